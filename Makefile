@@ -1,0 +1,34 @@
+# Entry points for a machine without ROS: each target builds .venv from the project's own
+# files (setup.py extras) and then runs. With a ROS 2 Jazzy install use colcon (see README).
+PYTHON ?= python3
+VENV ?= .venv
+PY := $(VENV)/bin/python
+STAMP := $(VENV)/.installed
+
+.PHONY: venv test demo bench lint clean
+
+venv: $(STAMP)
+
+$(STAMP): setup.py setup.cfg
+	$(PYTHON) -m venv $(VENV)
+	$(PY) -m pip install --quiet --upgrade pip
+	$(PY) -m pip install --quiet -e '.[core,ros,demo,test]'
+	touch $(STAMP)
+
+# The whole test suite (what CI runs).
+test: $(STAMP)
+	$(PY) -m pytest test
+
+# The main job: the paper's experiment, both potentials, real nodes over DDS.
+demo: $(STAMP)
+	$(PY) scripts/paper_experiment.py
+
+# The 1 kHz loop benchmark (30 s, two processes over DDS) and the core law throughput.
+bench: $(STAMP)
+	$(PY) scripts/benchmark.py
+
+lint: $(STAMP)
+	$(PY) -m flake8 quat_jt_controller wrist_sim test scripts launch setup.py
+
+clean:
+	rm -rf $(VENV) build install log *.egg-info results

@@ -1,0 +1,170 @@
+"""The transpose-Jacobian regulators of Campa and Kelly, Eq. (22), with two potentials.
+
+    tau = J_G(q)^T Q(eta_e, e)^T grad U_a(y_tilde) - K_v qdot + g(q)                 (22)
+
+* quadratic potential  U_a = 1/2 y^T K_p y                      -> grad = K_p y        (23, 24)
+* log-cosh potential   U_a = sum k_pi / l_i ln cosh(l_i y_i)    -> grad = K_p tanh(L y) (31, 32)
+
+Two tasks share one implementation:
+
+* ``orientation``: y_tilde = e (3-D), J = J_o (3 x n): Eqs. (37) and (38) of the wrist experiment.
+* ``pose``: y_tilde = [p_d - p; e] (6-D), J = J_G = [J_p; J_o] (6 x n): Eqs. (24) and (32).
+
+K_p, K_v and Lambda are diagonal and given as vectors. The law runs at 1 kHz, so it is written
+in plain Python floats over short tuples; the tests check it against numpy and finite
+differences.
+"""
+from dataclasses import dataclass
+import enum
+from math import exp, isfinite, log, log1p, tanh
+from typing import Optional, Sequence
+
+from quat_jt_controller import quaternion as quat
+
+LN2 = log(2.0)
+
+
+class Potential(str, enum.Enum):
+    """The artificial potential energy U_a(y_tilde)."""
+
+    QUADRATIC = 'quadratic'  # Eq. (23)
+    TANH = 'tanh'  # Eq. (31), the hyperbolic-tangent law
+
+
+class Task(str, enum.Enum):
+    """What is regulated: orientation only (the wrist, Section 5) or the full pose (Section 4)."""
+
+    ORIENTATION = 'orientation'
+    POSE = 'pose'
+
+    @property
+    def dim(self) -> int:
+        return 3 if self is Task.ORIENTATION else 6
+
+
+class GainsError(ValueError):
+    """An invalid gain; the message names the parameter and the offending value."""
+
+
+def _vector(name: str, values: Sequence[float], size: int) -> tuple[float, ...]:
+    try:
+        vals = tuple(float(v) for v in values)
+    except (TypeError, ValueError) as exc:
+        raise GainsError(f'{name} must be a list of numbers, got {values!r}') from exc
+    if len(vals) != size:
+        raise GainsError(f'{name} must have {size} values, got {len(vals)}: {list(vals)}')
+    for i, v in enumerate(vals):
+        if not isfinite(v) or v <= 0.0:
+            raise GainsError(f'{name}[{i}] must be finite and > 0, got {v}')
+    return vals
+
+
+@dataclass(frozen=True)
+class Gains:
+    """Validated, immutable controller gains (diagonals of K_p, K_v, Lambda).
+
+    Units (ERRATA.md, note 7): K_p in N m (orientation rows) or N/m (position rows), K_v in
+    N m s/rad, Lambda dimensionless (orientation) or 1/m (position). Build with :meth:`create`,
+    which validates; the 1 kHz loop reads one instance and a parameter change swaps in a new one.
+    """
+
+    potential: Potential
+    kp: tuple[float, ...]
+    kv: tuple[float, ...]
+    lam: tuple[float, ...]
+    gravity_compensation: bool = True
+
+    @classmethod
+    def create(cls, potential: str, kp: Sequence[float], kv: Sequence[float],
+               lam: Sequence[float], task: Task, n_joints: int,
+               gravity_compensation: bool = True) -> 'Gains':
+        """Validate and build. Raises GainsError naming the bad value."""
+        try:
+            pot = Potential(potential)
+        except ValueError:
+            raise GainsError(
+                f"potential must be one of {[p.value for p in Potential]}, got {potential!r}"
+            ) from None
+        task = Task(task)
+        return cls(potential=pot,
+                   kp=_vector('kp', kp, task.dim),
+                   kv=_vector('kv', kv, n_joints),
+                   lam=_vector('lambda', lam, task.dim),
+                   gravity_compensation=bool(gravity_compensation))
+
+
+def potential_energy(y_tilde: Sequence[float], gains: Gains) -> float:
+    """U_a(y_tilde): Eq. (23) (quadratic) or Eq. (31) (log-cosh)."""
+    if gains.potential is Potential.QUADRATIC:
+        return 0.5 * sum(k * y * y for k, y in zip(gains.kp, y_tilde))
+    total = 0.0
+    for k, lam, y in zip(gains.kp, gains.lam, y_tilde):
+        x = abs(lam * y)
+        total += k / lam * (x + log1p(exp(-2.0 * x)) - LN2)  # = ln cosh x, without overflow
+    return total
+
+
+def potential_gradient(y_tilde: Sequence[float], gains: Gains) -> tuple[float, ...]:
+    """grad_y U_a: K_p y (Eq. 24) or K_p tanh(Lambda y) (Eq. 32)."""
+    if gains.potential is Potential.QUADRATIC:
+        return tuple(k * y for k, y in zip(gains.kp, y_tilde))
+    return tuple(k * tanh(lam * y) for k, lam, y in zip(gains.kp, gains.lam, y_tilde))
+
+
+def task_force(y_tilde: Sequence[float], eta_e: float, gains: Gains) -> tuple[float, ...]:
+    """Q(eta_e, e)^T grad U_a(y_tilde), the task-space 'force' that J^T maps to torque.
+
+    ``y_tilde`` is ``e`` (3) or ``[p_tilde, e]`` (6); Q is Eq. (15): identity on the position
+    rows, 1/2 (eta_e I + S(e)) on the orientation rows.
+    """
+    w = potential_gradient(y_tilde, gains)
+    e = y_tilde[-3:]
+    w_o = quat.q_transpose_times(eta_e, e, w[-3:])
+    return w_o if len(w) == 3 else (w[0], w[1], w[2]) + w_o
+
+
+def control_torque(jacobian: Sequence[Sequence[float]], y_tilde: Sequence[float],
+                   eta_e: float, qdot: Sequence[float], gravity: Optional[Sequence[float]],
+                   gains: Gains) -> list[float]:
+    """Joint torque of Eq. (22): Eq. (24)/(32) for the pose, Eq. (37)/(38) for orientation.
+
+    ``jacobian`` has one row per task coordinate, matching ``y_tilde``: ``J_o`` (3 x n) for the
+    orientation task or ``J_G = [J_p; J_o]`` (6 x n) for the pose task, base-frame axes.
+    ``gravity`` is g(q); it is added only when ``gains.gravity_compensation`` is set.
+    Returns tau in N m, one entry per joint. Effort limits are applied by :func:`saturate`.
+    """
+    f = task_force(y_tilde, eta_e, gains)
+    n = len(qdot)
+    tau = [-gains.kv[j] * qdot[j] for j in range(n)]
+    for row, fi in zip(jacobian, f):
+        for j in range(n):
+            tau[j] += row[j] * fi
+    if gravity is not None and gains.gravity_compensation:
+        for j in range(n):
+            tau[j] += gravity[j]
+    return tau
+
+
+def saturate(tau: list[float], limits: Sequence[float]) -> bool:
+    """Clamp ``tau`` in place to +-limits; return True if any entry was clamped."""
+    clamped = False
+    for j, lim in enumerate(limits):
+        if tau[j] > lim:
+            tau[j] = lim
+            clamped = True
+        elif tau[j] < -lim:
+            tau[j] = -lim
+            clamped = True
+    return clamped
+
+
+def output_error(p: Sequence[float], R: quat.Matrix3, p_desired: Sequence[float],
+                 q_desired: Sequence[float], task: Task) -> tuple[tuple[float, ...], float]:
+    """The output error y_tilde of Eq. (8) and eta_e, from the measured pose (p, R).
+
+    Orientation task: y_tilde = e. Pose task: y_tilde = [p_d - p (Eq. 9); e (Eq. 10)].
+    """
+    eta_e, e = quat.orientation_error(quat.from_rotation_matrix(R), q_desired)
+    if task is Task.ORIENTATION:
+        return e, eta_e
+    return (p_desired[0] - p[0], p_desired[1] - p[1], p_desired[2] - p[2]) + e, eta_e

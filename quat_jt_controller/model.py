@@ -1,0 +1,150 @@
+"""The robot model, from a URDF (the single source of truth), through Pinocchio.
+
+Gives what the control laws need, with joints addressed by name and in a caller-chosen order:
+forward kinematics of a tip link in a base link, the geometric Jacobian J_G of Eq. (12) (linear
+rows then angular rows, base-frame axes, tip-origin velocity), gravity torques g(q) of Eq. (1),
+and the joint position, velocity and effort limits. Joints of the URDF that are not controlled
+are locked at zero.
+"""
+from typing import Optional, Sequence
+
+import numpy as np
+import pinocchio as pin
+
+
+class ModelError(ValueError):
+    """The URDF, or the links and joints asked of it, cannot make a controllable model."""
+
+
+class RobotModel:
+    """A fixed-base serial manipulator between ``base_link`` and ``tip_link``.
+
+    ``joint_names`` gives the order of q, qdot and tau everywhere in this package; by default
+    the URDF's movable joints in tree order. Each controlled joint must be revolute or
+    prismatic with one coordinate (a URDF ``continuous`` joint has two in Pinocchio).
+    """
+
+    def __init__(self, urdf_xml: str, base_link: str, tip_link: str,
+                 joint_names: Optional[Sequence[str]] = None) -> None:
+        try:
+            full = pin.buildModelFromXML(urdf_xml)
+        except Exception as exc:  # Pinocchio raises plain RuntimeError/ValueError
+            raise ModelError(f'cannot parse the URDF: {exc}') from exc
+        movable = [full.names[i] for i in range(1, full.njoints)]
+        if joint_names is None:
+            joint_names = movable
+        joint_names = [str(n) for n in joint_names]
+        unknown = [n for n in joint_names if n not in movable]
+        if unknown:
+            raise ModelError(f'joints {unknown} are not movable joints of the URDF '
+                             f'(it has {movable})')
+        if len(set(joint_names)) != len(joint_names):
+            raise ModelError(f'joint names repeat: {joint_names}')
+        if not joint_names:
+            raise ModelError('no joints to control')
+        locked = [full.getJointId(n) for n in movable if n not in joint_names]
+        model = (pin.buildReducedModel(full, locked, pin.neutral(full)) if locked else full)
+        for name in (base_link, tip_link):
+            if not model.existFrame(name):
+                raise ModelError(f'link {name!r} is not in the URDF')
+        self.model = model
+        self.data = model.createData()
+        self.joint_names: tuple[str, ...] = tuple(joint_names)
+        self.base_link = base_link
+        self.tip_link = tip_link
+        self.n = len(joint_names)
+
+        joint_ids = [model.getJointId(n) for n in joint_names]
+        for name, jid in zip(joint_names, joint_ids):
+            if model.joints[jid].nq != 1 or model.joints[jid].nv != 1:
+                raise ModelError(f'joint {name!r} has {model.joints[jid].nq} coordinates; only '
+                                 'one-coordinate (revolute/prismatic) joints are supported')
+        if model.nq != self.n:
+            raise ModelError(f'model has {model.nq} coordinates for {self.n} joints')
+        # Our joint order -> Pinocchio's q/v index.
+        self._idx = [model.joints[jid].idx_q for jid in joint_ids]
+        self._identity_order = self._idx == list(range(self.n))
+        self._base_id = model.getFrameId(base_link)
+        self._tip_id = model.getFrameId(tip_link)
+        if model.frames[self._base_id].parentJoint != 0:
+            raise ModelError(f'base link {base_link!r} moves with joint '
+                             f'{model.names[model.frames[self._base_id].parentJoint]!r}; '
+                             'it must be fixed to the URDF root')
+        self._q = pin.neutral(model)
+        pin.framesForwardKinematics(model, self.data, self._q)
+        base = self.data.oMf[self._base_id]
+        self._base_is_root = bool(np.allclose(base.homogeneous, np.eye(4)))
+        self._R_root_base = base.rotation.copy()  # base orientation in the root frame
+        self._p_root_base = base.translation.copy()
+
+        self.position_lower = self._per_joint(model.lowerPositionLimit)
+        self.position_upper = self._per_joint(model.upperPositionLimit)
+        self.velocity_limits = self._per_joint(model.velocityLimit)
+        self.effort_limits = self._per_joint(model.effortLimit)
+
+    def _per_joint(self, vec: np.ndarray) -> tuple[float, ...]:
+        return tuple(float(vec[i]) for i in self._idx)
+
+    def _set_q(self, q: Sequence[float]) -> np.ndarray:
+        if len(q) != self.n:
+            raise ValueError(f'expected {self.n} joint positions, got {len(q)}')
+        if self._identity_order:
+            self._q[:] = q
+        else:
+            for i, qi in zip(self._idx, q):
+                self._q[i] = qi
+        return self._q
+
+    def _reorder_columns(self, rows: list[list[float]]) -> list[list[float]]:
+        if self._identity_order:
+            return rows
+        return [[row[i] for i in self._idx] for row in rows]
+
+    def kinematics(self, q: Sequence[float]) -> tuple[list[float], list[list[float]],
+                                                      list[list[float]]]:
+        """One pass: tip position ``p`` (m), rotation ``R`` and ``J_G`` (6 x n), in the base frame.
+
+        ``J_G`` rows are [J_p; J_o] of Eq. (12): linear velocity of the tip origin, then angular
+        velocity, both in base-frame axes. Columns follow ``joint_names``.
+        """
+        qv = self._set_q(q)
+        J = pin.computeFrameJacobian(self.model, self.data, qv, self._tip_id,
+                                     pin.LOCAL_WORLD_ALIGNED)
+        tip = self.data.oMf[self._tip_id]  # updated by computeFrameJacobian
+        if self._base_is_root:
+            p = tip.translation.tolist()
+            R = tip.rotation.tolist()
+            rows = J.tolist()
+        else:
+            Rb = self._R_root_base.T
+            p = (Rb @ (tip.translation - self._p_root_base)).tolist()
+            R = (Rb @ tip.rotation).tolist()
+            rows = np.vstack((Rb @ J[:3], Rb @ J[3:])).tolist()
+        return p, R, self._reorder_columns(rows)
+
+    def forward_kinematics(self, q: Sequence[float]) -> tuple[list[float], list[list[float]]]:
+        """Tip position (m) and rotation matrix in the base frame."""
+        p, R, _ = self.kinematics(q)
+        return p, R
+
+    def gravity(self, q: Sequence[float]) -> list[float]:
+        """g(q) of Eq. (1), N m, in ``joint_names`` order."""
+        g = pin.computeGeneralizedGravity(self.model, self.data, self._set_q(q))
+        return [float(g[i]) for i in self._idx]
+
+    def mass_matrix(self, q: Sequence[float]) -> np.ndarray:
+        """M(q) of Eq. (1), in ``joint_names`` order."""
+        M = pin.crba(self.model, self.data, self._set_q(q).copy())
+        M = np.triu(M) + np.triu(M, 1).T
+        return M[np.ix_(self._idx, self._idx)]
+
+    def forward_dynamics(self, q: Sequence[float], qdot: Sequence[float],
+                         tau: Sequence[float]) -> np.ndarray:
+        """qddot = M(q)^-1 (tau - C(q, qdot) qdot - g(q)), in ``joint_names`` order."""
+        qv = self._set_q(q).copy()
+        v = np.zeros(self.n)
+        t = np.zeros(self.n)
+        v[self._idx] = qdot
+        t[self._idx] = tau
+        a = pin.aba(self.model, self.data, qv, v, t)
+        return a[self._idx]

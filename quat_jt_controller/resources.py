@@ -1,0 +1,41 @@
+"""Locate the package's data files (URDF, config) in a source tree, a pip or a colcon install.
+
+ROS-free: looks for ``share/quat_jt_controller`` the way ament_index does, without importing it.
+"""
+import os
+from pathlib import Path
+import sys
+
+PACKAGE_NAME = 'quat_jt_controller'
+DEFAULT_URDF = 'urdf/spherical_wrist.urdf'
+
+
+def _candidate_roots() -> list[Path]:
+    roots = []
+    source_root = Path(__file__).resolve().parent.parent
+    if (source_root / 'package.xml').is_file() and (source_root / 'urdf').is_dir():
+        roots.append(source_root)  # a source checkout or an editable pip install
+    for prefix in os.environ.get('AMENT_PREFIX_PATH', '').split(os.pathsep):
+        if prefix:
+            roots.append(Path(prefix) / 'share' / PACKAGE_NAME)  # colcon / ROS install
+    roots.append(Path(sys.prefix) / 'share' / PACKAGE_NAME)  # pip install (data_files)
+    return roots
+
+
+def share_path(relative: str) -> Path:
+    """Return the path of a data file such as ``urdf/spherical_wrist.urdf``.
+
+    Raises FileNotFoundError naming every place searched.
+    """
+    tried = []
+    for root in _candidate_roots():
+        path = root / relative
+        if path.is_file():
+            return path
+        tried.append(str(path))
+    raise FileNotFoundError(f'{relative!r} not found; searched: {", ".join(tried)}')
+
+
+def default_urdf_xml() -> str:
+    """The bundled spherical-wrist URDF as an XML string."""
+    return share_path(DEFAULT_URDF).read_text()

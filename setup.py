@@ -1,0 +1,43 @@
+"""ament_python package that also installs with plain pip (see README)."""
+from glob import glob
+
+from setuptools import find_packages, setup
+
+package_name = 'quat_jt_controller'
+
+setup(
+    name=package_name,
+    version='0.1.0',
+    packages=find_packages(include=['quat_jt_controller', 'quat_jt_controller.*',
+                                    'wrist_sim', 'wrist_sim.*']),
+    data_files=[
+        ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
+        ('share/' + package_name, ['package.xml']),
+        ('share/' + package_name + '/config', glob('config/*.yaml')),
+        ('share/' + package_name + '/launch', glob('launch/*.launch.py')),
+        ('share/' + package_name + '/urdf', glob('urdf/*.urdf')),
+    ],
+    # Under colcon, dependencies come from package.xml (rosdep); under pip, from the extras.
+    install_requires=['setuptools'],
+    extras_require={
+        # The ROS-free core: kinematics, dynamics and the control laws.
+        'core': ['numpy>=1.24', 'pin>=2.7', 'pybullet>=3.2.5'],
+        # rclpy and messages from the ROS 2 Jazzy wheels on PyPI (no ROS install needed).
+        'ros': ['ros-jazzy-rclpy[fastrtps]', 'ros-jazzy-common-interfaces'],
+        # Experiment recording and figures.
+        'demo': ['matplotlib>=3.7', 'mcap>=1.1', 'mcap-ros2-support>=0.5'],
+        'test': ['pytest>=7', 'hypothesis>=6', 'flake8>=6', 'colcon-common-extensions'],
+    },
+    zip_safe=True,
+    maintainer='quat_jt_controller maintainers',
+    maintainer_email='maintainers@quat-jt-controller.invalid',
+    description='Transpose-Jacobian unit-quaternion pose regulators (Campa and Kelly) for ROS 2.',
+    license='Apache-2.0',
+    tests_require=['pytest'],
+    entry_points={
+        'console_scripts': [
+            'controller_node = quat_jt_controller.controller_node:main',
+            'wrist_sim_node = wrist_sim.sim_node:main',
+        ],
+    },
+)
