@@ -1,0 +1,196 @@
+"""ROS parameters of the controller node: declared in one place, validated in one place.
+
+Not part of the ROS-free core (it imports rclpy). The live gains become one immutable
+:class:`~quat_jt_controller.control_law.Gains`, validated by ``Gains.create``; the structural
+parameters (task, joints, links, URDF, timeouts) are read-only and read once at start-up.
+
+Defaults are the paper's wrist experiment (Section 5, Eqs. 43-45, orientation task Eq. 37/38):
+K_p = (4.5, 20.5, 17.5) N m, K_v = (1, 1, 1) N m s/rad, Lambda = (30, 30, 30).
+"""
+from dataclasses import dataclass
+from typing import Any, Mapping, Optional, Sequence
+
+from quat_jt_controller.control_law import Gains, GainsError, Potential, Task
+from quat_jt_controller.resources import default_urdf_xml
+from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
+from rcl_interfaces.msg import ParameterType
+from rclpy.node import Node
+
+# The paper's experiment (Eqs. 43-45).
+PAPER_KP_ORIENTATION = (4.5, 20.5, 17.5)
+PAPER_LAMBDA_ORIENTATION = (30.0, 30.0, 30.0)
+PAPER_KV = 1.0
+# Pose task (Eq. 24/32): position rows (N/m, 1/m) then the paper's orientation rows.
+DEFAULT_KP_POSITION = (200.0, 200.0, 200.0)
+DEFAULT_LAMBDA_POSITION = (100.0, 100.0, 100.0)
+
+DEFAULT_JOINTS = ('joint1', 'joint2', 'joint3')
+DEFAULT_BASE_LINK = 'base_link'
+DEFAULT_TIP_LINK = 'tool0'
+DEFAULT_STATE_TIMEOUT_S = 0.1
+DEFAULT_PUBLISH_RATE_DIVIDER = 10
+
+# The live parameters that make up a Gains; everything else here is read-only.
+GAIN_PARAMETERS = ('potential', 'kp', 'kv', 'lambda', 'gravity_compensation')
+
+
+@dataclass(frozen=True)
+class StructuralConfig:
+    """The read-only parameters, read once at start-up."""
+
+    task: Task
+    joints: tuple[str, ...]
+    base_link: str
+    tip_link: str
+    robot_description: str
+    state_timeout_s: float
+    publish_rate_divider: int
+
+
+def _descriptor(description: str, ptype: int, read_only: bool = False,
+                float_range: Optional[tuple[float, float]] = None,
+                int_range: Optional[tuple[int, int]] = None,
+                constraints: str = '') -> ParameterDescriptor:
+    d = ParameterDescriptor(description=description, type=ptype, read_only=read_only,
+                            additional_constraints=constraints, dynamic_typing=False)
+    if float_range is not None:
+        d.floating_point_range = [FloatingPointRange(
+            from_value=float_range[0], to_value=float_range[1], step=0.0)]
+    if int_range is not None:
+        d.integer_range = [IntegerRange(from_value=int_range[0], to_value=int_range[1], step=1)]
+    return d
+
+
+def declare_structural(node: Node) -> StructuralConfig:
+    """Declare the read-only parameters and return their values.
+
+    Raises ValueError naming the parameter if a value is unusable.
+    """
+    p = node.declare_parameter(
+        'task', Task.ORIENTATION.value,
+        _descriptor("What is regulated: 'orientation' (y = e, Eqs. 37/38; the paper's wrist) "
+                    "or 'pose' (y = [p_d - p; e], Eqs. 24/32).",
+                    ParameterType.PARAMETER_STRING, read_only=True,
+                    constraints="one of 'orientation', 'pose'"))
+    try:
+        task = Task(p.value)
+    except ValueError:
+        raise ValueError(f"task must be 'orientation' or 'pose', got {p.value!r}") from None
+    joints = node.declare_parameter(
+        'joints', list(DEFAULT_JOINTS),
+        _descriptor('Controlled joints, in the order of effort_controller/commands; '
+                    'joint_states are matched by name.',
+                    ParameterType.PARAMETER_STRING_ARRAY, read_only=True)).value
+    base_link = node.declare_parameter(
+        'base_link', DEFAULT_BASE_LINK,
+        _descriptor('Frame of goals and published poses (target_pose header.frame_id).',
+                    ParameterType.PARAMETER_STRING, read_only=True)).value
+    tip_link = node.declare_parameter(
+        'tip_link', DEFAULT_TIP_LINK,
+        _descriptor('The end-effector link whose pose is regulated.',
+                    ParameterType.PARAMETER_STRING, read_only=True)).value
+    urdf = node.declare_parameter(
+        'robot_description', '',
+        _descriptor('URDF XML of the robot (kinematics, gravity, effort limits); '
+                    'empty = the bundled spherical wrist.',
+                    ParameterType.PARAMETER_STRING, read_only=True)).value
+    timeout = node.declare_parameter(
+        'state_timeout', DEFAULT_STATE_TIMEOUT_S,
+        _descriptor('Seconds without a valid joint_states message after which the command is '
+                    'zeroed (published once) until states return.',
+                    ParameterType.PARAMETER_DOUBLE, read_only=True,
+                    float_range=(0.005, 10.0))).value
+    divider = node.declare_parameter(
+        'publish_rate_divider', DEFAULT_PUBLISH_RATE_DIVIDER,
+        _descriptor('~/current_pose and the error topics are published every N-th tick '
+                    '(N = 10: 100 Hz at a 1 kHz state rate).',
+                    ParameterType.PARAMETER_INTEGER, read_only=True,
+                    int_range=(1, 1000))).value
+    if not joints or any(not j for j in joints):
+        raise ValueError(f'joints must be a non-empty list of names, got {list(joints)}')
+    if not base_link or not tip_link:
+        raise ValueError('base_link and tip_link must not be empty')
+    return StructuralConfig(task=task, joints=tuple(joints), base_link=base_link,
+                            tip_link=tip_link, robot_description=urdf or default_urdf_xml(),
+                            state_timeout_s=float(timeout), publish_rate_divider=int(divider))
+
+
+def default_gains(task: Task, n_joints: int) -> dict[str, Any]:
+    """The default live values: the paper's experiment for the orientation task."""
+    if task is Task.ORIENTATION:
+        kp, lam = PAPER_KP_ORIENTATION, PAPER_LAMBDA_ORIENTATION
+    else:
+        kp = DEFAULT_KP_POSITION + PAPER_KP_ORIENTATION
+        lam = DEFAULT_LAMBDA_POSITION + PAPER_LAMBDA_ORIENTATION
+    return {'potential': Potential.TANH.value, 'kp': list(kp), 'kv': [PAPER_KV] * n_joints,
+            'lambda': list(lam), 'gravity_compensation': True}
+
+
+def declare_gains(node: Node, config: StructuralConfig) -> Gains:
+    """Declare the live gain parameters and return the validated initial Gains.
+
+    Raises GainsError (naming the bad value) if the start-up values are invalid.
+    """
+    dim = config.task.dim
+    n = len(config.joints)
+    axes = 'x, y, z, rx, ry, rz' if dim == 6 else 'rx, ry, rz'
+    defaults = default_gains(config.task, n)
+    values = {
+        'potential': node.declare_parameter(
+            'potential', defaults['potential'],
+            _descriptor("Artificial potential: 'quadratic' (Eq. 23 -> law 24/37) or 'tanh' "
+                        '(Eq. 31 -> law 32/38). Live.',
+                        ParameterType.PARAMETER_STRING,
+                        constraints="one of 'quadratic', 'tanh'")).value,
+        'kp': node.declare_parameter(
+            'kp', defaults['kp'],
+            _descriptor(f'Diagonal of K_p, {dim} values ({axes}); N/m for position rows, N m '
+                        'for orientation rows. Finite, > 0. Live.',
+                        ParameterType.PARAMETER_DOUBLE_ARRAY,
+                        constraints=f'{dim} finite values > 0')).value,
+        'kv': node.declare_parameter(
+            'kv', defaults['kv'],
+            _descriptor(f'Diagonal of K_v (joint damping), one per joint ({n}), N m s/rad. '
+                        'Finite, > 0. Live.',
+                        ParameterType.PARAMETER_DOUBLE_ARRAY,
+                        constraints=f'{n} finite values > 0')).value,
+        'lambda': node.declare_parameter(
+            'lambda', defaults['lambda'],
+            _descriptor(f'Diagonal of Lambda in tanh(Lambda y) (Eq. 32/38), {dim} values '
+                        f'({axes}); used by the tanh potential. Finite, > 0. Live.',
+                        ParameterType.PARAMETER_DOUBLE_ARRAY,
+                        constraints=f'{dim} finite values > 0')).value,
+        'gravity_compensation': node.declare_parameter(
+            'gravity_compensation', defaults['gravity_compensation'],
+            _descriptor('Add g(q) from the URDF model to the torque (Eq. 22). Live.',
+                        ParameterType.PARAMETER_BOOL)).value,
+    }
+    return build_gains(values, config)
+
+
+def build_gains(values: Mapping[str, Any], config: StructuralConfig) -> Gains:
+    """Gains from parameter values keyed by parameter name. Raises GainsError."""
+    return Gains.create(values['potential'], values['kp'], values['kv'], values['lambda'],
+                        config.task, len(config.joints), values['gravity_compensation'])
+
+
+def gains_update(current: Mapping[str, Any], changes: Sequence[Any],
+                 config: StructuralConfig) -> tuple[Optional[Gains], str]:
+    """Validate a parameter change: the union of current values and the incoming ones.
+
+    ``changes`` are rclpy Parameters. Returns ``(gains, '')`` when a gain parameter changes and
+    the result is valid, ``(None, '')`` when no gain parameter is involved, and
+    ``(None, reason)`` when the change must be rejected.
+    """
+    merged = dict(current)
+    touched = False
+    for param in changes:
+        if param.name in GAIN_PARAMETERS:
+            merged[param.name] = param.value
+            touched = True
+    if not touched:
+        return None, ''
+    try:
+        return build_gains(merged, config), ''
+    except GainsError as exc:
+        return None, f'rejected, gains unchanged: {exc}'

@@ -1,0 +1,147 @@
+"""Core tests of model.py: the URDF model against the paper's closed forms and finite differences."""
+import numpy as np
+import pinocchio as pin
+import pytest
+
+from quat_jt_controller import quaternion as quat
+from quat_jt_controller.model import ModelError, RobotModel
+from quat_jt_controller.resources import default_urdf_xml
+from robots import (Q_DESIRED, Q_JOINT_DESIRED, random_q, wrist_model, XARM6_URDF,
+                    xarm6_model)
+
+
+def rz(a):
+    c, s = np.cos(a), np.sin(a)
+    return np.array([[c, -s, 0], [s, c, 0], [0, 0, 1]])
+
+
+def ry(a):
+    c, s = np.cos(a), np.sin(a)
+    return np.array([[c, 0, s], [0, 1, 0], [-s, 0, c]])
+
+
+def jacobian_eq39(q):
+    """The paper's orientation Jacobian of the wrist, Eq. (39): the test oracle."""
+    q1, q2 = q[0], q[1]
+    return np.array([[0.0, -np.sin(q1), np.cos(q1) * np.sin(q2)],
+                     [0.0, np.cos(q1), np.sin(q1) * np.sin(q2)],
+                     [1.0, 0.0, np.cos(q2)]])
+
+
+def test_wrist_angular_jacobian_equals_eq39_at_random_q():
+    model = wrist_model()
+    rng = np.random.default_rng(39)
+    for _ in range(200):
+        q = rng.uniform(-np.pi, np.pi, 3)
+        _, R, J = model.kinematics(q)
+        np.testing.assert_allclose(np.array(J)[3:], jacobian_eq39(q), atol=1e-12)
+        # ERRATA note 4: R(q) = Rz(q1) Ry(q2) Rz(q3).
+        np.testing.assert_allclose(R, rz(q[0]) @ ry(q[1]) @ rz(q[2]), atol=1e-12)
+
+
+def test_wrist_reaches_the_errata_goal_at_q_desired():
+    _, R = wrist_model().forward_kinematics(Q_JOINT_DESIRED)
+    q = quat.from_rotation_matrix(R)
+    eta_e, e = quat.orientation_error(q, quat.normalized(Q_DESIRED))
+    assert np.linalg.norm(e) < 1e-4
+    assert abs(eta_e) == pytest.approx(1.0, abs=1e-8)
+
+
+@pytest.mark.parametrize('make_model', [wrist_model, xarm6_model])
+def test_geometric_jacobian_matches_finite_differences(make_model):
+    """J_p = dp/dq and S(J_o dq) R = dR, with base-frame axes (Eq. 12)."""
+    model = make_model()
+    rng = np.random.default_rng(12)
+    h = 1e-6
+    for _ in range(20):
+        q = random_q(model, rng)
+        p, R, J = model.kinematics(q)
+        J = np.array(J)
+        for j in range(model.n):
+            dq = np.zeros(model.n)
+            dq[j] = h
+            p1, R1 = model.forward_kinematics(q + dq)
+            p0, R0 = model.forward_kinematics(q - dq)
+            np.testing.assert_allclose((np.subtract(p1, p0)) / (2 * h), J[:3, j], atol=1e-7)
+            dR = (np.array(R1) - np.array(R0)) / (2 * h)
+            omega_skew = dR @ np.array(R).T
+            omega = np.array([omega_skew[2, 1], omega_skew[0, 2], omega_skew[1, 0]])
+            np.testing.assert_allclose(omega, J[3:, j], atol=1e-7)
+
+
+@pytest.mark.parametrize('make_model', [wrist_model, xarm6_model])
+def test_gravity_is_gradient_of_potential_energy(make_model):
+    model = make_model()
+    rng = np.random.default_rng(1)
+    h = 1e-6
+
+    def energy(q):
+        return pin.computePotentialEnergy(model.model, model.data, np.asarray(q, dtype=float))
+
+    for _ in range(10):
+        q = random_q(model, rng)
+        fd = [(energy(q + h * e) - energy(q - h * e)) / (2 * h) for e in np.eye(model.n)]
+        np.testing.assert_allclose(model.gravity(q), fd, atol=1e-6)
+
+
+def test_wrist_gravity_is_not_trivial():
+    """The URDF puts centres of mass off the joint-2 axis, so g(q) is exercised."""
+    g = wrist_model().gravity([0.0, 0.8, 0.3])
+    assert abs(g[0]) < 1e-12  # joint 1 is vertical
+    assert abs(g[1]) > 0.1
+
+
+def test_limits_come_from_the_urdf():
+    model = wrist_model()
+    assert model.joint_names == ('joint1', 'joint2', 'joint3')
+    assert model.effort_limits == (50.0, 30.0, 20.0)
+    assert model.position_lower[1] == pytest.approx(-2.6)
+
+
+def test_joint_order_is_the_callers():
+    xml = default_urdf_xml()
+    ref = RobotModel(xml, 'base_link', 'tool0')
+    perm = RobotModel(xml, 'base_link', 'tool0', joint_names=['joint3', 'joint1', 'joint2'])
+    q = np.array([0.3, -0.4, 1.1])
+    q_perm = q[[2, 0, 1]]
+    p0, R0, J0 = ref.kinematics(q)
+    p1, R1, J1 = perm.kinematics(q_perm)
+    np.testing.assert_allclose(p0, p1, atol=1e-14)
+    np.testing.assert_allclose(R0, R1, atol=1e-14)
+    np.testing.assert_allclose(np.array(J0)[:, [2, 0, 1]], J1, atol=1e-14)
+    np.testing.assert_allclose(np.array(ref.gravity(q))[[2, 0, 1]], perm.gravity(q_perm))
+    assert perm.effort_limits == (20.0, 50.0, 30.0)
+
+
+def test_uncontrolled_joints_are_locked():
+    model = RobotModel(default_urdf_xml(), 'base_link', 'tool0', joint_names=['joint1', 'joint2'])
+    _, R, J = model.kinematics([0.2, 0.5])
+    np.testing.assert_allclose(R, rz(0.2) @ ry(0.5), atol=1e-12)
+    assert np.array(J).shape == (6, 2)
+
+
+def test_base_link_other_than_root():
+    """Kinematics relative to a fixed non-root base link (xArm6: 'world' -> 'link_base')."""
+    a = RobotModel(XARM6_URDF.read_text(), 'world', 'link6')
+    b = RobotModel(XARM6_URDF.read_text(), 'link_base', 'link6')
+    q = [0.1, -0.2, -0.5, 0.3, 0.4, -0.6]
+    for x, y in zip(a.kinematics(q), b.kinematics(q)):
+        np.testing.assert_allclose(x, y, atol=1e-12)  # world_joint is the identity here
+
+
+@pytest.mark.parametrize('kwargs, match', [
+    ({'base_link': 'nope', 'tip_link': 'tool0'}, "'nope' is not in the URDF"),
+    ({'base_link': 'base_link', 'tip_link': 'tool0', 'joint_names': ['joint9']},
+     r"\['joint9'\] are not movable"),
+    ({'base_link': 'link2', 'tip_link': 'tool0'}, 'moves with joint'),
+    ({'base_link': 'base_link', 'tip_link': 'tool0', 'joint_names': ['joint1', 'joint1']},
+     'repeat'),
+])
+def test_model_errors_are_clear(kwargs, match):
+    with pytest.raises(ModelError, match=match):
+        RobotModel(default_urdf_xml(), **kwargs)
+
+
+def test_bad_urdf_is_a_model_error():
+    with pytest.raises(ModelError, match='cannot parse'):
+        RobotModel('<robot name="x"><link name="a"/', 'a', 'a')
