@@ -21,14 +21,14 @@ test: $(STAMP)
 
 # The main job: the paper's experiment, both potentials, real nodes over DDS.
 demo: $(STAMP)
-	$(PY) scripts/paper_experiment.py
+	$(PY) -m quat_jt_controller.tools.paper_experiment
 
 # The 1 kHz loop benchmark (30 s, two processes over DDS) and the core law throughput.
 bench: $(STAMP)
-	$(PY) scripts/benchmark.py
+	$(PY) -m quat_jt_controller.tools.benchmark
 
 lint: $(STAMP)
-	$(PY) -m flake8 quat_jt_controller wrist_sim test scripts launch setup.py
+	$(PY) -m flake8 quat_jt_controller wrist_sim test launch setup.py
 
 clean:
 	rm -rf $(VENV) build install log *.egg-info results

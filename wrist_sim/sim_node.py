@@ -1,9 +1,401 @@
-"""Not built yet: exits non-zero so that nobody mistakes it for a working node."""
+"""``wrist_sim_node``: the simulated wrist (or any fixed-base serial URDF) as a ROS 2 node.
+
+A thin rclpy layer over :class:`wrist_sim.simulator.WristSimulator`, with the interface of a
+ros2_control robot driven by a JointGroupEffortController:
+
+- publishes ``joint_states`` (sensor_msgs/JointState) after every step: name, position,
+  velocity and effort = the motor torque applied in that step (clamped to the URDF effort
+  limits, friction not included);
+- subscribes ``effort_controller/commands`` (std_msgs/Float64MultiArray, one torque in N m per
+  joint, in the order of the ``joints`` parameter); bad commands (wrong length, NaN/Inf) are
+  rejected with a throttled warning and the last good command (or zero) stays applied;
+- command watchdog: no valid command for ``command_timeout`` seconds of simulated time (= wall
+  time when pacing in real time) -> zero torque, logged once, recovers when commands return;
+- ``~/reset`` (std_srvs/Trigger): back to ``initial_positions`` at rest, held command zeroed;
+- real-time pacing at ``rate_hz`` (dt = 1 / rate_hz), or with ``publish_clock:=true`` lockstep
+  with the controller: ``/clock`` is published with the simulation time and a step is taken
+  as soon as a command has arrived for the last published state (or after
+  ``lockstep_timeout`` s of wall time), so it can run faster than real time.
+
+Loop (real time): a deadline loop spinning an EventsExecutor until just before each tick, then
+busy-waiting to it; at the tick the latest command is applied, the simulation steps and the
+new state is published. Timing figures (rate, missed deadlines, step compute time, command
+freshness and latency) are kept in ``node.stats`` (:class:`wrist_sim.simulator.LoopStats`),
+logged at shutdown and written as JSON to ``stats_file`` if set.
+"""
+import json
+import math
+from pathlib import Path
 import sys
+import time
+from typing import Any, Optional
+from xml.etree import ElementTree
+
+import numpy as np
+from quat_jt_controller.resources import default_urdf_xml
+from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
+                                SetParametersResult)
+import rclpy
+from rclpy.executors import ExternalShutdownException
+from rclpy.experimental import EventsExecutor
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.qos import QoSProfile
+from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64MultiArray
+from std_srvs.srv import Trigger
+from wrist_sim.simulator import LoopStats, SimulatorError, WristSimulator
+
+NODE_NAME = 'wrist_sim'
+BUSY_WAIT_S = 2.5e-4  # spin the executor until this long before a tick, then busy-wait
+LOG_PERIOD_S = 1.0
+THROTTLE_S = 1.0
+# Live (not read-only) parameters and how they are checked.
+_FRICTION_PARAMS = ('viscous_friction', 'coulomb_friction')
 
 
-def main(args=None) -> None:
-    sys.exit(f'{__name__}: not implemented yet')
+def movable_joints_of(urdf_xml: str) -> list[str]:
+    """Names of the revolute/prismatic/continuous joints of a URDF, in document order."""
+    try:
+        root = ElementTree.fromstring(urdf_xml)
+    except ElementTree.ParseError as exc:
+        raise SimulatorError(f'robot_description is not valid XML: {exc}') from exc
+    return [j.get('name') for j in root.iter('joint')
+            if j.get('type') in ('revolute', 'continuous', 'prismatic')]
+
+
+def _float_range(lo: float, hi: float) -> list[FloatingPointRange]:
+    return [FloatingPointRange(from_value=lo, to_value=hi, step=0.0)]
+
+
+class WristSimNode(Node):
+    """The simulated robot; build it, then call :meth:`run` with an executor."""
+
+    def __init__(self, **kwargs: Any) -> None:
+        super().__init__(NODE_NAME, **kwargs)
+        self._declare_parameters()
+        p = self._params
+        self.rate_hz = int(p['rate_hz'])
+        self.dt_ns = int(round(1e9 / self.rate_hz))
+        self.sim = WristSimulator(
+            self._urdf_xml, p['joints'], dt_s=self.dt_ns * 1e-9, use_gui=p['use_gui'],
+            viscous_nm_s_per_rad=p['viscous_friction'], coulomb_nm=p['coulomb_friction'],
+            initial_positions_rad=p['initial_positions'])
+        self.n = self.sim.n
+        self.publish_clock = bool(p['publish_clock'])
+        self.stats = LoopStats()
+
+        # Command state (touched only from the executor thread, which is also the loop's).
+        self._cmd = np.zeros(self.n)
+        self._zero = np.zeros(self.n)
+        self._have_cmd = False
+        self._cmd_seq = 0           # valid commands received
+        self._seq_at_publish = 0    # _cmd_seq when the last state was published
+        self._cmd_sim_ns = 0        # simulation time when the last valid command arrived
+        self._publish_wall_s = time.perf_counter()
+        self._watchdog_tripped = False
+        self._last_stamp_ns = -1
+
+        self._js = JointState()
+        self._js.name = list(self.sim.joint_names)
+        self._clock_msg = Clock()
+        self.js_pub = self.create_publisher(JointState, 'joint_states', 10)
+        self.clock_pub = (self.create_publisher(Clock, '/clock', QoSProfile(depth=1))
+                          if self.publish_clock else None)
+        self.cmd_sub = self.create_subscription(
+            Float64MultiArray, 'effort_controller/commands', self._on_command, 10)
+        self.reset_srv = self.create_service(Trigger, '~/reset', self._on_reset)
+        self.add_on_set_parameters_callback(self._validate_parameters)
+        self.add_post_set_parameters_callback(self._apply_parameters)
+        self.get_logger().info(
+            f'simulating joints {list(self.sim.joint_names)} at {self.rate_hz} Hz, '
+            f'effort limits {self.sim.effort_limits_nm.tolist()} N m, '
+            + ('lockstep with /clock' if self.publish_clock else 'real time'))
+
+    # -- parameters ----------------------------------------------------------------------
+
+    def _declare_parameters(self) -> None:
+        """Every parameter, in one place. ``joints`` and the per-joint arrays default from
+        the URDF, so ``robot_description`` is read first."""
+        def desc(text: str, read_only: bool = False, **ranges: Any) -> ParameterDescriptor:
+            return ParameterDescriptor(description=text, read_only=read_only, **ranges)
+
+        self.declare_parameter('robot_description', '', desc(
+            'URDF as an XML string; empty = the bundled spherical wrist', read_only=True))
+        urdf = self.get_parameter('robot_description').value or default_urdf_xml()
+        self._urdf_xml = urdf
+        movable = movable_joints_of(urdf)
+        if not movable:
+            raise SimulatorError('the URDF has no movable joints')
+        self.declare_parameter('joints', movable, desc(
+            'joints to drive, in command/state order; default the URDF movable joints',
+            read_only=True))
+        n = len(self.get_parameter('joints').value)
+        zeros = [0.0] * n
+        self.declare_parameter('initial_positions', zeros, desc(
+            'joint positions (rad or m) at start and on ~/reset'))
+        self.declare_parameter('rate_hz', 1000, desc(
+            'steps per second; the time step is 1 / rate_hz', read_only=True,
+            integer_range=[IntegerRange(from_value=1, to_value=20000, step=1)]))
+        self.declare_parameter('use_gui', False, desc('open the PyBullet window',
+                                                      read_only=True))
+        self.declare_parameter('publish_clock', False, desc(
+            'publish /clock with the simulation time and step in lockstep with the commands '
+            'instead of in real time', read_only=True))
+        self.declare_parameter('lockstep_timeout', 0.05, desc(
+            'lockstep: wall seconds to wait for the command of the last state before stepping '
+            'anyway', floating_point_range=_float_range(1e-4, 10.0)))
+        self.declare_parameter('max_real_time_factor', 0.0, desc(
+            'lockstep: at most this many times faster than real time; 0 = no limit',
+            floating_point_range=_float_range(0.0, 1000.0)))
+        self.declare_parameter('viscous_friction', zeros, desc(
+            'viscous friction per joint, N m s/rad (>= 0)'))
+        self.declare_parameter('coulomb_friction', zeros, desc(
+            'Coulomb friction / stiction level per joint, N m (>= 0)'))
+        self.declare_parameter('command_timeout', 0.1, desc(
+            'seconds (simulation time) without a valid command before the torque goes to '
+            'zero; 0 disables the watchdog', floating_point_range=_float_range(0.0, 60.0)))
+        self.declare_parameter('stats_file', '', desc(
+            'if set, timing statistics are written there as JSON at shutdown', read_only=True))
+        names = ('joints', 'initial_positions', 'rate_hz', 'use_gui', 'publish_clock',
+                 'lockstep_timeout', 'max_real_time_factor', 'viscous_friction',
+                 'coulomb_friction', 'command_timeout', 'stats_file')
+        self._params: dict[str, Any] = {k: self.get_parameter(k).value for k in names}
+        for k in ('initial_positions', 'viscous_friction', 'coulomb_friction'):
+            self._params[k] = list(self._params[k])
+            problem = self._check_vector(k, self._params[k], n)
+            if problem:
+                raise SimulatorError(problem)
+
+    @staticmethod
+    def _check_vector(name: str, values: Any, n: int) -> Optional[str]:
+        values = list(values)
+        if len(values) != n:
+            return f'{name}: expected {n} values (one per joint), got {len(values)}'
+        if not all(math.isfinite(v) for v in values):
+            return f'{name}: values must be finite, got {values}'
+        if name in _FRICTION_PARAMS and any(v < 0.0 for v in values):
+            return f'{name}: values must be >= 0, got {values}'
+        return None
+
+    def _validate_parameters(self, params: list[Parameter]) -> SetParametersResult:
+        for prm in params:
+            if prm.name in _FRICTION_PARAMS + ('initial_positions',):
+                problem = self._check_vector(prm.name, prm.value, self.n)
+                if problem:
+                    return SetParametersResult(successful=False, reason=problem)
+        return SetParametersResult(successful=True)
+
+    def _apply_parameters(self, params: list[Parameter]) -> None:
+        """Apply accepted changes; both friction arrays go to the simulator together."""
+        for prm in params:
+            self._params[prm.name] = prm.value
+        names = {prm.name for prm in params}
+        if names & set(_FRICTION_PARAMS):
+            self.sim.set_friction(list(self._params['viscous_friction']),
+                                  list(self._params['coulomb_friction']))
+            self.get_logger().info(
+                f'friction: viscous {list(self._params["viscous_friction"])} N m s/rad, '
+                f'Coulomb {list(self._params["coulomb_friction"])} N m')
+
+    # -- callbacks -----------------------------------------------------------------------
+
+    def _on_command(self, msg: Float64MultiArray) -> None:
+        data = msg.data
+        if len(data) != self.n:
+            self.stats.rejected_commands += 1
+            self.get_logger().warning(
+                f'rejected command: {len(data)} values for {self.n} joints '
+                f'{list(self.sim.joint_names)}', throttle_duration_sec=THROTTLE_S)
+            return
+        cmd = np.asarray(data, dtype=float)
+        if not np.all(np.isfinite(cmd)):
+            self.stats.rejected_commands += 1
+            self.get_logger().warning(f'rejected command with non-finite values: {list(data)}',
+                                      throttle_duration_sec=THROTTLE_S)
+            return
+        if self._cmd_seq == self._seq_at_publish:  # first command since the last state
+            self.stats.record_latency(time.perf_counter() - self._publish_wall_s)
+        self._cmd[:] = cmd
+        self._cmd_seq += 1
+        self._cmd_sim_ns = self.sim.step_count * self.dt_ns
+        self._have_cmd = True
+
+    def _on_reset(self, request: Trigger.Request, response: Trigger.Response
+                  ) -> Trigger.Response:
+        try:
+            self.sim.reset(self._params['initial_positions'])
+        except SimulatorError as exc:
+            response.success = False
+            response.message = str(exc)
+            return response
+        self._cmd[:] = 0.0
+        self._have_cmd = False
+        self._watchdog_tripped = False
+        response.success = True
+        response.message = f'reset to {list(self._params["initial_positions"])} at rest'
+        self.get_logger().info(response.message)
+        return response
+
+    # -- the step ------------------------------------------------------------------------
+
+    def _torque_to_apply(self) -> np.ndarray:
+        timeout_ns = int(self._params['command_timeout'] * 1e9)
+        age_ns = self.sim.step_count * self.dt_ns - self._cmd_sim_ns
+        if self._have_cmd and (timeout_ns <= 0 or age_ns <= timeout_ns):
+            if self._watchdog_tripped:
+                self._watchdog_tripped = False
+                self.get_logger().info('commands are back: applying them again')
+            return self._cmd
+        if self._have_cmd and not self._watchdog_tripped:
+            self._watchdog_tripped = True
+            self.stats.watchdog_trips += 1
+            self.get_logger().warning(
+                f'no command for {age_ns * 1e-9:.3f} s (> command_timeout '
+                f'{self._params["command_timeout"]} s): torque set to zero')
+        return self._zero
+
+    def tick(self, late_s: float = 0.0) -> None:
+        """Apply the latest command, step once, publish the new state (and /clock)."""
+        t0 = time.perf_counter()
+        fresh = self._cmd_seq != self._seq_at_publish
+        self.sim.step(self._torque_to_apply())
+        self.publish_state()
+        self.stats.record_step(t0, time.perf_counter() - t0, late_s, fresh)
+
+    def publish_state(self) -> None:
+        """Publish joint_states (and /clock) for the current simulator state."""
+        if self.publish_clock:
+            stamp_ns = self.sim.step_count * self.dt_ns
+        else:
+            stamp_ns = self.get_clock().now().nanoseconds
+        if stamp_ns <= self._last_stamp_ns:  # strictly monotonic stamps
+            stamp_ns = self._last_stamp_ns + 1
+        self._last_stamp_ns = stamp_ns
+        sec, nsec = divmod(stamp_ns, 1_000_000_000)
+        js = self._js
+        js.header.stamp.sec = sec
+        js.header.stamp.nanosec = nsec
+        js.position = self.sim.q_rad.tolist()
+        js.velocity = self.sim.qdot_rad_s.tolist()
+        js.effort = self.sim.tau_applied_nm.tolist()
+        if self.clock_pub is not None:
+            self._clock_msg.clock.sec = sec
+            self._clock_msg.clock.nanosec = nsec
+            self.clock_pub.publish(self._clock_msg)
+        self._seq_at_publish = self._cmd_seq
+        self._publish_wall_s = time.perf_counter()
+        self.js_pub.publish(js)
+
+    # -- loops ---------------------------------------------------------------------------
+
+    def run(self, executor: Any) -> None:
+        """Step until the context shuts down (SIGINT), spinning ``executor`` in between."""
+        self.publish_state()  # the initial state, so a controller can answer it
+        self.stats.start_s = time.perf_counter()
+        if self.publish_clock:
+            self._run_lockstep(executor)
+        else:
+            self._run_real_time(executor)
+
+    def _periodic_log(self, now: float, last: list) -> None:
+        if now - last[0] < LOG_PERIOD_S:
+            return
+        steps = self.stats.steps - last[1]
+        self.get_logger().debug(
+            f'{steps / (now - last[0]):.1f} steps/s, missed {self.stats.missed_deadlines}, '
+            f'fresh {self.stats.fresh_steps}/{self.stats.steps}, '
+            f'rejected {self.stats.rejected_commands}')
+        last[0], last[1] = now, self.stats.steps
+
+    def _run_real_time(self, executor: Any) -> None:
+        period = self.dt_ns * 1e-9
+        clock = time.perf_counter
+        next_t = clock() + period
+        last_log = [clock(), 0]
+        ok = self.context.ok
+        while ok():
+            remaining = next_t - clock()
+            while remaining > BUSY_WAIT_S:
+                executor.spin_once(timeout_sec=remaining - BUSY_WAIT_S)
+                remaining = next_t - clock()
+            if not ok():
+                break
+            while clock() < next_t:
+                pass
+            now = clock()
+            late = now - next_t
+            if late > 0.5 * period:
+                self.stats.missed_deadlines += 1
+            self.tick(late)
+            next_t += period
+            behind = clock() - next_t
+            if behind > period:  # stalled: skip the ticks we cannot make up, resync
+                skipped = int(behind / period)
+                self.stats.missed_deadlines += skipped
+                next_t += skipped * period
+            self._periodic_log(now, last_log)
+
+    def _run_lockstep(self, executor: Any) -> None:
+        clock = time.perf_counter
+        last_step = clock()
+        last_log = [last_step, 0]
+        ok = self.context.ok
+        while ok():
+            deadline = last_step + self._params['lockstep_timeout']
+            while self._cmd_seq == self._seq_at_publish:
+                remaining = deadline - clock()
+                if remaining <= 0.0:
+                    self.stats.lockstep_timeouts += 1
+                    break
+                executor.spin_once(timeout_sec=remaining)
+                if not ok():
+                    return
+            rtf = self._params['max_real_time_factor']
+            if rtf > 0.0:
+                earliest = last_step + self.dt_ns * 1e-9 / rtf
+                while (remaining := earliest - clock()) > 0.0 and ok():
+                    executor.spin_once(timeout_sec=remaining)
+            last_step = clock()
+            self.tick()
+            self._periodic_log(last_step, last_log)
+
+    # -- shutdown ------------------------------------------------------------------------
+
+    def destroy_node(self) -> None:
+        """Log (and write) the timing statistics, close the simulator, destroy the node."""
+        summary = self.stats.summary()
+        self.get_logger().info('stats ' + json.dumps(summary, sort_keys=True))
+        path = self._params.get('stats_file') if hasattr(self, '_params') else ''
+        if path:
+            try:
+                Path(path).write_text(json.dumps(summary, indent=1, sort_keys=True))
+            except OSError as exc:
+                self.get_logger().error(f'cannot write stats_file {path}: {exc}')
+        self.sim.close()
+        super().destroy_node()
+
+
+def main(args: Optional[list[str]] = None) -> None:
+    """Entry point of ``wrist_sim_node``."""
+    rclpy.init(args=args)
+    node = None
+    try:
+        try:
+            node = WristSimNode()
+        except (SimulatorError, FileNotFoundError) as exc:
+            rclpy.logging.get_logger(NODE_NAME).fatal(str(exc))
+            sys.exit(1)
+        executor = EventsExecutor(context=node.context)
+        executor.add_node(node)
+        node.run(executor)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        if node is not None:
+            node.destroy_node()
+        rclpy.try_shutdown()
 
 
 if __name__ == '__main__':

@@ -1,0 +1,81 @@
+"""Choose the simulated wrist's Coulomb friction so the paper's Section 5 result reproduces.
+
+ROS-free: the PyBullet simulator core and the control law in a sampled loop at 1 kHz with the
+same one-tick command delay as the two nodes (the sim applies, at step k + 1, the torque computed
+from the state it published at step k). For each friction vector of a grid, both controllers run
+the paper's experiment (q(0) = 0, corrected goal, gains Eq. 43-45) and the final ||e|| is
+compared with the paper's 0.2043 (quadratic, Eq. 37) and 5.3184e-3 (tanh, Eq. 38) by
+``|ln(e_quad / 0.2043)| + |ln(e_tanh / 5.3184e-3)|``. The README's friction values come from
+
+    python -m quat_jt_controller.tools.friction_sweep
+"""
+import argparse
+import itertools
+import math
+import time
+from typing import Sequence
+
+import numpy as np
+
+from quat_jt_controller import control_law as cl
+from quat_jt_controller import quaternion as quat
+from quat_jt_controller.model import RobotModel
+from quat_jt_controller.reference_sim import ClosedLoop
+from quat_jt_controller.resources import default_urdf_xml
+from wrist_sim.simulator import WristSimulator
+
+PAPER_KP = (4.5, 20.5, 17.5)  # Eq. (43), N m
+PAPER_KV = (1.0, 1.0, 1.0)  # Eq. (44), N m s/rad
+PAPER_LAMBDA = (30.0, 30.0, 30.0)  # Eq. (45)
+Q_DESIRED = quat.normalized((0.5566, 0.0, 0.4226, 0.7152))  # ERRATA.md note 2
+PAPER_FINAL_ERROR = {'quadratic': 0.2043, 'tanh': 5.3184e-3}  # ERRATA.md note 5
+
+
+def sampled_run(model: RobotModel, potential: str, coulomb_nm: Sequence[float],
+                duration_s: float = 6.0) -> np.ndarray:
+    """||e|| at every 1 ms step of the paper's experiment on the simulated wrist."""
+    gains = cl.Gains.create(potential, PAPER_KP, PAPER_KV, PAPER_LAMBDA, cl.Task.ORIENTATION,
+                            model.n)
+    loop = ClosedLoop(model, gains, cl.Task.ORIENTATION, Q_DESIRED)
+    errors = np.empty(int(round(duration_s * 1000)))
+    tau_nm = [0.0] * model.n
+    with WristSimulator(default_urdf_xml(), model.joint_names, coulomb_nm=coulomb_nm) as sim:
+        for k in range(errors.size):
+            q, qdot = sim.q_rad.tolist(), sim.qdot_rad_s.tolist()
+            y, _, _ = loop.error(q)
+            errors[k] = math.sqrt(sum(c * c for c in y))
+            command = loop.torque(q, qdot)
+            cl.saturate(command, model.effort_limits)
+            sim.step(tau_nm)  # the command of the previous state: one tick of delay
+            tau_nm = command
+    return errors
+
+
+def score(final_quadratic: float, final_tanh: float) -> float:
+    return (abs(math.log(final_quadratic / PAPER_FINAL_ERROR['quadratic']))
+            + abs(math.log(max(final_tanh, 1e-12) / PAPER_FINAL_ERROR['tanh'])))
+
+
+def main(argv=None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split('\n')[0])
+    parser.add_argument('--joint1', type=float, nargs='+', default=[1.0, 1.5, 2.0])
+    parser.add_argument('--joint2', type=float, nargs='+', default=[0.6, 0.8, 1.0])
+    parser.add_argument('--joint3', type=float, nargs='+', default=[0.4, 0.5, 0.6])
+    parser.add_argument('--duration', type=float, default=6.0, help='seconds per run')
+    args = parser.parse_args(argv)
+    model = RobotModel(default_urdf_xml(), 'base_link', 'tool0')
+    rows = []
+    print(f'{"coulomb N m":>20} {"quadratic ||e||":>16} {"tanh ||e||":>12} {"score":>7}')
+    for coulomb in itertools.product(args.joint1, args.joint2, args.joint3):
+        t0 = time.perf_counter()
+        final = {p: sampled_run(model, p, coulomb, args.duration)[-1] for p in PAPER_FINAL_ERROR}
+        rows.append((score(final['quadratic'], final['tanh']), coulomb, final))
+        print(f'{str(coulomb):>20} {final["quadratic"]:16.4f} {final["tanh"]:12.5f} '
+              f'{rows[-1][0]:7.3f}   ({time.perf_counter() - t0:.1f} s)', flush=True)
+    best = min(rows)
+    print(f'best: coulomb_friction {list(best[1])}: quadratic {best[2]["quadratic"]:.4f} '
+          f'(paper 0.2043), tanh {best[2]["tanh"]:.5f} (paper 0.0053)')
+
+
+if __name__ == '__main__':
+    main()

@@ -1,0 +1,38 @@
+"""MCAP files written from raw CDR decode with the standard ROS 2 MCAP reader."""
+from mcap.reader import make_reader
+from mcap_ros2.decoder import DecoderFactory
+from rclpy.serialization import serialize_message
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64MultiArray
+
+from quat_jt_controller.tools.mcap_log import McapLog, message_definition
+
+
+def test_definition_carries_dependencies_in_rosbag2_form():
+    text = message_definition('sensor_msgs/msg/JointState')
+    assert 'float64[] effort' in text.split('=' * 80)[0]
+    assert '\nMSG: std_msgs/Header\n' in text and '\nMSG: builtin_interfaces/Time\n' in text
+
+
+def test_raw_messages_round_trip(tmp_path):
+    path = tmp_path / 'run.mcap'
+    log = McapLog(path)
+    js_ch = log.channel('/joint_states', 'sensor_msgs/msg/JointState')
+    cmd_ch = log.channel('/effort_controller/commands', 'std_msgs/msg/Float64MultiArray')
+    for k in range(5):
+        js = JointState(name=['joint1', 'joint2'], position=[0.1 * k, -0.2], velocity=[0.0, 1.0])
+        js.header.stamp.sec, js.header.stamp.nanosec = 7, 1000 * k
+        log.write(js_ch, serialize_message(js), log_time_ns=1_000_000 * k)
+        log.write(cmd_ch, serialize_message(Float64MultiArray(data=[float(k), 2.0])),
+                  log_time_ns=1_000_000 * k + 10)
+    log.close()
+
+    with open(path, 'rb') as f:
+        reader = make_reader(f, decoder_factories=[DecoderFactory()])
+        assert reader.get_header().profile == 'ros2'
+        decoded = list(reader.iter_decoded_messages())
+    states = [m for _, ch, _, m in decoded if ch.topic == '/joint_states']
+    commands = [m for _, ch, _, m in decoded if ch.topic == '/effort_controller/commands']
+    assert [s.position[0] for s in states] == [0.1 * k for k in range(5)]
+    assert states[3].name == ['joint1', 'joint2'] and states[3].header.stamp.nanosec == 3000
+    assert [c.data[0] for c in commands] == [0.0, 1.0, 2.0, 3.0, 4.0]

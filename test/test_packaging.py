@@ -1,0 +1,54 @@
+"""The repo is an ament_python package: colcon builds it into a workspace as a Jazzy user would."""
+import os
+from pathlib import Path
+import shutil
+import subprocess
+import sys
+
+import pytest
+
+REPO = Path(__file__).resolve().parent.parent
+COLCON = Path(sys.executable).parent / 'colcon'
+IGNORE = shutil.ignore_patterns('.venv', '.git', 'build', 'install', 'log', '*.egg-info',
+                                '__pycache__', '.pytest_cache', '.hypothesis', 'results')
+
+
+@pytest.fixture(scope='module')
+def colcon_install(tmp_path_factory):
+    if not COLCON.exists():
+        pytest.fail(f'colcon not found next to {sys.executable}: install the [test] extra')
+    ws = tmp_path_factory.mktemp('colcon_ws')
+    shutil.copytree(REPO, ws / 'src' / 'quat_jt_controller', ignore=IGNORE)
+    result = subprocess.run([str(COLCON), 'build', '--base-paths', 'src'], cwd=ws,
+                            capture_output=True, text=True, timeout=300)
+    assert result.returncode == 0, result.stdout + result.stderr
+    return ws / 'install' / 'quat_jt_controller'
+
+
+def test_install_tree_has_index_marker_executables_and_data(colcon_install):
+    prefix = colcon_install
+    assert (prefix / 'share/ament_index/resource_index/packages/quat_jt_controller').is_file()
+    for exe in ('controller_node', 'wrist_sim_node'):
+        path = prefix / 'lib' / 'quat_jt_controller' / exe
+        assert path.is_file() and os.access(path, os.X_OK), path
+    share = prefix / 'share' / 'quat_jt_controller'
+    assert (share / 'package.xml').is_file()
+    assert (share / 'urdf' / 'spherical_wrist.urdf').is_file()
+    repo_configs = sorted(p.name for p in (REPO / 'config').glob('*.yaml'))
+    repo_launch = sorted(p.name for p in (REPO / 'launch').glob('*.launch.py'))
+    assert repo_configs and repo_launch, 'the repo ships config and launch files'
+    assert sorted(p.name for p in (share / 'config').glob('*.yaml')) == repo_configs
+    assert sorted(p.name for p in (share / 'launch').glob('*.launch.py')) == repo_launch
+
+
+def test_installed_package_finds_its_data_through_the_ament_prefix(colcon_install, tmp_path):
+    site = next((colcon_install / 'lib').glob('python3*/site-packages'))
+    env = dict(os.environ, PYTHONPATH=str(site), AMENT_PREFIX_PATH=str(colcon_install))
+    code = ('import quat_jt_controller.resources as r; '
+            "print(r.__file__); print(r.share_path('urdf/spherical_wrist.urdf'))")
+    out = subprocess.run([sys.executable, '-c', code], env=env, cwd=tmp_path,
+                         capture_output=True, text=True, timeout=60)
+    assert out.returncode == 0, out.stderr
+    module_file, urdf = out.stdout.split()
+    assert Path(module_file).is_relative_to(site)
+    assert Path(urdf) == colcon_install / 'share/quat_jt_controller/urdf/spherical_wrist.urdf'

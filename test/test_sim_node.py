@@ -1,0 +1,308 @@
+"""wrist_sim_node: parameters in process; behaviour over real DDS with the node in its own
+process (local_ros), observed and commanded from this test process."""
+import json
+import math
+import os
+from pathlib import Path
+import random
+import time
+
+import numpy as np
+import pytest
+from quat_jt_controller import local_ros
+import rclpy
+from rclpy.experimental import EventsExecutor
+from rclpy.parameter import Parameter
+from rosgraph_msgs.msg import Clock
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64MultiArray
+from std_srvs.srv import Trigger
+from wrist_sim.simulator import SimulatorError
+
+JOINTS = ['joint1', 'joint2', 'joint3']
+INITIAL = [0.0, 0.3, 0.0]
+COULOMB = [1.0, 3.0, 1.0]  # holds joint 2 at 0.3 rad against gravity (~0.4 N m)
+
+
+# -- in process: parameters ------------------------------------------------------------------
+
+@pytest.fixture
+def context():
+    ctx = rclpy.Context()
+    rclpy.init(context=ctx)
+    yield ctx
+    rclpy.try_shutdown(context=ctx)
+
+
+def _make_node(context, **overrides):
+    from wrist_sim.sim_node import WristSimNode
+    return WristSimNode(context=context, parameter_overrides=[
+        Parameter(k, value=v) for k, v in overrides.items()])
+
+
+def test_parameters_default_from_the_urdf(context):
+    node = _make_node(context)
+    try:
+        assert node.get_parameter('joints').value == JOINTS
+        assert list(node.get_parameter('coulomb_friction').value) == [0.0] * 3
+        assert node.get_parameter('rate_hz').value == 1000
+        assert node.sim.dt_s == pytest.approx(1e-3)
+        assert node.get_parameter('command_timeout').value == pytest.approx(0.1)
+    finally:
+        node.destroy_node()
+
+
+def test_friction_parameters_are_validated_and_applied(context):
+    node = _make_node(context, coulomb_friction=[0.5, 0.5, 0.5])
+    try:
+        for bad in ([1.0, 2.0], [1.0, -1.0, 0.0], [1.0, math.nan, 0.0]):
+            result = node.set_parameters([Parameter('coulomb_friction', value=bad)])[0]
+            assert not result.successful, bad
+        np.testing.assert_allclose(node.sim.friction[1], [0.5, 0.5, 0.5])
+        # Both arrays in one call: applied together.
+        results = node.set_parameters_atomically([
+            Parameter('viscous_friction', value=[0.1, 0.2, 0.3]),
+            Parameter('coulomb_friction', value=[1.0, 2.0, 3.0])])
+        assert results.successful
+        viscous, coulomb = node.sim.friction
+        np.testing.assert_allclose(viscous, [0.1, 0.2, 0.3])
+        np.testing.assert_allclose(coulomb, [1.0, 2.0, 3.0])
+        # Structural parameters are read only.
+        assert not node.set_parameters([Parameter('rate_hz', value=500)])[0].successful
+        assert not node.set_parameters([Parameter('command_timeout', value=-1.0)])[0].successful
+    finally:
+        node.destroy_node()
+
+
+def test_bad_startup_parameters_are_refused(context):
+    with pytest.raises(SimulatorError):
+        _make_node(context, viscous_friction=[0.1, 0.2])
+    with pytest.raises(SimulatorError):
+        _make_node(context, joints=['joint1', 'nope'])
+
+
+# -- over DDS: the node in its own process ---------------------------------------------------
+
+class Probe:
+    """A test node: records joint_states (and /clock), publishes commands, calls reset."""
+
+    def __init__(self, context, respond=None):
+        self.node = rclpy.create_node('probe', context=context)
+        self.executor = EventsExecutor(context=context)
+        self.executor.add_node(self.node)
+        self.msgs: list[tuple[float, int, list, list, list]] = []
+        self.clock_ns: list[int] = []
+        self.respond = respond  # called with each JointState: a controller stand-in
+        self.pub = self.node.create_publisher(Float64MultiArray, 'effort_controller/commands',
+                                              10)
+        self.node.create_subscription(JointState, 'joint_states', self._on_js, 10)
+        self.node.create_subscription(Clock, '/clock', lambda m: self.clock_ns.append(
+            m.clock.sec * 1_000_000_000 + m.clock.nanosec), 10)
+        self.reset = self.node.create_client(Trigger, '/wrist_sim/reset')
+
+    def _on_js(self, msg: JointState) -> None:
+        stamp = msg.header.stamp.sec * 1_000_000_000 + msg.header.stamp.nanosec
+        self.msgs.append((time.perf_counter(), stamp, list(msg.position), list(msg.velocity),
+                          list(msg.effort)))
+        self.names = list(msg.name)
+        if self.respond is not None:
+            cmd = self.respond(msg)
+            if cmd is not None:
+                self.send(cmd)
+
+    def send(self, values) -> None:
+        self.pub.publish(Float64MultiArray(data=[float(v) for v in values]))
+
+    def spin_until(self, condition, timeout_s: float) -> bool:
+        deadline = time.perf_counter() + timeout_s
+        while time.perf_counter() < deadline:
+            if condition():
+                return True
+            self.executor.spin_once(timeout_sec=0.01)
+        return condition()
+
+    def spin_for(self, duration_s: float) -> None:
+        self.spin_until(lambda: False, duration_s)
+
+    def latest(self):
+        return self.msgs[-1]
+
+    def destroy(self) -> None:
+        self.executor.remove_node(self.node)
+        self.node.destroy_node()
+
+
+_used_domains = {int(os.environ['ROS_DOMAIN_ID'])}
+
+
+class SimProcess:
+    """The node in its own process on a private domain, and a context for probes."""
+
+    def __init__(self, tmp: Path, params: dict) -> None:
+        self.dir = tmp
+        domain = random.choice([d for d in range(1, 101) if d not in _used_domains])
+        _used_domains.add(domain)
+        self.env = local_ros.isolated_env(tmp, domain_id=domain)
+        self.stats = tmp / 'stats.json'
+        self.proc = local_ros.spawn_node('wrist_sim_node', self.env, tmp,
+                                         params={**params, 'stats_file': str(self.stats)})
+        self.context = rclpy.Context()
+        rclpy.init(context=self.context, domain_id=int(self.env['ROS_DOMAIN_ID']))
+
+    def log(self) -> str:
+        path = self.dir / 'wrist_sim_node.log'
+        return path.read_text(errors='replace') if path.exists() else '(no log)'
+
+    def alive(self) -> bool:
+        return self.proc.poll() is None
+
+    def close(self) -> int:
+        code = local_ros.stop_node(self.proc)
+        rclpy.try_shutdown(context=self.context)
+        return code
+
+
+@pytest.fixture(scope='module')
+def sim(tmp_path_factory):
+    s = SimProcess(tmp_path_factory.mktemp('wrist_sim'), {
+        'initial_positions': INITIAL, 'coulomb_friction': COULOMB,
+        'viscous_friction': [0.05, 0.05, 0.05], 'command_timeout': 0.1})
+    yield s
+    s.close()
+
+
+@pytest.fixture(scope='module')
+def probe(sim):
+    p = Probe(sim.context)
+    ok = p.spin_until(lambda: len(p.msgs) > 100, 30.0)
+    assert ok, f'no joint_states from the node:\n{sim.log()}'
+    yield p
+    p.destroy()
+
+
+def test_joint_states_arrive_at_about_1khz_with_monotonic_stamps(sim, probe):
+    start = len(probe.msgs)
+    t0 = time.perf_counter()
+    probe.spin_for(2.0)
+    window = probe.msgs[start:]
+    rate = len(window) / (time.perf_counter() - t0)
+    stamps = np.array([m[1] for m in probe.msgs])
+    assert rate >= 500.0, f'{rate:.0f} Hz\n{sim.log()}'
+    assert np.all(np.diff(stamps) > 0), 'stamps must be strictly increasing'
+    assert abs(stamps[-1] * 1e-9 - time.time()) < 5.0, 'real-time mode stamps with ROS time'
+    assert probe.names == JOINTS
+    np.testing.assert_allclose(window[-1][2], INITIAL, atol=1e-6)  # stiction holds it
+    print(f'joint_states rate {rate:.1f} Hz over 2 s')
+
+
+def _stream(probe: Probe, cmd, duration_s: float) -> None:
+    """Send ``cmd`` for each joint state received, for ``duration_s`` (a controller)."""
+    probe.respond = lambda msg: cmd
+    try:
+        probe.spin_for(duration_s)
+    finally:
+        probe.respond = None
+
+
+def test_effort_command_moves_the_joint_the_right_way(sim, probe):
+    q_before = np.array(probe.latest()[2])
+    _stream(probe, [2.0, 0.0, -1.5], 0.15)
+    _, _, q, qdot, effort = probe.latest()
+    assert q[0] - q_before[0] > 0.01 and qdot[0] > 0.0, f'{q_before} -> {q}\n{sim.log()}'
+    assert q[2] - q_before[2] < -0.01 and qdot[2] < 0.0
+    assert abs(q[1] - q_before[1]) < 1e-3, 'joint 2 held by stiction'
+    np.testing.assert_allclose(effort, [2.0, 0.0, -1.5])
+    # Effort limits clamp what is applied (and reported).
+    _stream(probe, [80.0, 0.0, -80.0], 0.05)
+    np.testing.assert_allclose(probe.latest()[4], [50.0, 0.0, -20.0])
+
+
+def test_bad_commands_are_rejected_and_the_node_keeps_publishing(sim, probe):
+    _stream(probe, [2.0, 0.0, 0.0], 0.1)
+    n0 = len(probe.msgs)
+    bad = iter([[1.0, 2.0], [math.nan, 0.0, 0.0], [0.0, math.inf, 0.0], []] * 10000)
+    probe.respond = lambda msg: next(bad)
+    try:
+        probe.spin_for(0.04)  # < command_timeout: the last good command still applies
+        assert probe.latest()[4] == [2.0, 0.0, 0.0]
+        probe.spin_for(0.3)   # bad commands do not feed the watchdog
+    finally:
+        probe.respond = None
+    assert sim.alive(), sim.log()
+    assert len(probe.msgs) - n0 > 100, 'the node keeps publishing'
+    assert probe.latest()[4] == [0.0, 0.0, 0.0]
+    log = sim.log()
+    assert 'rejected command: 2 values for 3 joints' in log, log
+    assert 'rejected command with non-finite values' in log, log
+    # Throttled: far fewer log lines than bad messages.
+    assert log.count('rejected command') < 10, log
+
+
+def test_watchdog_zeroes_torque_and_recovers(sim, probe):
+    _stream(probe, [0.0, 0.0, 2.5], 0.1)
+    assert probe.latest()[4] == [0.0, 0.0, 2.5]
+    t_stop = time.perf_counter()
+    assert probe.spin_until(lambda: probe.latest()[4] == [0.0, 0.0, 0.0], 2.0), sim.log()
+    assert time.perf_counter() - t_stop < 1.0
+    assert 'torque set to zero' in sim.log()
+    _stream(probe, [0.0, 0.0, -2.5], 0.1)
+    assert probe.latest()[4] == [0.0, 0.0, -2.5]
+    assert 'commands are back' in sim.log()
+
+
+def test_reset_returns_to_initial_positions_at_rest(sim, probe):
+    _stream(probe, [5.0, 0.0, 5.0], 0.2)
+    assert np.abs(np.array(probe.latest()[2]) - INITIAL).max() > 0.01
+    assert probe.reset.wait_for_service(timeout_sec=5.0), sim.log()
+    future = probe.reset.call_async(Trigger.Request())
+    assert probe.spin_until(future.done, 5.0), sim.log()
+    assert future.result().success, future.result().message
+    n = len(probe.msgs)
+    assert probe.spin_until(lambda: len(probe.msgs) > n + 20, 5.0)
+    _, _, q, qdot, effort = probe.latest()
+    np.testing.assert_allclose(q, INITIAL, atol=1e-6)
+    np.testing.assert_allclose(qdot, 0.0, atol=1e-6)
+    assert effort == [0.0, 0.0, 0.0]
+
+
+def test_shutdown_on_sigint_writes_stats(sim, probe):
+    # Last test of the module: a controller stand-in for 1 s, then SIGINT.
+    _stream(probe, [0.0, 0.0, 0.0], 1.0)
+    t0 = time.perf_counter()
+    code = local_ros.stop_node(sim.proc)
+    assert code == 0 and time.perf_counter() - t0 < 5.0, sim.log()
+    stats = json.loads(sim.stats.read_text())
+    assert stats['steps'] > 1000 and stats['rejected_commands'] > 0
+    assert stats['watchdog_trips'] >= 1, stats
+    assert stats['fresh_steps'] > 0 and 'cmd_latency_us_p50' in stats, stats
+    print('node stats', json.dumps(stats))
+
+
+# -- lockstep with /clock --------------------------------------------------------------------
+
+def test_lockstep_clock_steps_once_per_command(tmp_path):
+    s = SimProcess(tmp_path, {'publish_clock': True, 'lockstep_timeout': 0.5})
+    p = Probe(s.context)
+    try:
+        assert p.spin_until(lambda: len(p.msgs) >= 1, 30.0), s.log()
+        # No controller: a step per lockstep_timeout only.
+        n = len(p.msgs)
+        p.spin_for(0.3)
+        assert len(p.msgs) - n <= 2
+        # A controller answering every state: one step per command, sim time in 1 ms steps.
+        p.respond = lambda msg: [0.0, 0.0, 0.0]
+        p.send([0.0, 0.0, 0.0])
+        t0, n = time.perf_counter(), len(p.msgs)
+        p.spin_until(lambda: len(p.msgs) > n + 2000, 10.0)
+        wall = time.perf_counter() - t0
+        p.respond = None
+        stamps = np.array([m[1] for m in p.msgs[n:]])
+        assert len(stamps) > 500, s.log()
+        assert np.all(np.diff(stamps) == 1_000_000), 'one 1 ms step per state'
+        assert p.clock_ns and p.clock_ns[-1] >= stamps[0], '/clock follows the sim time'
+        rtf = (stamps[-1] - stamps[0]) * 1e-9 / wall
+        print(f'lockstep: {len(stamps)} steps, real-time factor {rtf:.2f}')
+        assert rtf > 0.2, rtf
+    finally:
+        p.destroy()
+        assert s.close() == 0, s.log()

@@ -1,0 +1,421 @@
+"""ROS-free simulator core: a fixed-base serial robot from a URDF in PyBullet, torque driven.
+
+Stands in for the paper's CICESE direct-drive wrist (by default the bundled
+``urdf/spherical_wrist.urdf``) but loads any fixed-base serial URDF given as an XML string.
+Each :class:`WristSimulator` owns one ``BulletClient`` (DIRECT unless a GUI is asked for), so
+several can live in one process.
+
+Dynamics match Pinocchio's for the same URDF (``RobotModel.forward_dynamics``): inertias come
+from the file (``URDF_USE_INERTIA_FROM_FILE``), PyBullet's default link damping (0.04) and joint
+damping are zeroed, gravity is -9.81 m/s^2 along z, and the default velocity motors are
+disabled, so a joint moves under the commanded torque, gravity and the friction below only.
+
+Friction, per joint:
+
+- viscous ``-b qdot`` as an explicit joint torque (``b`` in N m s/rad; stable while
+  ``b dt / I`` stays well below 2, i.e. for any realistic ``b`` at 1 kHz);
+- Coulomb, with stiction, as a PyBullet velocity motor with target velocity 0 whose force is
+  limited to the Coulomb level ``f_c`` (N m): the constraint solver holds the joint still while
+  the other torques on it stay below ``f_c`` and resists with ``f_c`` when they exceed it, with no
+  chattering around zero velocity. The solver runs its full iteration count (residual threshold
+  0) so a held joint does not creep.
+
+The commanded torque is clamped to the URDF effort limits; that clamped torque is the
+"applied" torque reported by :meth:`WristSimulator.step` and :meth:`WristSimulator.state`
+(friction is not included in it: it is the motor torque, as a drive would report it).
+
+This module never imports rclpy; :class:`LoopStats` is the node's timing bookkeeping, kept here
+so it can be tested without ROS.
+"""
+from dataclasses import dataclass
+import math
+import os
+from pathlib import Path
+import re
+import tempfile
+import time
+from typing import Optional, Sequence, Union
+
+import numpy as np
+import pybullet
+import pybullet_data
+from pybullet_utils.bullet_client import BulletClient
+
+GRAVITY_MPS2 = 9.81
+_MOVABLE = (pybullet.JOINT_REVOLUTE, pybullet.JOINT_PRISMATIC)
+_PACKAGE_URI = re.compile(r'package://([^/"\'\s]+)/([^"\'\s<>]*)')
+
+PathLike = Union[str, os.PathLike]
+
+
+class SimulatorError(ValueError):
+    """The URDF, the joints or the values asked of the simulator are not usable."""
+
+
+@dataclass(frozen=True)
+class SimState:
+    """A snapshot of the joints, in the simulator's joint order (copies, safe to keep)."""
+
+    time_s: float
+    q_rad: np.ndarray
+    qdot_rad_s: np.ndarray
+    tau_applied_nm: np.ndarray
+
+
+def resolve_package_uris(urdf_xml: str, search_dirs: Sequence[PathLike]) -> str:
+    """Replace ``package://pkg/rest`` URIs by absolute paths where the file can be found.
+
+    For each directory ``d`` of ``search_dirs`` it tries ``d/pkg/rest`` and then
+    ``d/*/pkg/rest`` (so ``pybullet_data`` resolves ``package://xarm_description/...`` through
+    ``pybullet_data/xarm/xarm_description``). Unresolved URIs are left untouched: PyBullet then
+    warns and skips that mesh.
+    """
+    dirs = [Path(d) for d in search_dirs if d and Path(d).is_dir()]
+
+    def find(match: re.Match) -> str:
+        pkg, rest = match.group(1), match.group(2)
+        for d in dirs:
+            candidates = [d / pkg / rest]
+            candidates += [sub / pkg / rest for sub in sorted(d.iterdir()) if sub.is_dir()]
+            for c in candidates:
+                if c.is_file():
+                    return str(c.resolve())
+        return match.group(0)
+
+    return _PACKAGE_URI.sub(find, urdf_xml)
+
+
+def _as_vector(values: Optional[Sequence[float]], n: int, name: str,
+               default: float = 0.0, nonnegative: bool = False) -> np.ndarray:
+    if values is None:
+        return np.full(n, default)
+    try:
+        vec = np.array(values, dtype=float).reshape(-1)
+    except (TypeError, ValueError) as exc:
+        raise SimulatorError(f'{name}: not a list of numbers ({exc})') from exc
+    if vec.size != n:
+        raise SimulatorError(f'{name}: expected {n} values, got {vec.size}')
+    if not np.all(np.isfinite(vec)):
+        raise SimulatorError(f'{name}: values must be finite, got {vec.tolist()}')
+    if nonnegative and np.any(vec < 0.0):
+        raise SimulatorError(f'{name}: values must be >= 0, got {vec.tolist()}')
+    return vec
+
+
+class WristSimulator:
+    """A fixed-base serial robot from a URDF, in its own PyBullet client, torque controlled.
+
+    Args:
+        urdf_xml: the URDF as an XML string.
+        joint_names: the joints to drive, in the order of every vector of this class; by
+            default the URDF's revolute/prismatic joints in tree order. Others stay at zero.
+        dt_s: the fixed time step (s).
+        use_gui: open the PyBullet window instead of a DIRECT (headless) client.
+        viscous_nm_s_per_rad: viscous friction ``b`` per joint (default zeros).
+        coulomb_nm: Coulomb friction / stiction level per joint (default zeros).
+        initial_positions_rad: where the robot starts, at rest (default zeros).
+        search_dirs: extra directories in which ``package://`` meshes are looked for (before
+            ``pybullet_data``); the first also becomes PyBullet's additional search path.
+        solver_iterations: PyBullet constraint-solver iterations (for the friction motors).
+    """
+
+    def __init__(self, urdf_xml: str, joint_names: Optional[Sequence[str]] = None, *,
+                 dt_s: float = 1e-3, use_gui: bool = False,
+                 viscous_nm_s_per_rad: Optional[Sequence[float]] = None,
+                 coulomb_nm: Optional[Sequence[float]] = None,
+                 initial_positions_rad: Optional[Sequence[float]] = None,
+                 search_dirs: Sequence[PathLike] = (),
+                 solver_iterations: int = 50) -> None:
+        if not (math.isfinite(dt_s) and dt_s > 0.0):
+            raise SimulatorError(f'dt_s must be finite and > 0, got {dt_s}')
+        if not urdf_xml or not urdf_xml.strip():
+            raise SimulatorError('empty URDF')
+        self.dt_s = float(dt_s)
+        dirs = [str(d) for d in search_dirs] + [pybullet_data.getDataPath()]
+        xml = resolve_package_uris(urdf_xml, dirs)
+
+        self._client = BulletClient(connection_mode=pybullet.GUI if use_gui else pybullet.DIRECT)
+        try:
+            self._setup(xml, dirs, joint_names, solver_iterations)
+        except Exception:
+            self.close()
+            raise
+        self._q = np.zeros(self.n)
+        self._qdot = np.zeros(self.n)
+        self._applied = np.zeros(self.n)
+        self._drive = np.zeros(self.n)
+        self._viscous = np.zeros(self.n)
+        self._coulomb = np.zeros(self.n)
+        self._step_count = 0
+        self._initial = _as_vector(initial_positions_rad, self.n, 'initial_positions_rad')
+        self.set_friction(viscous_nm_s_per_rad, coulomb_nm)
+        self.reset(self._initial)
+
+    def _setup(self, xml: str, dirs: list[str], joint_names: Optional[Sequence[str]],
+               solver_iterations: int) -> None:
+        c = self._client
+        c.setAdditionalSearchPath(dirs[0])
+        c.setGravity(0.0, 0.0, -GRAVITY_MPS2)
+        c.setTimeStep(self.dt_s)
+        # Residual threshold 0: always run every iteration, so a joint held by stiction does
+        # not creep (with the default 1e-7 it drifts ~1e-4 rad/s).
+        c.setPhysicsEngineParameter(numSolverIterations=int(solver_iterations),
+                                    solverResidualThreshold=0.0, numSubSteps=0)
+        # PyBullet reads URDFs from files only: write the XML to a temporary one.
+        fd, path = tempfile.mkstemp(prefix='wrist_sim_', suffix='.urdf')
+        try:
+            with os.fdopen(fd, 'w') as f:
+                f.write(xml)
+            try:
+                self._body = c.loadURDF(path, useFixedBase=True,
+                                        flags=pybullet.URDF_USE_INERTIA_FROM_FILE)
+            except pybullet.error as exc:
+                raise SimulatorError(f'PyBullet cannot load the URDF: {exc}') from exc
+        finally:
+            os.unlink(path)
+
+        by_name: dict[str, int] = {}
+        movable: list[str] = []
+        info_by_index = {}
+        for j in range(c.getNumJoints(self._body)):
+            info = c.getJointInfo(self._body, j)
+            name = info[1].decode()
+            by_name[name] = j
+            info_by_index[j] = info
+            if info[2] in _MOVABLE:
+                movable.append(name)
+            # Zero PyBullet's default damping (0.04 on every link) and joint damping.
+            c.changeDynamics(self._body, j, linearDamping=0.0, angularDamping=0.0,
+                             jointDamping=0.0)
+        c.changeDynamics(self._body, -1, linearDamping=0.0, angularDamping=0.0)
+        if joint_names is None:
+            joint_names = movable
+        names = [str(n) for n in joint_names]
+        unknown = [n for n in names if n not in movable]
+        if unknown:
+            raise SimulatorError(f'joints {unknown} are not movable joints of the URDF '
+                                 f'(it has {movable})')
+        if len(set(names)) != len(names):
+            raise SimulatorError(f'joint names repeat: {names}')
+        if not names:
+            raise SimulatorError('no joints to drive')
+        self.joint_names: tuple[str, ...] = tuple(names)
+        self.n = len(names)
+        self._idx = [by_name[n] for n in names]
+        infos = [info_by_index[j] for j in self._idx]
+        # URDF effort 0 (or absent) means "no limit given": no clamping.
+        self.effort_limits_nm = np.array([i[10] if i[10] > 0.0 else np.inf for i in infos])
+        self.position_lower = np.array([i[8] for i in infos])
+        self.position_upper = np.array([i[9] for i in infos])
+        # Joints not driven are held at zero by stiff motors (the "locked" joints of the model).
+        others = [by_name[n] for n in movable if n not in names]
+        if others:
+            c.setJointMotorControlArray(self._body, others, pybullet.POSITION_CONTROL,
+                                        targetPositions=[0.0] * len(others),
+                                        forces=[1e6] * len(others))
+        self._zero_forces = [0.0] * self.n
+
+    # -- configuration -------------------------------------------------------------------
+
+    @property
+    def friction(self) -> tuple[np.ndarray, np.ndarray]:
+        """(viscous N m s/rad, Coulomb N m) per joint (copies)."""
+        return self._viscous.copy(), self._coulomb.copy()
+
+    def set_friction(self, viscous_nm_s_per_rad: Optional[Sequence[float]] = None,
+                     coulomb_nm: Optional[Sequence[float]] = None) -> None:
+        """Set both friction vectors (None = zeros); validated (length, finite, >= 0) first,
+        then applied together, so a bad value changes nothing."""
+        viscous = _as_vector(viscous_nm_s_per_rad, self.n, 'viscous friction',
+                             nonnegative=True)
+        coulomb = _as_vector(coulomb_nm, self.n, 'coulomb friction', nonnegative=True)
+        self._viscous[:] = viscous
+        self._coulomb[:] = coulomb
+        self._has_viscous = bool(np.any(viscous > 0.0))
+        # The velocity motor: target 0, force bounded by the Coulomb level (0 = disabled).
+        self._client.setJointMotorControlArray(
+            self._body, self._idx, pybullet.VELOCITY_CONTROL,
+            targetVelocities=[0.0] * self.n, forces=coulomb.tolist())
+
+    @property
+    def initial_positions_rad(self) -> np.ndarray:
+        """Where :meth:`reset` without arguments puts the joints (copy)."""
+        return self._initial.copy()
+
+    # -- stepping ------------------------------------------------------------------------
+
+    @property
+    def time_s(self) -> float:
+        """Simulation time (s): steps taken times ``dt_s``; not reset by :meth:`reset`."""
+        return self._step_count * self.dt_s
+
+    @property
+    def step_count(self) -> int:
+        """Steps taken since construction."""
+        return self._step_count
+
+    def step(self, tau_nm: Sequence[float]) -> np.ndarray:
+        """Apply ``tau_nm`` (clamped to the effort limits) for one step of ``dt_s``.
+
+        Returns the applied (clamped) torque, a copy. Raises SimulatorError on a wrong length
+        or a non-finite value (nothing is stepped then).
+        """
+        tau = np.asarray(tau_nm, dtype=float)
+        if tau.shape != (self.n,):
+            raise SimulatorError(f'expected {self.n} torques, got shape {tau.shape}')
+        if not np.all(np.isfinite(tau)):
+            raise SimulatorError(f'torques must be finite, got {tau.tolist()}')
+        self._step(tau)
+        return self._applied.copy()
+
+    def step_zero(self) -> None:
+        """One step with no motor torque (friction and gravity only)."""
+        self._applied[:] = 0.0
+        self._advance(self._zero_forces if not self._has_viscous else None)
+
+    def _step(self, tau: np.ndarray) -> None:
+        np.clip(tau, -self.effort_limits_nm, self.effort_limits_nm, out=self._applied)
+        self._advance(None)
+
+    def _advance(self, forces: Optional[list[float]]) -> None:
+        if forces is None:
+            if self._has_viscous:
+                np.multiply(self._viscous, self._qdot, out=self._drive)
+                np.subtract(self._applied, self._drive, out=self._drive)
+                forces = self._drive.tolist()
+            else:
+                forces = self._applied.tolist()
+        c = self._client
+        c.setJointMotorControlArray(self._body, self._idx, pybullet.TORQUE_CONTROL,
+                                    forces=forces)
+        c.stepSimulation()
+        self._step_count += 1
+        self._read()
+
+    def _read(self) -> None:
+        for i, s in enumerate(self._client.getJointStates(self._body, self._idx)):
+            self._q[i] = s[0]
+            self._qdot[i] = s[1]
+
+    # -- state ---------------------------------------------------------------------------
+
+    def state(self) -> SimState:
+        """Joint positions (rad or m), velocities and the applied torque (copies)."""
+        return SimState(self.time_s, self._q.copy(), self._qdot.copy(), self._applied.copy())
+
+    @property
+    def q_rad(self) -> np.ndarray:
+        """Joint positions, the simulator's own buffer (read only; changes on each step)."""
+        return self._q
+
+    @property
+    def qdot_rad_s(self) -> np.ndarray:
+        """Joint velocities, the simulator's own buffer (read only)."""
+        return self._qdot
+
+    @property
+    def tau_applied_nm(self) -> np.ndarray:
+        """The torque applied in the last step, clamped, without friction (own buffer)."""
+        return self._applied
+
+    def reset(self, q0_rad: Optional[Sequence[float]] = None,
+              qdot0_rad_s: Optional[Sequence[float]] = None) -> None:
+        """Put the joints at ``q0_rad`` (default: the initial positions) with velocity
+        ``qdot0_rad_s`` (default: at rest); the applied torque reads zero. Time goes on."""
+        q0 = self._initial if q0_rad is None else _as_vector(q0_rad, self.n, 'q0_rad')
+        v0 = _as_vector(qdot0_rad_s, self.n, 'qdot0_rad_s')
+        for j, qi, vi in zip(self._idx, q0, v0):
+            self._client.resetJointState(self._body, j, float(qi), float(vi))
+        self._applied[:] = 0.0
+        self._read()
+
+    def close(self) -> None:
+        """Disconnect the PyBullet client (idempotent)."""
+        client = getattr(self, '_client', None)
+        if client is not None:
+            try:
+                client.disconnect()
+            except pybullet.error:
+                pass
+            self._client = None
+
+    def __enter__(self) -> 'WristSimulator':
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+class LoopStats:
+    """Cheap timing bookkeeping of a stepping loop: counters plus preallocated ring buffers.
+
+    Per step: wall time, compute time, lateness past the deadline, whether the command applied
+    was fresh (arrived after the previous state was published). Per fresh command: latency from
+    the state publish to its arrival. All times in seconds (``time.perf_counter``).
+    """
+
+    def __init__(self, capacity: int = 10000) -> None:
+        self.capacity = int(capacity)
+        self._t = np.zeros(self.capacity)
+        self._compute = np.zeros(self.capacity)
+        self._late = np.zeros(self.capacity)
+        self._fresh = np.zeros(self.capacity, dtype=bool)
+        self._lat = np.zeros(self.capacity)
+        self.steps = 0
+        self.fresh_steps = 0
+        self.latencies = 0
+        self.missed_deadlines = 0
+        self.rejected_commands = 0
+        self.watchdog_trips = 0
+        self.lockstep_timeouts = 0
+        self.start_s = time.perf_counter()
+
+    def record_step(self, t_s: float, compute_s: float, late_s: float, fresh: bool) -> None:
+        """One step: its wall time, compute time, lateness and freshness of its command."""
+        k = self.steps % self.capacity
+        self._t[k] = t_s
+        self._compute[k] = compute_s
+        self._late[k] = late_s
+        self._fresh[k] = fresh
+        self.steps += 1
+        if fresh:
+            self.fresh_steps += 1
+
+    def record_latency(self, latency_s: float) -> None:
+        """Wall time from a state publish to the arrival of the first command after it."""
+        self._lat[self.latencies % self.capacity] = latency_s
+        self.latencies += 1
+
+    def _window(self, buf: np.ndarray, count: int) -> np.ndarray:
+        return buf[:min(count, self.capacity)]
+
+    def summary(self) -> dict:
+        """Figures over the run and over the last ``capacity`` steps (the window)."""
+        n = min(self.steps, self.capacity)
+        out: dict = {
+            'steps': self.steps,
+            'elapsed_s': time.perf_counter() - self.start_s,
+            'missed_deadlines': self.missed_deadlines,
+            'fresh_steps': self.fresh_steps,
+            'rejected_commands': self.rejected_commands,
+            'watchdog_trips': self.watchdog_trips,
+            'lockstep_timeouts': self.lockstep_timeouts,
+        }
+        if n >= 2:
+            t = self._window(self._t, self.steps)
+            out['window_rate_hz'] = (n - 1) / max(float(t.max() - t.min()), 1e-12)
+            c = self._window(self._compute, self.steps) * 1e6
+            late = self._window(self._late, self.steps) * 1e6
+            out.update({
+                'step_compute_us_p50': float(np.percentile(c, 50)),
+                'step_compute_us_p99': float(np.percentile(c, 99)),
+                'step_compute_us_max': float(c.max()),
+                'lateness_us_p50': float(np.percentile(late, 50)),
+                'lateness_us_p99': float(np.percentile(late, 99)),
+                'window_fresh_fraction': float(self._window(self._fresh, self.steps).mean()),
+            })
+        if self.latencies:
+            lat = self._window(self._lat, self.latencies) * 1e6
+            out['cmd_latency_us_p50'] = float(np.percentile(lat, 50))
+            out['cmd_latency_us_p99'] = float(np.percentile(lat, 99))
+        return out
