@@ -3,15 +3,16 @@
     ros2 launch quat_jt_controller wrist_demo.launch.py [potential:=tanh|quadratic]
                                                       [use_gui:=true|false]
 
-Both nodes read their parameters from ``config/*.yaml`` of this package (the controller from
-``wrist_controller.yaml``); ``potential`` overrides the controller's, ``use_gui`` opens the
-PyBullet window of the simulator. Then send a goal, e.g. the paper's corrected one:
+The nodes read their parameters from this package's ``config/wrist_sim.yaml`` and
+``config/wrist_controller.yaml`` (the paper's experiment; the xarm6_*.yaml files in the same
+folder are for another robot and use the same node names, so they are not loaded here);
+``potential`` overrides the controller's, ``use_gui`` opens the PyBullet window. Then send a
+goal, e.g. the paper's corrected one (ERRATA.md, note 2):
 
     ros2 topic pub --once /quat_jt_controller/target_pose geometry_msgs/msg/PoseStamped \
       "{header: {frame_id: base_link},
         pose: {orientation: {x: 0.0, y: 0.4226, z: 0.7152, w: 0.5566}}}"
 """
-from glob import glob
 import os
 
 from ament_index_python.packages import get_package_share_directory
@@ -24,7 +25,8 @@ from launch_ros.parameter_descriptions import ParameterValue
 
 def generate_launch_description() -> LaunchDescription:
     share = get_package_share_directory('quat_jt_controller')
-    config_files = sorted(glob(os.path.join(share, 'config', '*.yaml')))
+    sim_config = os.path.join(share, 'config', 'wrist_sim.yaml')
+    controller_config = os.path.join(share, 'config', 'wrist_controller.yaml')
     potential = LaunchConfiguration('potential')
     use_gui = LaunchConfiguration('use_gui')
     return LaunchDescription([
@@ -36,10 +38,9 @@ def generate_launch_description() -> LaunchDescription:
                               description='open the PyBullet window of the simulator'),
         Node(package='quat_jt_controller', executable='wrist_sim_node', name='wrist_sim',
              output='screen', emulate_tty=True,
-             parameters=config_files + [
-                 {'use_gui': ParameterValue(use_gui, value_type=bool)}]),
+             parameters=[sim_config, {'use_gui': ParameterValue(use_gui, value_type=bool)}]),
         Node(package='quat_jt_controller', executable='controller_node',
              name='quat_jt_controller', output='screen', emulate_tty=True,
-             parameters=config_files + [
-                 {'potential': ParameterValue(potential, value_type=str)}]),
+             parameters=[controller_config,
+                         {'potential': ParameterValue(potential, value_type=str)}]),
     ])

@@ -498,12 +498,10 @@ def main(args=None) -> None:
             raise SystemExit(1) from None
         executor = EventsExecutor()
         executor.add_node(node)
-        import os
-        if os.environ.get('QJT_SPIN'):
-            executor.spin()
-        else:
-            while rclpy.ok():
-                executor.spin_once(timeout_sec=0.5)
+        # spin_once with a timeout in a loop: returns promptly on SIGINT (rclpy.ok() turns
+        # false); EventsExecutor.spin() did not process events when measured here.
+        while rclpy.ok():
+            executor.spin_once(timeout_sec=0.5)
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:

@@ -406,7 +406,17 @@ class LoopStats:
             out['window_rate_hz'] = (n - 1) / max(float(t.max() - t.min()), 1e-12)
             c = self._window(self._compute, self.steps) * 1e6
             late = self._window(self._late, self.steps) * 1e6
+            period = np.diff(np.sort(t)) * 1e6  # the ring is not in order once it wraps
+            jitter = np.abs(period - np.median(period))
+            fresh = self._window(self._fresh, self.steps)
             out.update({
+                'window_steps': n,
+                'window_stale_steps': int(n - np.count_nonzero(fresh)),
+                'period_us_p50': float(np.percentile(period, 50)),
+                'period_us_max': float(period.max()),
+                'jitter_us_p50': float(np.percentile(jitter, 50)),
+                'jitter_us_p99': float(np.percentile(jitter, 99)),
+                'jitter_us_max': float(jitter.max()),
                 'step_compute_us_p50': float(np.percentile(c, 50)),
                 'step_compute_us_p99': float(np.percentile(c, 99)),
                 'step_compute_us_max': float(c.max()),
@@ -418,4 +428,5 @@ class LoopStats:
             lat = self._window(self._lat, self.latencies) * 1e6
             out['cmd_latency_us_p50'] = float(np.percentile(lat, 50))
             out['cmd_latency_us_p99'] = float(np.percentile(lat, 99))
+            out['cmd_latency_us_max'] = float(lat.max())
         return out

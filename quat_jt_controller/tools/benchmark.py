@@ -1,0 +1,220 @@
+"""Benchmark of the 1 kHz loop: the two nodes over DDS in separate processes, and the pure core.
+
+Loop: ``wrist_sim_node`` (real-time pacing at 1 kHz) and ``controller_node`` (tanh law, paper
+gains, regulating to the paper's goal) on a private loopback ROS graph, warmed up, then measured
+for ``--duration`` seconds. Figures and where they come from:
+
+* state rate, period jitter, missed deadlines, stale ticks (a step that applied no command
+  computed from the previous state), state-to-command latency (state publish -> arrival of the
+  command computed from it): the simulator's own loop statistics over the last 30 s
+  (``stats_file``);
+* command rate and compute time per tick (JointState callback to command ready): the
+  controller's ``/diagnostics``, one window per second; p50 is the median of the windows' p50,
+  p99 the largest window p99;
+* CPU % per process: ``/proc/<pid>/stat`` user + system time over the measured interval.
+
+Core: control-law ticks per second (forward kinematics, Jacobian, g(q), error, law, clamp) for
+the wrist (3-DOF, orientation task) and the xArm6 (6-DOF, pose task), in one process.
+
+    python -m quat_jt_controller.tools.benchmark [--duration 30] [--out results/bench]
+"""
+import argparse
+import json
+import os
+from pathlib import Path
+import random
+import statistics
+import sys
+import time
+from typing import Optional
+
+from quat_jt_controller import control_law as cl
+from quat_jt_controller import local_ros
+from quat_jt_controller import quaternion as quat
+from quat_jt_controller.model import RobotModel
+from quat_jt_controller.resources import default_urdf_xml, share_path
+from quat_jt_controller.tools.friction_sweep import (PAPER_KP, PAPER_KV, PAPER_LAMBDA,
+                                                     Q_DESIRED)
+
+CONTROLLER = 'quat_jt_controller'
+TARGETS = {'command rate (Hz)': '>= 995', 'missed ticks (%)': '<= 0.5',
+           'latency p99 (ms)': '<= 1.0', 'compute p50 (us)': '<= 20'}
+
+
+def xarm6_urdf_xml() -> str:
+    import pybullet_data
+    return (Path(pybullet_data.getDataPath()) / 'xarm' / 'xarm6_robot.urdf').read_text()
+
+
+def core_ticks(model: RobotModel, task: cl.Task, gains: cl.Gains, q, qdot, goal,
+               n: int = 20000) -> dict:
+    """Time the whole control tick of the node's hot path, in one process."""
+    q_desired, p_desired = goal
+    rows = slice(3, 6) if task is cl.Task.ORIENTATION else slice(0, 6)
+    limits = model.effort_limits
+    times = []
+    for _ in range(5):
+        t0 = time.perf_counter()
+        for _ in range(n // 5):
+            p, R, J = model.kinematics(q)
+            y, eta_e = cl.output_error(p, R, p_desired, q_desired, task)
+            tau = cl.control_torque(J[rows], y, eta_e, qdot, model.gravity(q), gains)
+            cl.saturate(tau, limits)
+        times.append((time.perf_counter() - t0) / (n // 5))
+    best = min(times)
+    return {'us_per_tick': best * 1e6, 'ticks_per_s': 1.0 / best}
+
+
+def core_benchmark() -> dict:
+    wrist = RobotModel(default_urdf_xml(), 'base_link', 'tool0')
+    g3 = cl.Gains.create('tanh', PAPER_KP, PAPER_KV, PAPER_LAMBDA, cl.Task.ORIENTATION, 3)
+    xarm = RobotModel(xarm6_urdf_xml(), 'link_base', 'link6')
+    g6 = cl.Gains.create('tanh', (300.0,) * 3 + PAPER_KP, (2.0,) * 6, (20.0,) * 3 + PAPER_LAMBDA,
+                         cl.Task.POSE, 6)
+    q6 = [0.1, -0.3, -0.8, 0.2, 0.9, -0.1]
+    p6, R6 = xarm.forward_kinematics([0.3, -0.2, -0.6, 0.1, 0.7, 0.2])
+    return {
+        'wrist 3-DOF orientation': core_ticks(wrist, cl.Task.ORIENTATION, g3, [0.3, 0.5, -0.2],
+                                              [0.1, 0.1, 0.1], (Q_DESIRED, None)),
+        'xArm6 6-DOF pose': core_ticks(xarm, cl.Task.POSE, g6, q6, [0.1] * 6,
+                                       (quat.from_rotation_matrix(R6), p6)),
+    }
+
+
+def _cpu_seconds(pid: int) -> float:
+    fields = Path(f'/proc/{pid}/stat').read_text().rsplit(')', 1)[1].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf('SC_CLK_TCK')
+
+
+def loop_benchmark(duration_s: float, warmup_s: float, out: Path) -> dict:
+    import rclpy
+    from rclpy.experimental import EventsExecutor
+    from diagnostic_msgs.msg import DiagnosticArray
+    from geometry_msgs.msg import PoseStamped
+
+    domain_id = random.randint(1, 100)
+    env = local_ros.isolated_env(out, domain_id)
+    stats_file = out / 'sim_stats.json'
+    stats_file.unlink(missing_ok=True)
+    sim = local_ros.spawn_node('wrist_sim_node', env, out,
+                               params_files=(share_path('config/wrist_sim.yaml'),),
+                               params={'stats_file': str(stats_file),
+                                       'coulomb_friction': [0.0, 0.0, 0.0]})
+    ctrl = local_ros.spawn_node('controller_node', env, out,
+                                params_files=(share_path('config/wrist_controller.yaml'),),
+                                params={'potential': 'tanh'})
+    context = rclpy.Context()
+    rclpy.init(context=context, domain_id=domain_id)
+    node = rclpy.create_node('benchmark_probe', context=context)
+    executor = EventsExecutor(context=context)
+    executor.add_node(node)
+    windows: list[dict] = []
+    measuring = [False]
+
+    def on_diag(msg: DiagnosticArray) -> None:
+        for status in msg.status:
+            if status.name.endswith('control loop') and measuring[0]:
+                windows.append({kv.key: kv.value for kv in status.values})
+
+    node.create_subscription(DiagnosticArray, '/diagnostics', on_diag, 10)
+    goal_pub = node.create_publisher(PoseStamped, f'/{CONTROLLER}/target_pose', 10)
+
+    def spin_for(seconds: float) -> None:
+        end = time.monotonic() + seconds
+        while time.monotonic() < end:
+            for proc in (sim, ctrl):
+                if proc.poll() is not None:
+                    raise RuntimeError(f'a node exited early ({proc.returncode}); logs in {out}')
+            executor.spin_once(timeout_sec=min(0.1, max(end - time.monotonic(), 0.0)))
+
+    try:
+        print(f'loop: starting the nodes (domain {domain_id}), warm-up {warmup_s} s')
+        goal = PoseStamped()
+        goal.header.frame_id = 'base_link'
+        o = goal.pose.orientation
+        o.x, o.y, o.z, o.w = quat.to_xyzw(Q_DESIRED)
+        spin_for(2.0)
+        goal_pub.publish(goal)
+        spin_for(warmup_s)
+        cpu0 = {p.pid: _cpu_seconds(p.pid) for p in (sim, ctrl)}
+        t0 = time.monotonic()
+        measuring[0] = True
+        print(f'loop: measuring {duration_s} s')
+        spin_for(duration_s)
+        measuring[0] = False
+        wall = time.monotonic() - t0
+        cpu = {p.pid: 100.0 * (_cpu_seconds(p.pid) - cpu0[p.pid]) / wall for p in (sim, ctrl)}
+    finally:
+        for proc in (ctrl, sim):
+            local_ros.stop_node(proc)
+        executor.shutdown(timeout_sec=1.0)
+        node.destroy_node()
+        rclpy.try_shutdown(context=context)
+    sim_stats = json.loads(stats_file.read_text())
+    if not windows:
+        raise RuntimeError(f'no controller diagnostics received; logs in {out}')
+    full = [w for w in windows if int(w['ticks_in_window']) > 0]
+    return {
+        'duration_s': wall,
+        'sim': sim_stats,
+        'controller_windows': full,
+        'cpu_percent': {'wrist_sim_node': cpu[sim.pid], 'controller_node': cpu[ctrl.pid]},
+        'command_rate_hz': statistics.mean(float(w['control_rate_hz']) for w in full),
+        'compute_us_p50': statistics.median(float(w['compute_us_p50']) for w in full),
+        'compute_us_p99': max(float(w['compute_us_p99']) for w in full),
+    }
+
+
+def report(loop: dict, core: dict) -> str:
+    s = loop['sim']
+    missed_pct = 100.0 * s['window_stale_steps'] / s['window_steps']
+    rows = [
+        ('state rate (Hz)', f'{s["window_rate_hz"]:.1f}', ''),
+        ('command rate (Hz)', f'{loop["command_rate_hz"]:.1f}', TARGETS['command rate (Hz)']),
+        ('missed ticks (%)', f'{missed_pct:.3f} ({s["window_stale_steps"]} of '
+                             f'{s["window_steps"]} steps without a fresh command)',
+         TARGETS['missed ticks (%)']),
+        ('late deadlines (total, incl. start-up)', str(s['missed_deadlines']), ''),
+        ('period jitter p50 / p99 / max (us)',
+         f'{s["jitter_us_p50"]:.1f} / {s["jitter_us_p99"]:.1f} / {s["jitter_us_max"]:.1f}', ''),
+        ('latency p50 / p99 / max (ms)',
+         f'{s["cmd_latency_us_p50"] / 1e3:.3f} / {s["cmd_latency_us_p99"] / 1e3:.3f} / '
+         f'{s["cmd_latency_us_max"] / 1e3:.3f}', TARGETS['latency p99 (ms)']),
+        ('controller compute p50 / p99 (us)',
+         f'{loop["compute_us_p50"]:.1f} / {loop["compute_us_p99"]:.1f}',
+         TARGETS['compute p50 (us)']),
+        ('sim step p50 / p99 (us)',
+         f'{s["step_compute_us_p50"]:.1f} / {s["step_compute_us_p99"]:.1f}', ''),
+        ('CPU % wrist_sim_node / controller_node',
+         f'{loop["cpu_percent"]["wrist_sim_node"]:.0f} / '
+         f'{loop["cpu_percent"]["controller_node"]:.0f}', ''),
+    ]
+    for name, c in core.items():
+        rows.append((f'core tick, {name} (us; ticks/s)',
+                     f'{c["us_per_tick"]:.1f}; {c["ticks_per_s"]:,.0f}', ''))
+    lines = ['| figure | measured | target |', '|---|---|---|']
+    lines += [f'| {a} | {b} | {c} |' for a, b, c in rows]
+    return '\n'.join(lines)
+
+
+def main(argv: Optional[list] = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split('\n')[0])
+    parser.add_argument('--duration', type=float, default=30.0, help='measured seconds')
+    parser.add_argument('--warmup', type=float, default=3.0)
+    parser.add_argument('--out', type=Path, default=Path('results/bench'))
+    args = parser.parse_args(argv)
+    args.out.mkdir(parents=True, exist_ok=True)
+    print('core: timing the control tick in one process')
+    core = core_benchmark()
+    loop = loop_benchmark(args.duration, args.warmup, args.out)
+    text = report(loop, core)
+    (args.out / 'bench.json').write_text(json.dumps({'loop': loop, 'core': core}, indent=1))
+    (args.out / 'bench.md').write_text(text + '\n')
+    print()
+    print(text)
+    print(f'\n(machine: {os.cpu_count()} cores; raw figures in {args.out / "bench.json"})')
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
