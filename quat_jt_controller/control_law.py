@@ -83,7 +83,7 @@ class Gains:
             pot = Potential(potential)
         except ValueError:
             raise GainsError(
-                f"potential must be one of {[p.value for p in Potential]}, got {potential!r}"
+                f'potential must be one of {[p.value for p in Potential]}, got {potential!r}'
             ) from None
         task = Task(task)
         return cls(potential=pot,

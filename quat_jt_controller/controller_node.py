@@ -32,10 +32,10 @@ from quat_jt_controller.control_law import Task
 from quat_jt_controller.model import ModelError, RobotModel
 from quat_jt_controller.parameters import declare_gains, declare_structural, GAIN_PARAMETERS
 from quat_jt_controller.parameters import gains_update
+from rcl_interfaces.msg import SetParametersResult
 import rclpy
 from rclpy.executors import ExternalShutdownException
 from rclpy.node import Node
-from rcl_interfaces.msg import SetParametersResult
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 

@@ -162,16 +162,16 @@ def _report() -> None:  # pragma: no cover - the figures behind config/xarm6_con
         gains = xarm6_gains(potential)
         for label, q_goal in goals.items():
             p_d, q_d = goal_of(model, q_goal)
-            rho = [linearized_spectral_radius(model, q_goal, gains, d) for d in (0, 1, 2)]
-            print(f'{potential:9s} {label}: linearised rho (delay 0/1/2) '
+            rho = [linearized_spectral_radius(model, q_goal, gains, d) for d in (1, 3, 4, 5)]
+            print(f'{potential:9s} {label}: linearised rho (delay 1/3/4/5) '
                   + ' '.join(f'{r:.5f}' for r in rho)
-                  + f', slowest time constant {time_constant_s(rho[1]):.3f} s (delay 1)')
+                  + f', slowest time constant {time_constant_s(rho[0]):.3f} s (delay 1)')
             ideal = ClosedLoop(model, gains, cl.Task.POSE, q_d, p_d).run(q0, 4.0)
             y, _, _ = ClosedLoop(model, gains, cl.Task.POSE, q_d, p_d).error(ideal.q_rad[-1])
             print(f'    ideal 4 s: |p_d - p| {np.linalg.norm(y[:3]) * 1e3:.4f} mm, '
                   f'||e|| {np.linalg.norm(y[3:]):.2e}, V non-increasing: '
                   f'{bool(np.diff(ideal.lyapunov).max() <= 1e-9 * ideal.lyapunov[0])}')
-            for delay in (1, 2):
+            for delay in (1, 3):
                 for friction in (False, True):
                     with WristSimulator(
                             XARM6_URDF.read_text(), model.joint_names, initial_positions_rad=q0,

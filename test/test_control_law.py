@@ -147,8 +147,8 @@ def test_paper_gains_are_accepted_and_immutable():
     ({'task': POSE}, r'kp must have 6 values, got 3'),
 ])
 def test_invalid_gains_are_rejected_naming_the_value(kwargs, match):
-    args = dict(potential='quadratic', kp=PAPER_KP, kv=PAPER_KV, lam=PAPER_LAMBDA, task=ORI,
-                n_joints=3)
+    args = {'potential': 'quadratic', 'kp': PAPER_KP, 'kv': PAPER_KV, 'lam': PAPER_LAMBDA,
+            'task': ORI, 'n_joints': 3}
     args.update(kwargs)
     with pytest.raises(cl.GainsError, match=match):
         cl.Gains.create(**args)

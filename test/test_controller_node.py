@@ -29,11 +29,11 @@ from quat_jt_controller.control_law import control_torque, Gains, output_error, 
 from quat_jt_controller.control_law import Task
 from quat_jt_controller.model import RobotModel
 from quat_jt_controller.resources import default_urdf_xml
+from rcl_interfaces.msg import Log
 import rclpy
 from rclpy.experimental import EventsExecutor
 from rclpy.parameter import Parameter
 from rclpy.parameter_client import AsyncParameterClient
-from rcl_interfaces.msg import Log
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 

@@ -16,10 +16,10 @@ from quat_jt_controller.control_law import GainsError, Potential, Task
 from quat_jt_controller.controller_node import QuatJtController
 from quat_jt_controller.model import ModelError
 from quat_jt_controller.parameters import GAIN_PARAMETERS
+from rcl_interfaces.msg import ParameterType
 import rclpy
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
-from rcl_interfaces.msg import ParameterType
 from sensor_msgs.msg import JointState
 
 CONFIG = Path(__file__).resolve().parent.parent / 'config' / 'wrist_controller.yaml'

@@ -1,11 +1,10 @@
 """MCAP files written from raw CDR decode with the standard ROS 2 MCAP reader."""
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
+from quat_jt_controller.tools.mcap_log import McapLog, message_definition
 from rclpy.serialization import serialize_message
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
-
-from quat_jt_controller.tools.mcap_log import McapLog, message_definition
 
 
 def test_definition_carries_dependencies_in_rosbag2_form():

@@ -1,4 +1,4 @@
-"""Core tests of model.py: the URDF model against the paper's closed forms and finite differences."""
+"""Core tests of model.py: the URDF model against the paper's closed forms and differences."""
 import numpy as np
 import pinocchio as pin
 import pytest
@@ -6,8 +6,8 @@ import pytest
 from quat_jt_controller import quaternion as quat
 from quat_jt_controller.model import ModelError, RobotModel
 from quat_jt_controller.resources import default_urdf_xml
-from robots import (Q_DESIRED, Q_JOINT_DESIRED, random_q, wrist_model, XARM6_URDF,
-                    xarm6_model)
+from robots import (Q_DESIRED, Q_JOINT_DESIRED, random_q, wrist_model, xarm6_model,
+                    XARM6_URDF)
 
 
 def rz(a):

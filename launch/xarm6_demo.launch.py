@@ -1,0 +1,61 @@
+"""The 6-DOF demo: the xArm6 of pybullet_data in the simulator, regulated in full pose.
+
+    ros2 launch quat_jt_controller xarm6_demo.launch.py [potential:=tanh|quadratic]
+                                                       [use_gui:=true|false]
+
+The general case of Campa and Kelly (Section 4): y_tilde = [p_d - p; e], law (24) or (32). The
+URDF ships inside the ``pybullet_data`` Python package (no download): it is read here into
+``robot_description`` of both nodes (its ``package://xarm_description`` meshes are resolved by
+the simulator inside pybullet_data). Parameters come from this package's
+``config/xarm6_sim.yaml`` and ``config/xarm6_controller.yaml`` (task: pose, link_base ->
+link6, the gains and how they were chosen). ``potential`` overrides the controller's,
+``use_gui`` opens the PyBullet window. The arm starts at rest at a non-singular configuration
+(tool pointing down at (0.334, 0, 0.498) m) and holds that pose; then send a reachable goal,
+e.g. this one, 0.10 m and 0.25 rad away (the arm's pose at q = [0.2, -0.4, -1.1, 0.2, 1.4, 0.3]):
+
+    ros2 topic pub --once /quat_jt_controller/target_pose geometry_msgs/msg/PoseStamped \
+      "{header: {frame_id: link_base},
+        pose: {position: {x: 0.3604, y: 0.0898, z: 0.5157},
+               orientation: {x: -0.9919, y: 0.0617, z: -0.0237, w: 0.1083}}}"
+
+and watch ``/quat_jt_controller/position_error`` and ``/quat_jt_controller/orientation_error``.
+"""
+import os
+from pathlib import Path
+
+from ament_index_python.packages import get_package_share_directory
+from launch import LaunchDescription
+from launch.actions import DeclareLaunchArgument
+from launch.substitutions import LaunchConfiguration
+from launch_ros.actions import Node
+from launch_ros.parameter_descriptions import ParameterValue
+import pybullet_data
+
+XARM6_URDF = Path(pybullet_data.getDataPath()) / 'xarm' / 'xarm6_robot.urdf'
+
+
+def generate_launch_description() -> LaunchDescription:
+    share = get_package_share_directory('quat_jt_controller')
+    sim_config = os.path.join(share, 'config', 'xarm6_sim.yaml')
+    controller_config = os.path.join(share, 'config', 'xarm6_controller.yaml')
+    robot_description = XARM6_URDF.read_text()
+    potential = LaunchConfiguration('potential')
+    use_gui = LaunchConfiguration('use_gui')
+    return LaunchDescription([
+        DeclareLaunchArgument('potential', default_value='tanh',
+                              choices=['tanh', 'quadratic'],
+                              description="controller potential: 'tanh' (Eq. 32) or "
+                                          "'quadratic' (Eq. 24)"),
+        DeclareLaunchArgument('use_gui', default_value='false', choices=['true', 'false'],
+                              description='open the PyBullet window of the simulator'),
+        Node(package='quat_jt_controller', executable='wrist_sim_node', name='wrist_sim',
+             output='screen', emulate_tty=True,
+             parameters=[sim_config,
+                         {'robot_description': robot_description,
+                          'use_gui': ParameterValue(use_gui, value_type=bool)}]),
+        Node(package='quat_jt_controller', executable='controller_node',
+             name='quat_jt_controller', output='screen', emulate_tty=True,
+             parameters=[controller_config,
+                         {'robot_description': robot_description,
+                          'potential': ParameterValue(potential, value_type=str)}]),
+    ])
