@@ -1,4 +1,5 @@
-"""The transpose-Jacobian regulators of Campa and Kelly, Eq. (22), with two potentials.
+"""
+The transpose-Jacobian regulators of Campa and Kelly, Eq. (22), with two potentials.
 
     tau = J_G(q)^T Q(eta_e, e)^T grad U_a(y_tilde) - K_v qdot + g(q)                 (22)
 
@@ -61,7 +62,8 @@ def _vector(name: str, values: Sequence[float], size: int) -> tuple[float, ...]:
 
 @dataclass(frozen=True)
 class Gains:
-    """Validated, immutable controller gains (diagonals of K_p, K_v, Lambda).
+    """
+    Validated, immutable controller gains (diagonals of K_p, K_v, Lambda).
 
     Units (ERRATA.md, note 7): K_p in N m (orientation rows) or N/m (position rows), K_v in
     N m s/rad, Lambda dimensionless (orientation) or 1/m (position). Build with :meth:`create`,
@@ -112,7 +114,8 @@ def potential_gradient(y_tilde: Sequence[float], gains: Gains) -> tuple[float, .
 
 
 def task_force(y_tilde: Sequence[float], eta_e: float, gains: Gains) -> tuple[float, ...]:
-    """Q(eta_e, e)^T grad U_a(y_tilde), the task-space 'force' that J^T maps to torque.
+    """
+    Q(eta_e, e)^T grad U_a(y_tilde), the task-space 'force' that J^T maps to torque.
 
     ``y_tilde`` is ``e`` (3) or ``[p_tilde, e]`` (6); Q is Eq. (15): identity on the position
     rows, 1/2 (eta_e I + S(e)) on the orientation rows.
@@ -126,7 +129,8 @@ def task_force(y_tilde: Sequence[float], eta_e: float, gains: Gains) -> tuple[fl
 def control_torque(jacobian: Sequence[Sequence[float]], y_tilde: Sequence[float],
                    eta_e: float, qdot: Sequence[float], gravity: Optional[Sequence[float]],
                    gains: Gains) -> list[float]:
-    """Joint torque of Eq. (22): Eq. (24)/(32) for the pose, Eq. (37)/(38) for orientation.
+    """
+    Joint torque of Eq. (22): Eq. (24)/(32) for the pose, Eq. (37)/(38) for orientation.
 
     ``jacobian`` has one row per task coordinate, matching ``y_tilde``: ``J_o`` (3 x n) for the
     orientation task or ``J_G = [J_p; J_o]`` (6 x n) for the pose task, base-frame axes.
@@ -160,7 +164,8 @@ def saturate(tau: list[float], limits: Sequence[float]) -> bool:
 
 def output_error(p: Sequence[float], R: quat.Matrix3, p_desired: Sequence[float],
                  q_desired: Sequence[float], task: Task) -> tuple[tuple[float, ...], float]:
-    """The output error y_tilde of Eq. (8) and eta_e, from the measured pose (p, R).
+    """
+    Return the output error y_tilde of Eq. (8) and eta_e, from the measured pose (p, R).
 
     Orientation task: y_tilde = e. Pose task: y_tilde = [p_d - p (Eq. 9); e (Eq. 10)].
     """

@@ -1,4 +1,5 @@
-"""The transpose-Jacobian unit-quaternion regulator as a ROS 2 node (Campa and Kelly).
+"""
+The transpose-Jacobian unit-quaternion regulator as a ROS 2 node (Campa and Kelly).
 
     tau = J^T Q(eta_e, e)^T grad U_a(y_tilde) - K_v qdot + g(q),  clamped to the effort limits
 
@@ -168,7 +169,7 @@ class QuatJtController(Node):
 
     # ---------------------------------------------------------------------------------- tick
     def _layout(self, names: list[str]) -> Optional[list[int]]:
-        """Indices of the controlled joints in a JointState's name list (None if missing)."""
+        """Map a JointState's name list to the controlled joints' indices (None if missing)."""
         if names == self._last_names:
             return self._last_index
         key = tuple(names)
@@ -345,7 +346,8 @@ class QuatJtController(Node):
             self.get_logger().info(text)
 
     def _check_goal(self, q_desired_base, p_desired_base) -> str:
-        """Assumptions A1 (reachable) and A2 (not singular) for a goal, by a small IK.
+        """
+        Assumptions A1 (reachable) and A2 (not singular) for a goal, by a small IK.
 
         Damped least squares from the last measured q (the branch the regulator most likely
         ends on), then sigma_min of J_o (orientation task) or J_G (pose task) at the solution.

@@ -1,4 +1,5 @@
-"""Run this package's nodes as separate processes on a private, loopback-only ROS graph.
+"""
+Run this package's nodes as separate processes on a private, loopback-only ROS graph.
 
 Used by the multi-process tests, the paper experiment and the benchmark, standing in for
 ``ros2 launch`` (launch/launch_ros are not on PyPI). ROS-free: it only builds environments and
@@ -21,8 +22,11 @@ NODE_MODULES = {
 
 def isolated_env(work_dir: Path, domain_id: Optional[int] = None,
                  base: Optional[Mapping[str, str]] = None) -> dict[str, str]:
-    """Environment for a private ROS graph: localhost-only discovery, its own domain id,
-    ROS_HOME and ROS_LOG_DIR under ``work_dir``."""
+    """
+    Build the environment of a private ROS graph.
+
+    Localhost-only discovery, its own domain id, ROS_HOME and ROS_LOG_DIR under ``work_dir``.
+    """
     env = dict(os.environ if base is None else base)
     work_dir = Path(work_dir)
     (work_dir / 'log').mkdir(parents=True, exist_ok=True)
@@ -49,7 +53,8 @@ def spawn_node(executable: str, env: Mapping[str, str], work_dir: Path,
                params: Optional[Mapping[str, Any]] = None,
                params_files: tuple[Path, ...] = (), ros_args: tuple[str, ...] = (),
                name: Optional[str] = None) -> subprocess.Popen:
-    """Start ``executable`` (a key of NODE_MODULES) as ``python -m module --ros-args ...``.
+    """
+    Start ``executable`` (a key of NODE_MODULES) as ``python -m module --ros-args ...``.
 
     Its stdout and stderr go to ``work_dir/<name>.log``.
     """

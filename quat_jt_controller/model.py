@@ -1,4 +1,5 @@
-"""The robot model, from a URDF (the single source of truth), through Pinocchio.
+"""
+The robot model, from a URDF (the single source of truth), through Pinocchio.
 
 Gives what the control laws need, with joints addressed by name and in a caller-chosen order:
 forward kinematics of a tip link in a base link, the geometric Jacobian J_G of Eq. (12) (linear
@@ -17,7 +18,8 @@ class ModelError(ValueError):
 
 
 class RobotModel:
-    """A fixed-base serial manipulator between ``base_link`` and ``tip_link``.
+    """
+    A fixed-base serial manipulator between ``base_link`` and ``tip_link``.
 
     ``joint_names`` gives the order of q, qdot and tau everywhere in this package; by default
     the URDF's movable joints in tree order. Each controlled joint must be revolute or
@@ -102,7 +104,8 @@ class RobotModel:
 
     def kinematics(self, q: Sequence[float]) -> tuple[list[float], list[list[float]],
                                                       list[list[float]]]:
-        """One pass: tip position ``p`` (m), rotation ``R`` and ``J_G`` (6 x n), in the base frame.
+        """
+        One pass: tip position ``p`` (m), rotation ``R`` and ``J_G`` (6 x n), in the base frame.
 
         ``J_G`` rows are [J_p; J_o] of Eq. (12): linear velocity of the tip origin, then angular
         velocity, both in base-frame axes. Columns follow ``joint_names``.
@@ -140,7 +143,7 @@ class RobotModel:
 
     def forward_dynamics(self, q: Sequence[float], qdot: Sequence[float],
                          tau: Sequence[float]) -> np.ndarray:
-        """qddot = M(q)^-1 (tau - C(q, qdot) qdot - g(q)), in ``joint_names`` order."""
+        """Return qddot = M(q)^-1 (tau - C(q, qdot) qdot - g(q)), in ``joint_names`` order."""
         qv = self._set_q(q).copy()
         v = np.zeros(self.n)
         t = np.zeros(self.n)

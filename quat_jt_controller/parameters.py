@@ -1,4 +1,5 @@
-"""ROS parameters of the controller node: declared in one place, validated in one place.
+"""
+ROS parameters of the controller node: declared in one place, validated in one place.
 
 Not part of the ROS-free core (it imports rclpy). The live gains become one immutable
 :class:`~quat_jt_controller.control_law.Gains`, validated by ``Gains.create``; the structural
@@ -62,7 +63,8 @@ def _descriptor(description: str, ptype: int, read_only: bool = False,
 
 
 def declare_structural(node: Node) -> StructuralConfig:
-    """Declare the read-only parameters and return their values.
+    """
+    Declare the read-only parameters and return their values.
 
     Raises ValueError naming the parameter if a value is unusable.
     """
@@ -116,7 +118,7 @@ def declare_structural(node: Node) -> StructuralConfig:
 
 
 def default_gains(task: Task, n_joints: int) -> dict[str, Any]:
-    """The default live values: the paper's experiment for the orientation task."""
+    """Return the default live values: the paper's experiment for the orientation task."""
     if task is Task.ORIENTATION:
         kp, lam = PAPER_KP_ORIENTATION, PAPER_LAMBDA_ORIENTATION
     else:
@@ -127,7 +129,8 @@ def default_gains(task: Task, n_joints: int) -> dict[str, Any]:
 
 
 def declare_gains(node: Node, config: StructuralConfig) -> Gains:
-    """Declare the live gain parameters and return the validated initial Gains.
+    """
+    Declare the live gain parameters and return the validated initial Gains.
 
     Raises GainsError (naming the bad value) if the start-up values are invalid.
     """
@@ -176,7 +179,8 @@ def build_gains(values: Mapping[str, Any], config: StructuralConfig) -> Gains:
 
 def gains_update(current: Mapping[str, Any], changes: Sequence[Any],
                  config: StructuralConfig) -> tuple[Optional[Gains], str]:
-    """Validate a parameter change: the union of current values and the incoming ones.
+    """
+    Validate a parameter change: the union of current values and the incoming ones.
 
     ``changes`` are rclpy Parameters. Returns ``(gains, '')`` when a gain parameter changes and
     the result is valid, ``(None, '')`` when no gain parameter is involved, and

@@ -1,4 +1,5 @@
-"""Unit quaternions (Euler parameters) and Yuan's orientation error, in plain Python floats.
+"""
+Unit quaternions (Euler parameters) and Yuan's orientation error, in plain Python floats.
 
 Component order: inside this package a quaternion is ``(eta, ex, ey, ez)``, scalar first, as in
 the paper (``eta`` = scalar part, ``eps`` = vector part). ROS messages use ``(x, y, z, w)``;
@@ -41,7 +42,8 @@ def normalized(q: Sequence[float]) -> Quaternion:
 
 def validate_unit(q: Sequence[float],
                   tolerance: float = UNIT_NORM_SQ_TOLERANCE) -> Quaternion:
-    """Check a quaternion the way tf2 does and return it normalised.
+    """
+    Check a quaternion the way tf2 does and return it normalised.
 
     Raises ValueError, saying why, if a component is NaN/Inf or if |norm^2 - 1| > tolerance
     (the printed Eq. 40 of the paper, with norm 1.0509, is such a case).
@@ -59,7 +61,7 @@ def validate_unit(q: Sequence[float],
 
 
 def skew(x: Sequence[float]) -> tuple[Vector3, Vector3, Vector3]:
-    """The skew-symmetric matrix S(x) of Eq. (11): S(x) y = x cross y."""
+    """Return the skew-symmetric matrix S(x) of Eq. (11): S(x) y = x cross y."""
     return ((0.0, -x[2], x[1]),
             (x[2], 0.0, -x[0]),
             (-x[1], x[0], 0.0))
@@ -82,7 +84,8 @@ def multiply(a: Sequence[float], b: Sequence[float]) -> Quaternion:
 
 
 def from_rotation_matrix(R: Matrix3) -> Quaternion:
-    """Unit quaternion of a rotation matrix by Shepperd's method, with eta >= 0.
+    """
+    Convert a rotation matrix to a unit quaternion by Shepperd's method, with eta >= 0.
 
     Replaces Eqs. (4)-(5) of the paper (see ERRATA.md, note 1): the component with the largest
     of 1 + tr R and 1 + 2 r_ii - tr R is found by a square root, the others from sums and
@@ -118,7 +121,8 @@ def to_rotation_matrix(q: Sequence[float]) -> tuple[Vector3, Vector3, Vector3]:
 
 
 def orientation_error(q: Sequence[float], q_desired: Sequence[float]) -> tuple[float, Vector3]:
-    """Yuan's orientation error, Eq. (10), and eta_e (defined after Eq. 13).
+    """
+    Yuan's orientation error, Eq. (10), and eta_e (defined after Eq. 13).
 
     ``q`` is the measured quaternion ``(eta, eps)``, ``q_desired`` is ``(eta_d, eps_d)``:
 
@@ -140,7 +144,7 @@ def orientation_error(q: Sequence[float], q_desired: Sequence[float]) -> tuple[f
 
 
 def q_matrix(eta_e: float, e: Sequence[float]) -> tuple[Vector3, Vector3, Vector3]:
-    """The orientation block of Q(eta_e, e), Eq. (15): 1/2 eta_e I + 1/2 S(e)."""
+    """Return the orientation block of Q(eta_e, e), Eq. (15): 1/2 eta_e I + 1/2 S(e)."""
     h = 0.5 * eta_e
     return ((h, -0.5 * e[2], 0.5 * e[1]),
             (0.5 * e[2], h, -0.5 * e[0]),

@@ -1,4 +1,5 @@
-"""The ideal closed loop, Eq. (25) / (33): robot dynamics (1) + control law (24) / (32).
+"""
+The ideal closed loop, Eq. (25) / (33): robot dynamics (1) + control law (24) / (32).
 
 Integrated with classic RK4 on Pinocchio's dynamics, the law evaluated continuously at every
 stage (no sampling, no delay, no friction, no torque limits), so the Lyapunov function of

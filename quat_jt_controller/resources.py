@@ -1,4 +1,5 @@
-"""Locate the package's data files (URDF, config) in a source tree, a pip or a colcon install.
+"""
+Locate the package's data files (URDF, config) in a source tree, a pip or a colcon install.
 
 ROS-free: looks for ``share/quat_jt_controller`` the way ament_index does, without importing it.
 """
@@ -23,7 +24,8 @@ def _candidate_roots() -> list[Path]:
 
 
 def share_path(relative: str) -> Path:
-    """Return the path of a data file such as ``urdf/spherical_wrist.urdf``.
+    """
+    Return the path of a data file such as ``urdf/spherical_wrist.urdf``.
 
     Raises FileNotFoundError naming every place searched.
     """
@@ -37,5 +39,5 @@ def share_path(relative: str) -> Path:
 
 
 def default_urdf_xml() -> str:
-    """The bundled spherical-wrist URDF as an XML string."""
+    """Return the bundled spherical-wrist URDF as an XML string."""
     return share_path(DEFAULT_URDF).read_text()

@@ -26,13 +26,13 @@ CONFIG_DIR = Path(__file__).resolve().parent.parent / 'config'
 
 
 def load_params(name: str, node: str) -> dict:
-    """The ``ros__parameters`` of ``node`` in ``config/<name>``."""
+    """Return the ``ros__parameters`` of ``node`` in ``config/<name>``."""
     with open(CONFIG_DIR / name) as f:
         return yaml.safe_load(f)[node]['ros__parameters']
 
 
 def xarm6_gains(potential: Optional[str] = None) -> cl.Gains:
-    """The gains of ``config/xarm6_controller.yaml`` (its potential unless one is given)."""
+    """Return the gains of ``config/xarm6_controller.yaml`` (its potential unless given)."""
     p = load_params('xarm6_controller.yaml', 'quat_jt_controller')
     return cl.Gains.create(potential or p['potential'], p['kp'], p['kv'], p['lambda'],
                            cl.Task(p['task']), len(p['joints']),
@@ -40,7 +40,7 @@ def xarm6_gains(potential: Optional[str] = None) -> cl.Gains:
 
 
 def goal_of(model: RobotModel, q_goal_rad: Sequence[float]):
-    """The reachable goal (p_d, quaternion_d) that the arm has at ``q_goal_rad`` (A1)."""
+    """Return the reachable goal (p_d, quaternion_d): the arm's pose at ``q_goal_rad`` (A1)."""
     p, R = model.forward_kinematics(q_goal_rad)
     return tuple(p), quat.from_rotation_matrix(R)
 
@@ -147,7 +147,7 @@ def run_sampled(model: RobotModel, sim, gains: cl.Gains, p_desired: Sequence[flo
 
 def _report() -> None:  # pragma: no cover - the figures behind config/xarm6_controller.yaml
     sys.path.insert(0, str(Path(__file__).resolve().parent))
-    from robots import XARM6_URDF, xarm6_model
+    from robots import xarm6_model, XARM6_URDF
     from wrist_sim.simulator import WristSimulator
 
     model = xarm6_model()

@@ -1,5 +1,9 @@
-"""The ideal closed loop (Eq. 25 / 33) of the wrist: convergence from the singular q(0) = 0 and
-the Lyapunov function of Eq. (27) / (34) never increasing (Eq. 28 / 35). No PyBullet, no ROS."""
+"""
+The ideal closed loop (Eq. 25 / 33) of the wrist, without PyBullet or ROS.
+
+Convergence from the singular q(0) = 0 and the Lyapunov function of Eq. (27) / (34) never
+increasing (Eq. 28 / 35).
+"""
 import numpy as np
 import pytest
 

@@ -31,7 +31,7 @@ CASES = [(wrist_model, ORI), (wrist_model, POSE), (xarm6_model, ORI), (xarm6_mod
 
 @pytest.mark.parametrize('make_model, task', CASES)
 def test_eq21_error_jacobian_is_minus_q_times_geometric_jacobian(make_model, task):
-    """d y_tilde / dq = -Q(eta_e, e) J_G(q), Eq. (21), by central differences at random q."""
+    """Check d y_tilde / dq = -Q(eta_e, e) J_G(q), Eq. (21), by central differences."""
     model = make_model()
     rng = np.random.default_rng(21)
     for _ in range(20):

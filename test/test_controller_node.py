@@ -1,4 +1,5 @@
-"""The controller node as a separate process over real DDS (issue 4).
+"""
+The controller node as a separate process over real DDS (issue 4).
 
 Two plants drive it:
 
@@ -189,7 +190,7 @@ class FakePlant:
 
 
 def expected_torque(model: RobotModel, gains: Gains, q, v, goal_xyzw) -> list[float]:
-    """The core law (Eq. 37/38 + g(q)), clamped: what the node must publish for (q, v)."""
+    """Compute the core law (Eq. 37/38 + g(q)), clamped: what the node must publish."""
     p, R, J = model.kinematics(list(q))
     q_d = quat.validate_unit(quat.from_xyzw(*goal_xyzw))
     y, eta_e = output_error(p, R, (0.0, 0.0, 0.0), q_d, Task.ORIENTATION)
@@ -199,7 +200,7 @@ def expected_torque(model: RobotModel, gains: Gains, q, v, goal_xyzw) -> list[fl
 
 
 def expected(model: RobotModel, q, g: Optional[Gains] = None, xyzw=GOAL_XYZW) -> list:
-    """The command for joint positions q at rest, paper gains (tanh) unless given."""
+    """Compute the command for joint positions q at rest, paper gains (tanh) unless given."""
     return expected_torque(model, g or gains(), q, (0.0, 0.0, 0.0), xyzw)
 
 
@@ -235,7 +236,7 @@ def model() -> RobotModel:
 
 @pytest.fixture(scope='module')
 def rig(tmp_path_factory, model):
-    """A controller process driven by the in-test FakePlant, paper gains, tanh potential."""
+    """Run a controller process driven by the in-test FakePlant, paper gains, tanh."""
     h = Harness(tmp_path_factory.mktemp('controller_fake_plant'))
     try:
         h.spawn('controller_node', {'state_timeout': STATE_TIMEOUT_S, 'potential': 'tanh',

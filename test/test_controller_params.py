@@ -1,5 +1,8 @@
-"""The controller node in-process: parameter declarations, validation, atomic gain swaps,
-goal checks, the hold-pose start and the diagnostics (issue 4).
+"""
+The controller node in-process.
+
+Parameter declarations, validation, atomic gain swaps, goal checks, the hold-pose start and the
+diagnostics (issue 4).
 
 The node is constructed in this process and its callbacks are driven directly or through an
 executor; the multi-process behaviour over DDS is in test_controller_node.py.

@@ -21,7 +21,7 @@ def ry(a):
 
 
 def jacobian_eq39(q):
-    """The paper's orientation Jacobian of the wrist, Eq. (39): the test oracle."""
+    """Return the paper's orientation Jacobian of the wrist, Eq. (39): the test oracle."""
     q1, q2 = q[0], q[1]
     return np.array([[0.0, -np.sin(q1), np.cos(q1) * np.sin(q2)],
                      [0.0, np.cos(q1), np.sin(q1) * np.sin(q2)],

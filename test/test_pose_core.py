@@ -17,7 +17,7 @@ import numpy as np
 import pytest
 from quat_jt_controller import control_law as cl
 from quat_jt_controller.reference_sim import ClosedLoop
-from robots import XARM6_URDF, xarm6_model
+from robots import xarm6_model, XARM6_URDF
 from sampled_loop import goal_of, linearized_spectral_radius, load_params, run_sampled
 from sampled_loop import time_constant_s, xarm6_gains
 from wrist_sim.simulator import WristSimulator
@@ -148,3 +148,49 @@ def test_xarm6_launch_file_is_jazzy_launch_code():
         assert needed in source, needed
     for name in ('xarm6_controller.yaml', 'xarm6_sim.yaml'):
         assert (REPO / 'config' / name).is_file()
+
+
+def test_xarm6_launch_description_with_stand_in_launch_modules(monkeypatch, model):
+    """Run generate_launch_description() against recording stand-ins of launch/launch_ros."""
+    import importlib.util
+    import sys
+    import types
+
+    class Recorder:
+
+        def __init__(self, *args, **kwargs):
+            self.args, self.kwargs = args, kwargs
+
+    stand_ins = {
+        'launch': {'LaunchDescription': Recorder},
+        'launch.actions': {'DeclareLaunchArgument': Recorder},
+        'launch.substitutions': {'LaunchConfiguration': Recorder},
+        'launch_ros': {},
+        'launch_ros.actions': {'Node': Recorder},
+        'launch_ros.parameter_descriptions': {'ParameterValue': Recorder},
+        'ament_index_python': {},
+        'ament_index_python.packages': {'get_package_share_directory': lambda pkg: str(REPO)},
+    }
+    for name, attrs in stand_ins.items():
+        monkeypatch.setitem(sys.modules, name, types.SimpleNamespace(**attrs))
+    spec = importlib.util.spec_from_file_location(
+        'xarm6_demo_launch', REPO / 'launch' / 'xarm6_demo.launch.py')
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    description = module.generate_launch_description()
+
+    actions = description.args[0]
+    nodes = {a.kwargs['executable']: a.kwargs for a in actions if 'executable' in a.kwargs}
+    assert set(nodes) == {'controller_node', 'wrist_sim_node'}
+    assert nodes['controller_node']['name'] == 'quat_jt_controller'
+    assert nodes['wrist_sim_node']['name'] == 'wrist_sim'
+    for exe, config in (('controller_node', 'xarm6_controller.yaml'),
+                        ('wrist_sim_node', 'xarm6_sim.yaml')):
+        config_path, overrides = nodes[exe]['parameters']
+        assert Path(config_path) == REPO / 'config' / config
+        assert overrides['robot_description'] == XARM6_URDF.read_text()
+    assert nodes['controller_node']['parameters'][1]['potential'].kwargs == {'value_type': str}
+    assert nodes['wrist_sim_node']['parameters'][1]['use_gui'].kwargs == {'value_type': bool}
+    defaults = {a.args[0]: a.kwargs['default_value'] for a in actions if 'default_value'
+                in a.kwargs}
+    assert defaults == {'potential': 'tanh', 'use_gui': 'false'}

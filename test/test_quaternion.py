@@ -30,7 +30,7 @@ quaternions = st.tuples(*[st.floats(-1, 1)] * 4).filter(
 
 
 def same_rotation(q1, q2, tol=1e-9):
-    """q and -q are the same rotation."""
+    """Compare as rotations: q and -q are the same rotation."""
     return min(np.abs(np.subtract(q1, q2)).max(), np.abs(np.add(q1, q2)).max()) < tol
 
 

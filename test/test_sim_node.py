@@ -1,5 +1,9 @@
-"""wrist_sim_node: parameters in process; behaviour over real DDS with the node in its own
-process (local_ros), observed and commanded from this test process."""
+"""
+Tests of wrist_sim_node.
+
+Parameters in process; behaviour over real DDS with the node in its own process (local_ros),
+observed and commanded from this test process.
+"""
 import json
 import math
 import os

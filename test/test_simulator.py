@@ -40,7 +40,7 @@ def test_defaults_come_from_the_urdf(sim):
 
 
 def test_one_step_acceleration_matches_pinocchio(sim, model):
-    """qddot from PyBullet for a known torque = M^-1 (tau - C qdot - g) from Pinocchio."""
+    """Check PyBullet's qddot for a known torque = M^-1 (tau - C qdot - g) from Pinocchio."""
     rng = np.random.default_rng(1)
     for _ in range(30):
         q = rng.uniform(-1.2, 1.2, 3)
@@ -57,8 +57,12 @@ def test_one_step_acceleration_matches_pinocchio(sim, model):
 
 
 def test_pendulum_swing_matches_pinocchio_integration(sim, model):
-    """Joint 2 falls from 0.4 rad under gravity alone for 0.5 s: the same trajectory as
-    Pinocchio's forward dynamics integrated the same way (semi-implicit Euler)."""
+    """
+    Let joint 2 fall from 0.4 rad under gravity alone for 0.5 s.
+
+    The same trajectory as Pinocchio's forward dynamics integrated the same way (semi-implicit
+    Euler).
+    """
     q = np.array([0.3, 0.4, -0.2])
     qdot = np.zeros(3)
     sim.reset(q)
@@ -113,8 +117,12 @@ def _run(sim: WristSimulator, tau, steps: int) -> np.ndarray:
 
 
 def test_coulomb_below_the_level_holds_the_joint_still(urdf):
-    """Stiction: 0.9 x the Coulomb level on each joint (and gravity) for 1 s: no motion, no
-    chattering at 1 kHz (the velocity is zero at every step, not oscillating around it)."""
+    """
+    Apply 0.9 x the Coulomb level on each joint (and gravity) for 1 s.
+
+    Stiction: no motion, no chattering at 1 kHz (the velocity is zero at every step, not
+    oscillating around it).
+    """
     coulomb = np.array([2.0, 3.0, 2.0])
     q0 = np.array([0.2, 0.5, -0.3])  # gravity torque on joint 2 here ~0.6 N m < 3 N m
     with WristSimulator(urdf, coulomb_nm=coulomb, initial_positions_rad=q0) as s:
@@ -141,8 +149,12 @@ def test_coulomb_above_the_level_moves_the_joint(urdf, model):
 
 
 def test_viscous_friction_is_minus_b_qdot(urdf, model):
-    """Viscous friction = an explicit -b qdot torque: the same trajectory as Pinocchio's
-    dynamics integrated with that torque; the spinning joint slows down."""
+    """
+    Check viscous friction is an explicit -b qdot torque.
+
+    The same trajectory as Pinocchio's dynamics integrated with that torque; the spinning joint
+    slows down.
+    """
     b = np.array([0.2, 0.1, 0.05])
     q, qdot = np.zeros(3), np.array([2.0, 0.0, 0.0])
     with WristSimulator(urdf, viscous_nm_s_per_rad=b) as s:

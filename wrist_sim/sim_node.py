@@ -1,4 +1,5 @@
-"""``wrist_sim_node``: the simulated wrist (or any fixed-base serial URDF) as a ROS 2 node.
+"""
+``wrist_sim_node``: the simulated wrist (or any fixed-base serial URDF) as a ROS 2 node.
 
 A thin rclpy layer over :class:`wrist_sim.simulator.WristSimulator`, with the interface of a
 ros2_control robot driven by a JointGroupEffortController:
@@ -117,8 +118,12 @@ class WristSimNode(Node):
     # -- parameters ----------------------------------------------------------------------
 
     def _declare_parameters(self) -> None:
-        """Every parameter, in one place. ``joints`` and the per-joint arrays default from
-        the URDF, so ``robot_description`` is read first."""
+        """
+        Declare every parameter, in one place.
+
+        ``joints`` and the per-joint arrays default from the URDF, so ``robot_description`` is
+        read first.
+        """
         def desc(text: str, read_only: bool = False, **ranges: Any) -> ParameterDescriptor:
             return ParameterDescriptor(description=text, read_only=read_only, **ranges)
 

@@ -1,4 +1,5 @@
-"""ROS-free simulator core: a fixed-base serial robot from a URDF in PyBullet, torque driven.
+"""
+ROS-free simulator core: a fixed-base serial robot from a URDF in PyBullet, torque driven.
 
 Stands in for the paper's CICESE direct-drive wrist (by default the bundled
 ``urdf/spherical_wrist.urdf``) but loads any fixed-base serial URDF given as an XML string.
@@ -63,7 +64,8 @@ class SimState:
 
 
 def resolve_package_uris(urdf_xml: str, search_dirs: Sequence[PathLike]) -> str:
-    """Replace ``package://pkg/rest`` URIs by absolute paths where the file can be found.
+    """
+    Replace ``package://pkg/rest`` URIs by absolute paths where the file can be found.
 
     For each directory ``d`` of ``search_dirs`` it tries ``d/pkg/rest`` and then
     ``d/*/pkg/rest`` (so ``pybullet_data`` resolves ``package://xarm_description/...`` through
@@ -103,20 +105,20 @@ def _as_vector(values: Optional[Sequence[float]], n: int, name: str,
 
 
 class WristSimulator:
-    """A fixed-base serial robot from a URDF, in its own PyBullet client, torque controlled.
+    """
+    A fixed-base serial robot from a URDF, in its own PyBullet client, torque controlled.
 
-    Args:
-        urdf_xml: the URDF as an XML string.
-        joint_names: the joints to drive, in the order of every vector of this class; by
-            default the URDF's revolute/prismatic joints in tree order. Others stay at zero.
-        dt_s: the fixed time step (s).
-        use_gui: open the PyBullet window instead of a DIRECT (headless) client.
-        viscous_nm_s_per_rad: viscous friction ``b`` per joint (default zeros).
-        coulomb_nm: Coulomb friction / stiction level per joint (default zeros).
-        initial_positions_rad: where the robot starts, at rest (default zeros).
-        search_dirs: extra directories in which ``package://`` meshes are looked for (before
-            ``pybullet_data``); the first also becomes PyBullet's additional search path.
-        solver_iterations: PyBullet constraint-solver iterations (for the friction motors).
+    :param urdf_xml: the URDF as an XML string.
+    :param joint_names: the joints to drive, in the order of every vector of this class; by
+        default the URDF's revolute/prismatic joints in tree order. Others stay at zero.
+    :param dt_s: the fixed time step (s).
+    :param use_gui: open the PyBullet window instead of a DIRECT (headless) client.
+    :param viscous_nm_s_per_rad: viscous friction ``b`` per joint (default zeros).
+    :param coulomb_nm: Coulomb friction / stiction level per joint (default zeros).
+    :param initial_positions_rad: where the robot starts, at rest (default zeros).
+    :param search_dirs: extra directories in which ``package://`` meshes are looked for (before
+        ``pybullet_data``); the first also becomes PyBullet's additional search path.
+    :param solver_iterations: PyBullet constraint-solver iterations (for the friction motors).
     """
 
     def __init__(self, urdf_xml: str, joint_names: Optional[Sequence[str]] = None, *,
@@ -224,8 +226,12 @@ class WristSimulator:
 
     def set_friction(self, viscous_nm_s_per_rad: Optional[Sequence[float]] = None,
                      coulomb_nm: Optional[Sequence[float]] = None) -> None:
-        """Set both friction vectors (None = zeros); validated (length, finite, >= 0) first,
-        then applied together, so a bad value changes nothing."""
+        """
+        Set both friction vectors (None = zeros).
+
+        Both are validated (length, finite, >= 0) first, then applied together, so a bad value
+        changes nothing.
+        """
         viscous = _as_vector(viscous_nm_s_per_rad, self.n, 'viscous friction',
                              nonnegative=True)
         coulomb = _as_vector(coulomb_nm, self.n, 'coulomb friction', nonnegative=True)
@@ -246,16 +252,17 @@ class WristSimulator:
 
     @property
     def time_s(self) -> float:
-        """Simulation time (s): steps taken times ``dt_s``; not reset by :meth:`reset`."""
+        """Return the simulation time (s): steps taken times ``dt_s``; :meth:`reset` keeps it."""
         return self._step_count * self.dt_s
 
     @property
     def step_count(self) -> int:
-        """Steps taken since construction."""
+        """Return the number of steps taken since construction."""
         return self._step_count
 
     def step(self, tau_nm: Sequence[float]) -> np.ndarray:
-        """Apply ``tau_nm`` (clamped to the effort limits) for one step of ``dt_s``.
+        """
+        Apply ``tau_nm`` (clamped to the effort limits) for one step of ``dt_s``.
 
         Returns the applied (clamped) torque, a copy. Raises SimulatorError on a wrong length
         or a non-finite value (nothing is stepped then).
@@ -315,13 +322,17 @@ class WristSimulator:
 
     @property
     def tau_applied_nm(self) -> np.ndarray:
-        """The torque applied in the last step, clamped, without friction (own buffer)."""
+        """Return the torque applied in the last step, clamped, without friction (own buffer)."""
         return self._applied
 
     def reset(self, q0_rad: Optional[Sequence[float]] = None,
               qdot0_rad_s: Optional[Sequence[float]] = None) -> None:
-        """Put the joints at ``q0_rad`` (default: the initial positions) with velocity
-        ``qdot0_rad_s`` (default: at rest); the applied torque reads zero. Time goes on."""
+        """
+        Put the joints at ``q0_rad`` (default: the initial positions).
+
+        The velocity becomes ``qdot0_rad_s`` (default: at rest); the applied torque reads zero.
+        Time goes on.
+        """
         q0 = self._initial if q0_rad is None else _as_vector(q0_rad, self.n, 'q0_rad')
         v0 = _as_vector(qdot0_rad_s, self.n, 'qdot0_rad_s')
         for j, qi, vi in zip(self._idx, q0, v0):
@@ -347,7 +358,8 @@ class WristSimulator:
 
 
 class LoopStats:
-    """Cheap timing bookkeeping of a stepping loop: counters plus preallocated ring buffers.
+    """
+    Cheap timing bookkeeping of a stepping loop: counters plus preallocated ring buffers.
 
     Per step: wall time, compute time, lateness past the deadline, whether the command applied
     was fresh (arrived after the previous state was published). Per fresh command: latency from

@@ -1,4 +1,5 @@
-"""Benchmark of the 1 kHz loop: the two nodes over DDS in separate processes, and the pure core.
+"""
+Benchmark of the 1 kHz loop: the two nodes over DDS in separate processes, and the pure core.
 
 Loop: ``wrist_sim_node`` (real-time pacing at 1 kHz) and ``controller_node`` (tanh law, paper
 gains, regulating to the paper's goal) on a private loopback ROS graph, warmed up, then measured

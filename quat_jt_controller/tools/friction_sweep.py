@@ -1,4 +1,5 @@
-"""Choose the simulated wrist's Coulomb friction so the paper's Section 5 result reproduces.
+"""
+Choose the simulated wrist's Coulomb friction so the paper's Section 5 result reproduces.
 
 ROS-free: the PyBullet simulator core and the control law in a sampled loop at 1 kHz with the
 same one-tick command delay as the two nodes (the sim applies, at step k + 1, the torque computed

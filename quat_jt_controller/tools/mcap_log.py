@@ -1,4 +1,5 @@
-"""Write ROS 2 messages, as received serialised (CDR), to an MCAP file that rosbag2 can read.
+"""
+Write ROS 2 messages, as received serialised (CDR), to an MCAP file that rosbag2 can read.
 
 The schema of each channel is the message definition in ROS 2's ``ros2msg`` form, the .msg text
 followed by the definitions it depends on, as ``ros2 bag record`` writes it. ROS-free: works
@@ -50,7 +51,7 @@ def _dependencies(package: str, text: str) -> list[str]:
 
 
 def message_definition(full_name: str) -> str:
-    """The ros2msg schema text of e.g. 'sensor_msgs/msg/JointState', with its dependencies."""
+    """Return the ros2msg schema of e.g. 'sensor_msgs/msg/JointState' with its dependencies."""
     parts = [_msg_text(full_name)]
     seen = {full_name}
     pending = _dependencies(full_name.split('/')[0], parts[0])

@@ -1,4 +1,5 @@
-"""The paper's experiment (Section 5) end to end: the real nodes over DDS, as a user runs them.
+"""
+The paper's experiment (Section 5) end to end: the real nodes over DDS, as a user runs them.
 
 For each controller, quadratic (Eq. 37) and tanh (Eq. 38): start ``wrist_sim_node`` and
 ``controller_node`` as separate processes on a private loopback ROS graph with the package's
