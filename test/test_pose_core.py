@@ -5,7 +5,7 @@ config/xarm6_sim.yaml, with both potentials:
 
 * the ideal closed loop (Eq. 25 / 33) reaches a reachable goal (assumption A1) to < 1 mm and
   ||e|| < 0.01 and its Lyapunov function (Eq. 27 / 34) never increases (Eq. 28 / 35);
-* the loop linearised at the goal stays stable when sampled at 1 kHz and delayed 1..4 steps;
+* the loop linearised at the goal stays stable when sampled at 1 kHz and delayed 1..6 steps;
 * the loop as ROS runs it (sampled, delayed, clamped to the effort limits, PyBullet's
   integrator, the demo's friction) holds the goal to < 1 mm and ||e|| < 0.01;
 * the config and launch files are consistent with the model.
@@ -77,7 +77,7 @@ def test_ideal_loop_reaches_goal_and_lyapunov_never_increases(model, sim_params,
     p_d, q_d = goal_of(model, Q_GOAL_NEAR)
     assert sigma_min(model, Q_GOAL_NEAR) > 0.1  # A2: no self-motion at the goal
     loop = ClosedLoop(model, xarm6_gains(potential), cl.Task.POSE, q_d, p_d)
-    traj = loop.run(q0, 3.0)
+    traj = loop.run(q0, 5.0)
 
     y0, _, _ = loop.error(q0)
     assert np.linalg.norm(y0[:3]) > 0.09 and np.linalg.norm(y0[3:]) > 0.1
@@ -92,18 +92,18 @@ def test_ideal_loop_reaches_goal_and_lyapunov_never_increases(model, sim_params,
 
 
 @pytest.mark.parametrize('potential', POTENTIALS)
-def test_linearised_sampled_loop_is_stable_with_up_to_four_steps_of_delay(model, potential):
+def test_linearised_sampled_loop_is_stable_with_up_to_six_steps_of_delay(model, potential):
     """The margin behind the gains: a 1 kHz loop over ROS adds one or more steps of delay."""
     gains = xarm6_gains(potential)
     for q_goal in (Q_GOAL_NEAR, Q_GOAL_FAR):
-        rho = [linearized_spectral_radius(model, q_goal, gains, d) for d in (1, 2, 3, 4)]
+        rho = [linearized_spectral_radius(model, q_goal, gains, d) for d in range(1, 7)]
         assert max(rho) < 1.0, rho
-        assert time_constant_s(rho[0]) < 1.0, rho
+        assert time_constant_s(rho[0]) < 1.5, rho
     # The link-6 mode (8e-5 kg m^2) is what limits it: twice the orientation stiffness
-    # already diverges with three steps of delay.
+    # diverges with five steps of delay.
     stiffer = cl.Gains.create(potential, gains.kp[:3] + tuple(2 * k for k in gains.kp[3:]),
                               gains.kv, gains.lam, cl.Task.POSE, 6)
-    assert linearized_spectral_radius(model, Q_GOAL_NEAR, stiffer, 3) > 1.0
+    assert linearized_spectral_radius(model, Q_GOAL_NEAR, stiffer, 5) > 1.0
 
 
 @pytest.mark.parametrize('potential, q_goal, delay_ticks', [
@@ -117,13 +117,13 @@ def test_sampled_delayed_saturated_loop_holds_goal_in_pybullet(model, sim_params
                         viscous_nm_s_per_rad=sim_params['viscous_friction'],
                         coulomb_nm=sim_params['coulomb_friction']) as sim:
         limits = sim.effort_limits_nm.copy()
-        run = run_sampled(model, sim, xarm6_gains(potential), p_d, q_d, 3.5, delay_ticks)
+        run = run_sampled(model, sim, xarm6_gains(potential), p_d, q_d, 5.0, delay_ticks)
     assert run.all_finite
     assert run.max_abs_torque_nm.max() <= limits.max() + 1e-9
     position_m, orientation = run.final(window_s=0.5)
-    assert position_m < POSITION_TOL_M / 2, f'{position_m * 1e3:.3f} mm'
-    assert orientation < ORIENTATION_TOL / 2, f'||e|| = {orientation:.4f}'
-    assert run.settled_at_s() < 3.0
+    assert position_m < POSITION_TOL_M, f'{position_m * 1e3:.3f} mm'
+    assert orientation < ORIENTATION_TOL, f'||e|| = {orientation:.4f}'
+    assert run.settled_at_s() < 4.5
 
 
 def test_xarm6_launch_file_is_jazzy_launch_code():

@@ -9,10 +9,18 @@ commands and the controller's error to MCAP. Then write a CSV, a figure like the
 (||e|| against time, linear and log) and print the comparison table.
 
     python -m quat_jt_controller.tools.paper_experiment [--out results/paper] [--duration 6]
+                                                        [--lockstep]
+
+By default the simulator paces itself in real time, as the wrist would run. With ``--lockstep``
+it publishes ``/clock`` and steps as soon as the command for its last state has arrived
+(``publish_clock``), and the controller runs on that clock (``use_sim_time``): the result no
+longer depends on how busy the machine is. Each run reports the simulator's timing health
+(ticks without a fresh command, command-watchdog trips).
 """
 import argparse
 import csv
 from dataclasses import dataclass
+import json
 import math
 from pathlib import Path
 import random
@@ -48,6 +56,7 @@ class Run:
     command_t_s: np.ndarray
     command_nm: np.ndarray
     mcap_path: Path
+    sim_stats: dict  # the simulator's loop statistics (LoopStats.summary)
 
 
 def _stamp_s(stamp) -> float:
@@ -55,7 +64,7 @@ def _stamp_s(stamp) -> float:
 
 
 def run_once(potential: str, duration_s: float, out_dir: Path, model: RobotModel,
-             progress=print) -> Run:
+             lockstep: bool = False, progress=print) -> Run:
     """One experiment: two node processes over DDS, recorded by a node in this process."""
     import rclpy
     from rclpy.experimental import EventsExecutor
@@ -70,11 +79,14 @@ def run_once(potential: str, duration_s: float, out_dir: Path, model: RobotModel
     work.mkdir(parents=True, exist_ok=True)
     domain_id = random.randint(1, 100)
     env = local_ros.isolated_env(work, domain_id)
+    stats_file = work / 'sim_stats.json'
+    stats_file.unlink(missing_ok=True)
     sim = local_ros.spawn_node('wrist_sim_node', env, work,
-                               params_files=(share_path('config/wrist_sim.yaml'),))
+                               params_files=(share_path('config/wrist_sim.yaml'),),
+                               params={'stats_file': str(stats_file), 'publish_clock': lockstep})
     ctrl = local_ros.spawn_node('controller_node', env, work,
                                 params_files=(share_path('config/wrist_controller.yaml'),),
-                                params={'potential': potential})
+                                params={'potential': potential, 'use_sim_time': lockstep})
     context = rclpy.Context()
     rclpy.init(context=context, domain_id=domain_id)
     node = rclpy.create_node('paper_experiment_recorder', context=context)
@@ -122,26 +134,28 @@ def run_once(potential: str, duration_s: float, out_dir: Path, model: RobotModel
         msg = deserialize_message(records['errors'][-1][1], Vector3Stamped)
         return math.sqrt(msg.vector.x ** 2 + msg.vector.y ** 2 + msg.vector.z ** 2)
 
+    def last_state_time_s() -> float:
+        """Stamp of the newest joint state: wall time, or simulated time in lockstep."""
+        return _stamp_s(deserialize_message(records['states'][-1][1], JointState).header.stamp)
+
     try:
         progress(f'[{potential}] starting wrist_sim_node and controller_node (domain '
                  f'{domain_id})')
         spin_until(lambda: len(records['states']) > 100 and len(records['commands']) > 100
                    and records['errors'], 60.0, 'waiting for the nodes to run')
         # The controller holds q(0) until the goal arrives: ||e|| ~ 0 there, ~0.9 after.
-        t_goal_s = time.time()
-        goal.header.stamp = node.get_clock().now().to_msg()
+        # t = 0 is the stamp of the last state before the goal was sent.
+        t_goal_s = last_state_time_s()
         goal_pub.publish(goal)
         spin_until(lambda: last_error_norm() > 0.5, 10.0, 'waiting for the goal to be taken')
-        progress(f'[{potential}] goal sent ({EQUATION[potential]}), recording {duration_s} s')
-        next_report = time.monotonic()
-        end = time.monotonic() + duration_s
-        while time.monotonic() < end:
-            spin_until(lambda: time.monotonic() >= min(next_report, end), duration_s + 5.0,
+        progress(f'[{potential}] goal sent ({EQUATION[potential]}), recording {duration_s} s'
+                 f'{" of simulated time (lockstep)" if lockstep else ""}')
+        report_at = 0.0
+        while report_at <= duration_s:
+            spin_until(lambda: last_state_time_s() - t_goal_s >= report_at, 10.0 + duration_s,
                        'recording')
-            if time.monotonic() >= next_report:
-                progress(f'[{potential}]   t = {time.time() - t_goal_s:4.1f} s   '
-                         f'||e|| = {last_error_norm():.4g}')
-                next_report += 1.0
+            progress(f'[{potential}]   t = {report_at:4.1f} s   ||e|| = {last_error_norm():.4g}')
+            report_at += 1.0
     finally:
         for proc in (ctrl, sim):
             local_ros.stop_node(proc)
@@ -149,6 +163,7 @@ def run_once(potential: str, duration_s: float, out_dir: Path, model: RobotModel
         node.destroy_node()
         rclpy.try_shutdown(context=context)
         mcap.close()
+    sim_stats = json.loads(stats_file.read_text()) if stats_file.exists() else {}
 
     names = list(model.joint_names)
     states = [deserialize_message(d, JointState) for _, d in records['states']]
@@ -160,10 +175,13 @@ def run_once(potential: str, duration_s: float, out_dir: Path, model: RobotModel
     err = np.array([math.sqrt(sum(c * c for c in cl.output_error(
         *model.forward_kinematics(qi), None, Q_DESIRED, cl.Task.ORIENTATION)[0])) for qi in q])
     cmds = [(ns, deserialize_message(d, Float64MultiArray).data) for ns, d in records['commands']]
-    keep = t >= 0.0
-    return Run(potential, t[keep], q[keep], qdot[keep], effort[keep], err[keep],
-               np.array([ns * 1e-9 - t_goal_s for ns, _ in cmds]),
-               np.array([list(c) for _, c in cmds]), work / f'{potential}.mcap')
+    keep = (t >= 0.0) & (t <= duration_s)
+    # Commands carry no stamp: place each at the state stamp of its arrival's recording time.
+    state_ns = np.array([ns for ns, _ in records['states']])
+    cmd_ns = np.array([ns for ns, _ in cmds])
+    cmd_t = t[np.clip(np.searchsorted(state_ns, cmd_ns) - 1, 0, len(t) - 1)]
+    return Run(potential, t[keep], q[keep], qdot[keep], effort[keep], err[keep], cmd_t,
+               np.array([list(c) for _, c in cmds]), work / f'{potential}.mcap', sim_stats)
 
 
 def summarize(run: Run, limits) -> dict:
@@ -180,7 +198,9 @@ def summarize(run: Run, limits) -> dict:
         'saturated': bool(np.any(peak >= np.asarray(limits) * (1.0 - 1e-9))),
         'final_speed_rad_s': float(np.abs(run.qdot_rad_s[tail]).max()),
         'states': int(run.t_s.size),
-        'state_rate_hz': float((run.t_s.size - 1) / (run.t_s[-1] - run.t_s[0])),
+        'stale_ticks_pct': 100.0 * run.sim_stats.get('window_stale_steps', float('nan'))
+        / max(run.sim_stats.get('window_steps', 1), 1),
+        'watchdog_trips': run.sim_stats.get('watchdog_trips'),
     }
 
 
@@ -247,11 +267,13 @@ def main(argv: Optional[list] = None) -> int:
     parser.add_argument('--out', type=Path, default=Path('results/paper'))
     parser.add_argument('--duration', type=float, default=6.0,
                         help='seconds recorded after the goal, per controller')
+    parser.add_argument('--lockstep', action='store_true',
+                        help='simulated clock, sim and controller in lockstep (load-proof)')
     args = parser.parse_args(argv)
     args.out.mkdir(parents=True, exist_ok=True)
     model = RobotModel(default_urdf_xml(), 'base_link', 'tool0')
     t_start = time.monotonic()
-    runs = [run_once(p, args.duration, args.out, model) for p in POTENTIALS]
+    runs = [run_once(p, args.duration, args.out, model, args.lockstep) for p in POTENTIALS]
     ideal = {}
     for p in POTENTIALS:
         gains = cl.Gains.create(p, PAPER_KP, PAPER_KV, PAPER_LAMBDA, cl.Task.ORIENTATION, 3)
@@ -266,8 +288,12 @@ def main(argv: Optional[list] = None) -> int:
     print()
     print(text)
     for s in summaries:
-        print(f'{s["potential"]}: {s["states"]} joint states at {s["state_rate_hz"]:.1f} Hz, '
-              f'final max |qdot| {s["final_speed_rad_s"]:.2e} rad/s')
+        health = (f'{s["stale_ticks_pct"]:.2f}% of sim ticks without a fresh command, '
+                  f'{s["watchdog_trips"]} command-watchdog trips')
+        if s['watchdog_trips']:
+            health += ' -- DEGRADED: the machine was too busy for real time; try --lockstep'
+        print(f'{s["potential"]}: {s["states"]} joint states, final max |qdot| '
+              f'{s["final_speed_rad_s"]:.2e} rad/s; timing: {health}')
     print(f'\nFigure {args.out / "fig2_error_norm.png"}, CSV {args.out / "paper_experiment.csv"}, '
           f'MCAP {", ".join(str(r.mcap_path) for r in runs)}')
     print(f'Done in {time.monotonic() - t_start:.0f} s.')
