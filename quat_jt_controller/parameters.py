@@ -11,16 +11,13 @@ K_p = (4.5, 20.5, 17.5) N m, K_v = (1, 1, 1) N m s/rad, Lambda = (30, 30, 30).
 from dataclasses import dataclass
 from typing import Any, Mapping, Optional, Sequence
 
+from quat_jt_controller import paper
 from quat_jt_controller.control_law import Gains, GainsError, Potential, Task
 from quat_jt_controller.resources import default_urdf_xml
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 from rcl_interfaces.msg import ParameterType
 from rclpy.node import Node
 
-# The paper's experiment (Eqs. 43-45).
-PAPER_KP_ORIENTATION = (4.5, 20.5, 17.5)
-PAPER_LAMBDA_ORIENTATION = (30.0, 30.0, 30.0)
-PAPER_KV = 1.0
 # Pose task (Eq. 24/32): position rows (N/m, 1/m) then the paper's orientation rows.
 DEFAULT_KP_POSITION = (200.0, 200.0, 200.0)
 DEFAULT_LAMBDA_POSITION = (100.0, 100.0, 100.0)
@@ -120,11 +117,11 @@ def declare_structural(node: Node) -> StructuralConfig:
 def default_gains(task: Task, n_joints: int) -> dict[str, Any]:
     """Return the default live values: the paper's experiment for the orientation task."""
     if task is Task.ORIENTATION:
-        kp, lam = PAPER_KP_ORIENTATION, PAPER_LAMBDA_ORIENTATION
+        kp, lam = paper.KP, paper.LAMBDA
     else:
-        kp = DEFAULT_KP_POSITION + PAPER_KP_ORIENTATION
-        lam = DEFAULT_LAMBDA_POSITION + PAPER_LAMBDA_ORIENTATION
-    return {'potential': Potential.TANH.value, 'kp': list(kp), 'kv': [PAPER_KV] * n_joints,
+        kp = DEFAULT_KP_POSITION + paper.KP
+        lam = DEFAULT_LAMBDA_POSITION + paper.LAMBDA
+    return {'potential': Potential.TANH.value, 'kp': list(kp), 'kv': [paper.KV[0]] * n_joints,
             'lambda': list(lam), 'gravity_compensation': True}
 
 

@@ -162,16 +162,16 @@ def _report() -> None:  # pragma: no cover - the figures behind config/xarm6_con
         gains = xarm6_gains(potential)
         for label, q_goal in goals.items():
             p_d, q_d = goal_of(model, q_goal)
-            rho = [linearized_spectral_radius(model, q_goal, gains, d) for d in (1, 3, 4, 5)]
-            print(f'{potential:9s} {label}: linearised rho (delay 1/3/4/5) '
+            rho = [linearized_spectral_radius(model, q_goal, gains, d) for d in (1, 3, 6, 7)]
+            print(f'{potential:9s} {label}: linearised rho (delay 1/3/6/7) '
                   + ' '.join(f'{r:.5f}' for r in rho)
                   + f', slowest time constant {time_constant_s(rho[0]):.3f} s (delay 1)')
-            ideal = ClosedLoop(model, gains, cl.Task.POSE, q_d, p_d).run(q0, 4.0)
+            ideal = ClosedLoop(model, gains, cl.Task.POSE, q_d, p_d).run(q0, 5.0)
             y, _, _ = ClosedLoop(model, gains, cl.Task.POSE, q_d, p_d).error(ideal.q_rad[-1])
-            print(f'    ideal 4 s: |p_d - p| {np.linalg.norm(y[:3]) * 1e3:.4f} mm, '
+            print(f'    ideal 5 s: |p_d - p| {np.linalg.norm(y[:3]) * 1e3:.4f} mm, '
                   f'||e|| {np.linalg.norm(y[3:]):.2e}, V non-increasing: '
                   f'{bool(np.diff(ideal.lyapunov).max() <= 1e-9 * ideal.lyapunov[0])}')
-            for delay in (1, 3):
+            for delay in (1, 3, 6):
                 for friction in (False, True):
                     with WristSimulator(
                             XARM6_URDF.read_text(), model.joint_names, initial_positions_rad=q0,
@@ -179,7 +179,7 @@ def _report() -> None:  # pragma: no cover - the figures behind config/xarm6_con
                                                   if friction else None),
                             coulomb_nm=sim_params['coulomb_friction'] if friction else None
                     ) as sim:
-                        run = run_sampled(model, sim, gains, p_d, q_d, 4.0, delay)
+                        run = run_sampled(model, sim, gains, p_d, q_d, 5.0, delay)
                     fp, fe = run.final()
                     print(f'    PyBullet delay {delay} friction {friction!s:5s}: last 0.5 s '
                           f'max |p_d - p| {fp * 1e3:.4f} mm, ||e|| {fe:.2e}; within 1 mm / '

@@ -108,7 +108,7 @@ def test_linearised_sampled_loop_is_stable_with_up_to_six_steps_of_delay(model, 
 
 @pytest.mark.parametrize('potential, q_goal, delay_ticks', [
     ('quadratic', Q_GOAL_NEAR, 1), ('tanh', Q_GOAL_NEAR, 1),
-    ('quadratic', Q_GOAL_FAR, 3), ('tanh', Q_GOAL_FAR, 3)])
+    ('quadratic', Q_GOAL_FAR, 3), ('tanh', Q_GOAL_FAR, 3), ('tanh', Q_GOAL_FAR, 6)])
 def test_sampled_delayed_saturated_loop_holds_goal_in_pybullet(model, sim_params, potential,
                                                                q_goal, delay_ticks):
     p_d, q_d = goal_of(model, q_goal)

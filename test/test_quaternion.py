@@ -142,3 +142,11 @@ def test_validate_unit_rejects(bad):
 def test_validate_unit_normalises_small_deviation():
     q = quat.validate_unit((1.004, 0.0, 0.0, 0.0))
     assert q == pytest.approx((1.0, 0.0, 0.0, 0.0))
+
+
+def test_package_constants_are_the_errata_values():
+    """quat_jt_controller.paper, the code's single source, agrees with ERRATA.md."""
+    from quat_jt_controller import paper
+    assert same_rotation(paper.Q_DESIRED, quat.normalized(Q_DESIRED), 1e-12)
+    assert paper.KP == (4.5, 20.5, 17.5) and paper.LAMBDA == (30.0, 30.0, 30.0)
+    assert paper.FINAL_ERROR == {'quadratic': 0.2043, 'tanh': 5.3184e-3}

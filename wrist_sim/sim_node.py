@@ -18,9 +18,10 @@ ros2_control robot driven by a JointGroupEffortController:
   as soon as a command has arrived for the last published state (or after
   ``lockstep_timeout`` s of wall time), so it can run faster than real time.
 
-Loop (real time): a deadline loop spinning an EventsExecutor until just before each tick, then
-busy-waiting to it; at the tick the latest command is applied, the simulation steps and the
-new state is published. Timing figures (rate, missed deadlines, step compute time, command
+Loop (real time): a deadline loop spinning an EventsExecutor. Each state is published exactly
+on its tick (the executor sleeps until just before it, then a busy-wait); the command that
+answers it is applied as soon as it arrives, stepping the simulation, and the new state waits
+for the next tick (see ``_run_real_time``). Timing figures (rate, missed deadlines, step compute time, command
 freshness and latency) are kept in ``node.stats`` (:class:`wrist_sim.simulator.LoopStats`),
 logged at shutdown and written as JSON to ``stats_file`` if set.
 """
@@ -50,6 +51,7 @@ from wrist_sim.simulator import LoopStats, SimulatorError, WristSimulator
 
 NODE_NAME = 'wrist_sim'
 BUSY_WAIT_S = 2.5e-4  # spin the executor until this long before a tick, then busy-wait
+STEP_LEAD_S = 2.5e-4  # step with the last command if no answer came this long before a tick
 LOG_PERIOD_S = 1.0
 THROTTLE_S = 1.0
 STATS_WINDOW_STEPS = 30000  # timing percentiles cover the last 30 s at 1 kHz
@@ -316,12 +318,32 @@ class WristSimNode(Node):
         last[0], last[1] = now, self.stats.steps
 
     def _run_real_time(self, executor: Any) -> None:
+        """
+        Deadline loop: publish each state exactly on its tick, step as soon as its answer is in.
+
+        The state of step k is published at its tick t_k (the executor sleeps until shortly
+        before, then a busy-wait). The controller answers that state; its command is applied
+        the moment it arrives, stepping the physics to k + 1, whose state then waits for
+        t_k+1. If no answer has come ``STEP_LEAD_S`` before t_k+1, the last command is applied
+        again (a stale tick). So the controller has nearly the whole period to answer, and the
+        publication never waits for the physics.
+        """
         period = self.dt_ns * 1e-9
         clock = time.perf_counter
         next_t = clock() + period
         last_log = [clock(), 0]
         ok = self.context.ok
         while ok():
+            step_at = next_t - STEP_LEAD_S
+            while self._cmd_seq == self._seq_at_publish:  # wait for the answer
+                remaining = step_at - clock()
+                if remaining <= 0.0 or not ok():
+                    break
+                executor.spin_once(timeout_sec=remaining)
+            fresh = self._cmd_seq != self._seq_at_publish
+            t0 = clock()
+            self.sim.step(self._torque_to_apply())
+            step_s = clock() - t0
             remaining = next_t - clock()
             while remaining > BUSY_WAIT_S:
                 executor.spin_once(timeout_sec=remaining - BUSY_WAIT_S)
@@ -334,7 +356,8 @@ class WristSimNode(Node):
             late = now - next_t
             if late > 0.5 * period:
                 self.stats.missed_deadlines += 1
-            self.tick(late)
+            self.publish_state()
+            self.stats.record_step(now, step_s + clock() - now, late, fresh)
             next_t += period
             behind = clock() - next_t
             if behind > period:  # stalled: skip the ticks we cannot make up, resync

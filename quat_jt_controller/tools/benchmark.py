@@ -31,11 +31,10 @@ from typing import Optional
 
 from quat_jt_controller import control_law as cl
 from quat_jt_controller import local_ros
+from quat_jt_controller import paper
 from quat_jt_controller import quaternion as quat
 from quat_jt_controller.model import RobotModel
 from quat_jt_controller.resources import default_urdf_xml, share_path
-from quat_jt_controller.tools.friction_sweep import (PAPER_KP, PAPER_KV, PAPER_LAMBDA,
-                                                     Q_DESIRED)
 
 CONTROLLER = 'quat_jt_controller'
 TARGETS = {'command rate (Hz)': '>= 995', 'missed ticks (%)': '<= 0.5',
@@ -68,15 +67,15 @@ def core_ticks(model: RobotModel, task: cl.Task, gains: cl.Gains, q, qdot, goal,
 
 def core_benchmark() -> dict:
     wrist = RobotModel(default_urdf_xml(), 'base_link', 'tool0')
-    g3 = cl.Gains.create('tanh', PAPER_KP, PAPER_KV, PAPER_LAMBDA, cl.Task.ORIENTATION, 3)
+    g3 = cl.Gains.create('tanh', paper.KP, paper.KV, paper.LAMBDA, cl.Task.ORIENTATION, 3)
     xarm = RobotModel(xarm6_urdf_xml(), 'link_base', 'link6')
-    g6 = cl.Gains.create('tanh', (300.0,) * 3 + PAPER_KP, (2.0,) * 6, (20.0,) * 3 + PAPER_LAMBDA,
+    g6 = cl.Gains.create('tanh', (300.0,) * 3 + paper.KP, (2.0,) * 6, (20.0,) * 3 + paper.LAMBDA,
                          cl.Task.POSE, 6)
     q6 = [0.1, -0.3, -0.8, 0.2, 0.9, -0.1]
     p6, R6 = xarm.forward_kinematics([0.3, -0.2, -0.6, 0.1, 0.7, 0.2])
     return {
         'wrist 3-DOF orientation': core_ticks(wrist, cl.Task.ORIENTATION, g3, [0.3, 0.5, -0.2],
-                                              [0.1, 0.1, 0.1], (Q_DESIRED, None)),
+                                              [0.1, 0.1, 0.1], (paper.Q_DESIRED, None)),
         'xArm6 6-DOF pose': core_ticks(xarm, cl.Task.POSE, g6, q6, [0.1] * 6,
                                        (quat.from_rotation_matrix(R6), p6)),
     }
@@ -133,7 +132,7 @@ def loop_benchmark(duration_s: float, warmup_s: float, out: Path) -> dict:
         goal = PoseStamped()
         goal.header.frame_id = 'base_link'
         o = goal.pose.orientation
-        o.x, o.y, o.z, o.w = quat.to_xyzw(Q_DESIRED)
+        o.x, o.y, o.z, o.w = quat.to_xyzw(paper.Q_DESIRED)
         spin_for(2.0)
         goal_pub.publish(goal)
         spin_for(warmup_s)

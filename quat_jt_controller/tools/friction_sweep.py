@@ -19,25 +19,19 @@ from typing import Sequence
 import numpy as np
 
 from quat_jt_controller import control_law as cl
-from quat_jt_controller import quaternion as quat
+from quat_jt_controller import paper
 from quat_jt_controller.model import RobotModel
 from quat_jt_controller.reference_sim import ClosedLoop
 from quat_jt_controller.resources import default_urdf_xml
 from wrist_sim.simulator import WristSimulator
 
-PAPER_KP = (4.5, 20.5, 17.5)  # Eq. (43), N m
-PAPER_KV = (1.0, 1.0, 1.0)  # Eq. (44), N m s/rad
-PAPER_LAMBDA = (30.0, 30.0, 30.0)  # Eq. (45)
-Q_DESIRED = quat.normalized((0.5566, 0.0, 0.4226, 0.7152))  # ERRATA.md note 2
-PAPER_FINAL_ERROR = {'quadratic': 0.2043, 'tanh': 5.3184e-3}  # ERRATA.md note 5
-
 
 def sampled_run(model: RobotModel, potential: str, coulomb_nm: Sequence[float],
                 duration_s: float = 6.0) -> np.ndarray:
     """||e|| at every 1 ms step of the paper's experiment on the simulated wrist."""
-    gains = cl.Gains.create(potential, PAPER_KP, PAPER_KV, PAPER_LAMBDA, cl.Task.ORIENTATION,
+    gains = cl.Gains.create(potential, paper.KP, paper.KV, paper.LAMBDA, cl.Task.ORIENTATION,
                             model.n)
-    loop = ClosedLoop(model, gains, cl.Task.ORIENTATION, Q_DESIRED)
+    loop = ClosedLoop(model, gains, cl.Task.ORIENTATION, paper.Q_DESIRED)
     errors = np.empty(int(round(duration_s * 1000)))
     tau_nm = [0.0] * model.n
     with WristSimulator(default_urdf_xml(), model.joint_names, coulomb_nm=coulomb_nm) as sim:
@@ -53,8 +47,8 @@ def sampled_run(model: RobotModel, potential: str, coulomb_nm: Sequence[float],
 
 
 def score(final_quadratic: float, final_tanh: float) -> float:
-    return (abs(math.log(final_quadratic / PAPER_FINAL_ERROR['quadratic']))
-            + abs(math.log(max(final_tanh, 1e-12) / PAPER_FINAL_ERROR['tanh'])))
+    return (abs(math.log(final_quadratic / paper.FINAL_ERROR['quadratic']))
+            + abs(math.log(max(final_tanh, 1e-12) / paper.FINAL_ERROR['tanh'])))
 
 
 def main(argv=None) -> None:
@@ -69,7 +63,7 @@ def main(argv=None) -> None:
     print(f'{"coulomb N m":>20} {"quadratic ||e||":>16} {"tanh ||e||":>12} {"score":>7}')
     for coulomb in itertools.product(args.joint1, args.joint2, args.joint3):
         t0 = time.perf_counter()
-        final = {p: sampled_run(model, p, coulomb, args.duration)[-1] for p in PAPER_FINAL_ERROR}
+        final = {p: sampled_run(model, p, coulomb, args.duration)[-1] for p in paper.FINAL_ERROR}
         rows.append((score(final['quadratic'], final['tanh']), coulomb, final))
         print(f'{str(coulomb):>20} {final["quadratic"]:16.4f} {final["tanh"]:12.5f} '
               f'{rows[-1][0]:7.3f}   ({time.perf_counter() - t0:.1f} s)', flush=True)

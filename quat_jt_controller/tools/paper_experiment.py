@@ -32,12 +32,11 @@ import numpy as np
 
 from quat_jt_controller import control_law as cl
 from quat_jt_controller import local_ros
+from quat_jt_controller import paper
 from quat_jt_controller import quaternion as quat
 from quat_jt_controller.model import RobotModel
 from quat_jt_controller.reference_sim import ClosedLoop
 from quat_jt_controller.resources import default_urdf_xml, share_path
-from quat_jt_controller.tools.friction_sweep import (PAPER_FINAL_ERROR, PAPER_KP, PAPER_KV,
-                                                     PAPER_LAMBDA, Q_DESIRED)
 
 POTENTIALS = ('quadratic', 'tanh')
 EQUATION = {'quadratic': 'Eq. 37', 'tanh': 'Eq. 38'}
@@ -61,6 +60,13 @@ class Run:
 
 def _stamp_s(stamp) -> float:
     return stamp.sec + 1e-9 * stamp.nanosec
+
+
+def error_norm(model: RobotModel, q_rad) -> float:
+    """||e|| (Eq. 10) of the wrist at joint angles ``q_rad`` towards the paper's goal."""
+    p, R = model.forward_kinematics(q_rad)
+    e, _ = cl.output_error(p, R, None, paper.Q_DESIRED, cl.Task.ORIENTATION)
+    return math.sqrt(sum(c * c for c in e))
 
 
 def run_once(potential: str, duration_s: float, out_dir: Path, model: RobotModel,
@@ -117,7 +123,7 @@ def run_once(potential: str, duration_s: float, out_dir: Path, model: RobotModel
     goal = PoseStamped()
     goal.header.frame_id = 'base_link'
     (goal.pose.orientation.x, goal.pose.orientation.y, goal.pose.orientation.z,
-     goal.pose.orientation.w) = quat.to_xyzw(Q_DESIRED)
+     goal.pose.orientation.w) = quat.to_xyzw(paper.Q_DESIRED)
 
     def spin_until(condition, timeout_s: float, what: str) -> None:
         deadline = time.monotonic() + timeout_s
@@ -172,8 +178,7 @@ def run_once(potential: str, duration_s: float, out_dir: Path, model: RobotModel
     q = np.array([[s.position[i] for i in order] for s in states])
     qdot = np.array([[s.velocity[i] for i in order] for s in states])
     effort = np.array([[s.effort[i] for i in order] for s in states])
-    err = np.array([math.sqrt(sum(c * c for c in cl.output_error(
-        *model.forward_kinematics(qi), None, Q_DESIRED, cl.Task.ORIENTATION)[0])) for qi in q])
+    err = np.array([error_norm(model, qi) for qi in q])
     cmds = [(ns, deserialize_message(d, Float64MultiArray).data) for ns, d in records['commands']]
     keep = (t >= 0.0) & (t <= duration_s)
     # Commands carry no stamp: place each at the state stamp of its arrival's recording time.
@@ -192,7 +197,7 @@ def summarize(run: Run, limits) -> dict:
     return {
         'potential': run.potential,
         'final_error': float(run.error_norm[tail].mean()),
-        'paper_error': PAPER_FINAL_ERROR[run.potential],
+        'paper_error': paper.FINAL_ERROR[run.potential],
         'time_to_reach_s': float(run.t_s[reached[0]]) if reached.size else None,
         'peak_torque_nm': peak.tolist(),
         'saturated': bool(np.any(peak >= np.asarray(limits) * (1.0 - 1e-9))),
@@ -229,7 +234,7 @@ def plot(runs: list[Run], ideal: dict, path: Path) -> None:
         for r in runs:
             ax.plot(r.t_s, r.error_norm, color=colors[r.potential],
                     label=f'{r.potential} ({EQUATION[r.potential]}), simulated wrist')
-            ax.axhline(PAPER_FINAL_ERROR[r.potential], color=colors[r.potential], ls=':',
+            ax.axhline(paper.FINAL_ERROR[r.potential], color=colors[r.potential], ls=':',
                        lw=1, label=f'paper final {r.potential}')
             t_ref, e_ref = ideal[r.potential]
             ax.plot(t_ref, e_ref, color=colors[r.potential], ls='--', lw=1, alpha=0.6,
@@ -276,8 +281,8 @@ def main(argv: Optional[list] = None) -> int:
     runs = [run_once(p, args.duration, args.out, model, args.lockstep) for p in POTENTIALS]
     ideal = {}
     for p in POTENTIALS:
-        gains = cl.Gains.create(p, PAPER_KP, PAPER_KV, PAPER_LAMBDA, cl.Task.ORIENTATION, 3)
-        traj = ClosedLoop(model, gains, cl.Task.ORIENTATION, Q_DESIRED).run(
+        gains = cl.Gains.create(p, paper.KP, paper.KV, paper.LAMBDA, cl.Task.ORIENTATION, 3)
+        traj = ClosedLoop(model, gains, cl.Task.ORIENTATION, paper.Q_DESIRED).run(
             [0.0, 0.0, 0.0], args.duration)
         ideal[p] = (traj.t_s, traj.error_norm)
     summaries = [summarize(r, model.effort_limits) for r in runs]
