@@ -1,4 +1,5 @@
-"""The 6-DOF demo: the xArm6 of pybullet_data in the simulator, regulated in full pose.
+"""
+The 6-DOF demo: the xArm6 of pybullet_data in the simulator, regulated in full pose.
 
     ros2 launch quat_jt_controller xarm6_demo.launch.py [potential:=tanh|quadratic]
                                                        [use_gui:=true|false]

@@ -1,4 +1,5 @@
-"""The pose regulator as the real system runs it, without ROS: sampled, delayed, saturated.
+"""
+The pose regulator as the real system runs it, without ROS: sampled, delayed, saturated.
 
 The ideal loop of ``reference_sim`` evaluates Eq. (24) / (32) continuously. Over ROS the
 controller sees the joint state of one tick and its torque is applied, held constant (zero-order
@@ -48,7 +49,8 @@ def goal_of(model: RobotModel, q_goal_rad: Sequence[float]):
 def linearized_spectral_radius(model: RobotModel, q_goal_rad: Sequence[float], gains: cl.Gains,
                                delay_ticks: int = 1, dt_s: float = 1e-3,
                                mass_matrix: Optional[np.ndarray] = None) -> float:
-    """Spectral radius of the pose loop linearised at the goal, sampled and delayed.
+    """
+    Spectral radius of the pose loop linearised at the goal, sampled and delayed.
 
     At y_tilde = 0 (eta_e = 1), Eq. (24) / (32) minus g(q) is tau = -K_q dq - K_v qdot with the
     joint stiffness K_q = J_G^T Q^T diag(s) Q J_G, Q = diag(I, I/2) (Eq. 15) and slopes
@@ -110,7 +112,8 @@ class SampledRun:
 def run_sampled(model: RobotModel, sim, gains: cl.Gains, p_desired: Sequence[float],
                 q_desired: Sequence[float], duration_s: float,
                 delay_ticks: int = 1) -> SampledRun:
-    """Regulate ``sim`` (a WristSimulator on the same URDF and joints) to the pose goal.
+    """
+    Regulate ``sim`` (a WristSimulator on the same URDF and joints) to the pose goal.
 
     Each step applies (zero-order hold) the torque of Eq. (24) / (32) + g(q), computed from the
     state measured ``delay_ticks`` steps earlier and clamped to the URDF effort limits (the

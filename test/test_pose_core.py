@@ -1,4 +1,5 @@
-"""Issue 6, ROS-free: full pose regulation (Section 4, Eqs. 24 and 32) of the 6-DOF xArm6.
+"""
+Issue 6, ROS-free: full pose regulation (Section 4, Eqs. 24 and 32) of the 6-DOF xArm6.
 
 With the gains of config/xarm6_controller.yaml, from the non-singular start of
 config/xarm6_sim.yaml, with both potentials:
