@@ -1,4 +1,5 @@
-"""The wrist demo: the simulated spherical wrist and the transpose-Jacobian regulator.
+"""
+The wrist demo: the simulated spherical wrist and the transpose-Jacobian regulator.
 
     ros2 launch quat_jt_controller wrist_demo.launch.py [potential:=tanh|quadratic]
                                                       [use_gui:=true|false]

@@ -20,11 +20,9 @@ e.g. this one, 0.10 m and 0.25 rad away (the arm's pose at q = [0.2, -0.4, -1.1,
                orientation: {x: -0.9919, y: 0.0617, z: -0.0237, w: 0.1083}}}"
 
 and watch ``/quat_jt_controller/position_error`` and ``/quat_jt_controller/orientation_error``.
-
-Note: the simulator steps with zero torque until the controller's first command arrives, so
-the arm sags under gravity for as long as DDS discovery takes, and the controller then holds
-the sagged pose. To start the motion from the configured start: publish the goal, then
-``ros2 service call /wrist_sim/reset std_srvs/srv/Trigger`` (back to the start, at rest).
+The simulator holds the arm at its start until the controller's first command arrives
+(``hold_until_first_command``), so it does not sag while the nodes discover each other;
+``ros2 service call /wrist_sim/reset std_srvs/srv/Trigger`` puts it back there, at rest.
 """
 import os
 from pathlib import Path

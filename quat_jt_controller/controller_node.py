@@ -20,16 +20,16 @@ The tick reads two immutable references, ``self._gains`` (a Gains) and ``self._g
 swap the reference, so the loop never sees half an update. The node runs on one thread
 (EventsExecutor), so callbacks never interleave.
 """
-from math import atan2, isfinite, sqrt
+from math import isfinite, sqrt
 import time
 from typing import Optional, Sequence
 
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PoseStamped, Vector3Stamped
-import numpy as np
 from quat_jt_controller import quaternion as quat
 from quat_jt_controller.control_law import control_torque, GainsError, output_error, saturate
 from quat_jt_controller.control_law import Task
+from quat_jt_controller.goal_check import check_goal
 from quat_jt_controller.model import ModelError, RobotModel
 from quat_jt_controller.parameters import declare_gains, declare_structural, GAIN_PARAMETERS
 from quat_jt_controller.parameters import gains_update
@@ -46,8 +46,6 @@ STATS_WINDOW = 2048
 # |eta_e| below this means the error is within ~11.5 degrees of 180 degrees, where
 # Q(eta_e, e)^T K_p e can vanish (ERRATA note 6): reported as a warning.
 NEAR_180_ETA_E = 0.1
-# A goal whose IK solution has sigma_min(J) below this is reported singular (assumption A2).
-SINGULAR_SIGMA_MIN = 0.05
 # Saturated ticks above this fraction of a diagnostics window give a warning.
 SATURATION_WARN_FRACTION = 0.05
 NS = 1e-9
@@ -124,6 +122,7 @@ class QuatJtController(Node):
         self._last_q: Optional[list[float]] = None
         self._last_qdot: Optional[list[float]] = None
         self._decimation = 0
+        self._published_q: Optional[quat.Quaternion] = None  # last ~/current_pose quaternion
 
         self._cmd_pub = self.create_publisher(Float64MultiArray, 'effort_controller/commands', 10)
         self._pose_pub = self.create_publisher(PoseStamped, '~/current_pose', 10)
@@ -278,7 +277,12 @@ class QuatJtController(Node):
         pose = self._pose_msg
         pose.header.stamp = stamp
         pose.pose.position.x, pose.pose.position.y, pose.pose.position.z = p
-        x, y, z, w = quat.to_xyzw(quat.from_rotation_matrix(R))
+        q = quat.from_rotation_matrix(R)
+        prev = self._published_q
+        if prev is not None and sum(a * b for a, b in zip(q, prev)) < 0.0:
+            q = (-q[0], -q[1], -q[2], -q[3])  # the same rotation, no sign flip between samples
+        self._published_q = q
+        x, y, z, w = quat.to_xyzw(q)
         o = pose.pose.orientation
         o.x, o.y, o.z, o.w = x, y, z, w
         self._pose_pub.publish(pose)
@@ -334,7 +338,8 @@ class QuatJtController(Node):
             p_desired_base = (0.0, 0.0, 0.0)  # ignored by the orientation task
         self._goal = (q_desired_base, p_desired_base)
         self._goal_source = 'target_pose'
-        warning = self._check_goal(q_desired_base, p_desired_base)
+        warning = check_goal(self._model, self._last_q, q_desired_base, p_desired_base,
+                             self._task)
         self._goal_warning = warning
         text = (f'new goal: quaternion (x, y, z, w) '
                 f'{tuple(round(c, 4) for c in quat.to_xyzw(q_desired_base))}')
@@ -344,54 +349,6 @@ class QuatJtController(Node):
             self.get_logger().warn(f'{text}; accepted with a warning: {warning}')
         else:
             self.get_logger().info(text)
-
-    def _check_goal(self, q_desired_base, p_desired_base) -> str:
-        """
-        Assumptions A1 (reachable) and A2 (not singular) for a goal, by a small IK.
-
-        Damped least squares from the last measured q (the branch the regulator most likely
-        ends on), then sigma_min of J_o (orientation task) or J_G (pose task) at the solution.
-        Returns a warning, or '' if the goal is reachable at a regular configuration.
-        """
-        q = np.array(self._last_q if self._last_q is not None else [0.0] * self._n)
-        # Start slightly off a singular configuration so that DLS has a direction to go.
-        q = q + 1e-3
-        lower = np.array(self._model.position_lower)
-        upper = np.array(self._model.position_upper)
-        damping_sq = 1e-4
-        err_norm = float('inf')
-        J = None
-        for _ in range(300):
-            p, R, J_rows = self._model.kinematics(q.tolist())
-            eta_e, e = quat.orientation_error(quat.from_rotation_matrix(R), q_desired_base)
-            if eta_e < 0.0:
-                eta_e, e = -eta_e, (-e[0], -e[1], -e[2])
-            s = sqrt(e[0] * e[0] + e[1] * e[1] + e[2] * e[2])
-            angle = 2.0 * atan2(s, eta_e)
-            rot = np.array(e) * (angle / s) if s > 1e-12 else np.zeros(3)
-            J = np.array(J_rows)
-            if self._task is Task.POSE:
-                err = np.concatenate((np.array(p_desired_base) - np.array(p), rot))
-            else:
-                err, J = rot, J[3:]
-            err_norm = float(np.linalg.norm(err))
-            if err_norm < 1e-8:
-                break
-            step = J.T @ np.linalg.solve(J @ J.T + damping_sq * np.eye(J.shape[0]), err)
-            q = q + step
-            finite_limits = np.isfinite(lower) & np.isfinite(upper) & (upper > lower)
-            q[finite_limits] = np.clip(q[finite_limits], lower[finite_limits],
-                                       upper[finite_limits])
-        sigma_min = float(np.linalg.svd(J, compute_uv=False)[-1]) if J is not None else 0.0
-        q_text = [round(float(x), 4) for x in q]
-        if err_norm > 1e-4:
-            return (f'no joint configuration within the limits reaches it (IK residual '
-                    f'{err_norm:.3g} at q = {q_text}): assumption A1 may not hold')
-        if sigma_min < SINGULAR_SIGMA_MIN:
-            return (f'it is reached at a singular configuration q = {q_text} (sigma_min(J) = '
-                    f'{sigma_min:.3g} < {SINGULAR_SIGMA_MIN}): assumption A2 of the paper does '
-                    'not hold; the regulator may drift along the self-motion')
-        return ''
 
     # --------------------------------------------------------------------------- diagnostics
     def _on_diagnostics(self) -> None:

@@ -71,3 +71,64 @@ class ClosedLoop:
         err = np.array([np.linalg.norm(self.error(qi)[0]) for qi in q])
         lyap = np.array([self.lyapunov(qi, vi) for qi, vi in zip(q, qdot)])
         return Trajectory(np.arange(steps + 1) * dt_s, q, qdot, err, lyap)
+
+
+@dataclass
+class SampledRun:
+    t_s: np.ndarray  # (N,)
+    position_error_m: np.ndarray  # ||p_d - p|| (N,), zeros for the orientation task
+    orientation_error: np.ndarray  # ||e|| of Eq. (10) (N,)
+    max_abs_torque_nm: np.ndarray  # max_j |tau_j| applied (N,)
+    saturated_ticks: int
+    all_finite: bool
+
+    def settled_at_s(self, position_m: float = 1e-3, orientation: float = 1e-2) -> float:
+        """First time after which both errors stay below the tolerances (inf if never)."""
+        ok = (self.position_error_m < position_m) & (self.orientation_error < orientation)
+        if not ok[-1]:
+            return float('inf')
+        bad = np.flatnonzero(~ok)
+        return float(self.t_s[bad[-1] + 1]) if bad.size else float(self.t_s[0])
+
+    def final(self, window_s: float = 0.5) -> tuple[float, float]:
+        """Largest position error (m) and ||e|| over the last ``window_s``."""
+        k = max(1, int(round(window_s / max(self.t_s[1] - self.t_s[0], 1e-12))))
+        return float(self.position_error_m[-k:].max()), float(self.orientation_error[-k:].max())
+
+
+def run_sampled(loop: ClosedLoop, sim, duration_s: float, delay_ticks: int = 1) -> SampledRun:
+    """
+    Run ``loop``'s regulator on a simulator as the nodes do: sampled, delayed, held, clamped.
+
+    ``sim`` is a simulator of the same URDF and joints (``wrist_sim.simulator.WristSimulator``
+    or anything with ``q_rad``, ``qdot_rad_s``, ``dt_s`` and ``step(tau) -> applied``). Each
+    step applies (zero-order hold) the torque of Eq. (22) + g(q) computed from the state
+    measured ``delay_ticks`` steps earlier, clamped to the URDF effort limits. The nodes run
+    with no extra delay (0) while every command arrives in time: the sim steps from the state
+    it published with the command computed from it. Records the errors after each step.
+    """
+    limits = list(loop.model.effort_limits)
+    history = [(sim.q_rad.tolist(), sim.qdot_rad_s.tolist())] * (delay_ticks + 1)
+    steps = int(round(duration_s / sim.dt_s))
+    pos, ori, tau_max = np.zeros(steps), np.empty(steps), np.empty(steps)
+    saturated = 0
+    finite = True
+    for k in range(steps):
+        q, qdot = history[-1 - delay_ticks]
+        tau = loop.torque(q, qdot)
+        if cl.saturate(tau, limits):
+            saturated += 1
+        if not all(np.isfinite(tau)):
+            finite = False
+            break
+        applied = sim.step(tau)
+        history.append((sim.q_rad.tolist(), sim.qdot_rad_s.tolist()))
+        del history[0]
+        y, _, _ = loop.error(history[-1][0])
+        if loop.task is cl.Task.POSE:
+            pos[k] = np.linalg.norm(y[:3])
+        ori[k] = np.linalg.norm(y[-3:])
+        tau_max[k] = np.abs(applied).max()
+        finite = finite and bool(np.all(np.isfinite(sim.q_rad)))
+    t = (np.arange(steps) + 1) * sim.dt_s
+    return SampledRun(t, pos, ori, tau_max, saturated, finite)

@@ -11,7 +11,6 @@ gains of ``config/xarm6_controller.yaml``.
 
     .venv/bin/python test/sampled_loop.py     # the figures quoted in config/xarm6_controller.yaml
 """
-from dataclasses import dataclass
 from pathlib import Path
 import sys
 from typing import Optional, Sequence
@@ -20,7 +19,7 @@ import numpy as np
 from quat_jt_controller import control_law as cl
 from quat_jt_controller import quaternion as quat
 from quat_jt_controller.model import RobotModel
-from quat_jt_controller.reference_sim import ClosedLoop
+from quat_jt_controller.reference_sim import ClosedLoop, run_sampled
 import yaml
 
 CONFIG_DIR = Path(__file__).resolve().parent.parent / 'config'
@@ -86,68 +85,6 @@ def time_constant_s(rho: float, dt_s: float = 1e-3) -> float:
     return -dt_s / np.log(rho) if rho < 1.0 else float('inf')
 
 
-@dataclass
-class SampledRun:
-    t_s: np.ndarray  # (N,)
-    position_error_m: np.ndarray  # ||p_d - p|| (N,)
-    orientation_error: np.ndarray  # ||e|| of Eq. (10) (N,)
-    max_abs_torque_nm: np.ndarray  # max_j |tau_j| applied (N,)
-    saturated_ticks: int
-    all_finite: bool
-
-    def settled_at_s(self, position_m: float = 1e-3, orientation: float = 1e-2) -> float:
-        """First time after which both errors stay below the tolerances (inf if never)."""
-        ok = (self.position_error_m < position_m) & (self.orientation_error < orientation)
-        if not ok[-1]:
-            return float('inf')
-        bad = np.flatnonzero(~ok)
-        return float(self.t_s[bad[-1] + 1]) if bad.size else float(self.t_s[0])
-
-    def final(self, window_s: float = 0.5) -> tuple[float, float]:
-        """Largest position error (m) and ||e|| over the last ``window_s``."""
-        k = max(1, int(round(window_s / max(self.t_s[1] - self.t_s[0], 1e-12))))
-        return float(self.position_error_m[-k:].max()), float(self.orientation_error[-k:].max())
-
-
-def run_sampled(model: RobotModel, sim, gains: cl.Gains, p_desired: Sequence[float],
-                q_desired: Sequence[float], duration_s: float,
-                delay_ticks: int = 1) -> SampledRun:
-    """
-    Regulate ``sim`` (a WristSimulator on the same URDF and joints) to the pose goal.
-
-    Each step applies (zero-order hold) the torque of Eq. (24) / (32) + g(q), computed from the
-    state measured ``delay_ticks`` steps earlier and clamped to the URDF effort limits (the
-    simulator clamps too). Records the errors after every step.
-    """
-    loop = ClosedLoop(model, gains, cl.Task.POSE, q_desired, p_desired)
-    limits = list(model.effort_limits)
-    history = [(sim.q_rad.copy(), sim.qdot_rad_s.copy())] * (delay_ticks + 1)
-    steps = int(round(duration_s / sim.dt_s))
-    pos = np.empty(steps)
-    ori = np.empty(steps)
-    tau_max = np.empty(steps)
-    saturated = 0
-    finite = True
-    for k in range(steps):
-        q, qdot = history[-1 - delay_ticks]
-        tau = loop.torque(q.tolist(), qdot.tolist())
-        if cl.saturate(tau, limits):
-            saturated += 1
-        if not all(np.isfinite(tau)):
-            finite = False
-            break
-        applied = sim.step(tau)
-        history.append((sim.q_rad.copy(), sim.qdot_rad_s.copy()))
-        del history[0]
-        y, _, _ = loop.error(sim.q_rad.tolist())
-        pos[k] = np.linalg.norm(y[:3])
-        ori[k] = np.linalg.norm(y[3:])
-        tau_max[k] = np.abs(applied).max()
-        finite = finite and bool(np.all(np.isfinite(sim.q_rad)))
-    t = (np.arange(steps) + 1) * sim.dt_s
-    return SampledRun(t, pos, ori, tau_max, saturated, finite)
-
-
 def _report() -> None:  # pragma: no cover - the figures behind config/xarm6_controller.yaml
     sys.path.insert(0, str(Path(__file__).resolve().parent))
     from robots import xarm6_model, XARM6_URDF
@@ -182,7 +119,8 @@ def _report() -> None:  # pragma: no cover - the figures behind config/xarm6_con
                                                   if friction else None),
                             coulomb_nm=sim_params['coulomb_friction'] if friction else None
                     ) as sim:
-                        run = run_sampled(model, sim, gains, p_d, q_d, 5.0, delay)
+                        loop = ClosedLoop(model, gains, cl.Task.POSE, q_d, p_d)
+                        run = run_sampled(loop, sim, 5.0, delay)
                     fp, fe = run.final()
                     print(f'    PyBullet delay {delay} friction {friction!s:5s}: last 0.5 s '
                           f'max |p_d - p| {fp * 1e3:.4f} mm, ||e|| {fe:.2e}; within 1 mm / '

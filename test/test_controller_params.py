@@ -195,14 +195,19 @@ def test_shuffled_and_extra_names_give_the_same_command(make_node, monkeypatch):
     assert sent[0] == sent[1] == sent[2]
 
 
-def test_goal_checks(make_node):
+def test_goals_breaking_a1_or_a2_are_accepted_with_a_warning(make_node):
     node = make_node()
-    assert node._check_goal(quat.from_xyzw(*GOAL_XYZW), (0.0, 0.0, 0.0)) == ''
-    singular = quat.from_xyzw(0.0, 0.0, math.sin(0.4), math.cos(0.4))  # q2 = 0
-    assert 'singular' in node._check_goal(singular, (0.0, 0.0, 0.0))
+    node._on_target_pose(goal(GOAL_XYZW))
+    assert node._goal_source == 'target_pose' and node._goal_warning == ''
+    singular_xyzw = (0.0, 0.0, math.sin(0.4), math.cos(0.4))  # only reached with q2 = 0
+    node._on_target_pose(goal(singular_xyzw))
+    assert node._goal[0] == pytest.approx(quat.from_xyzw(*singular_xyzw))  # accepted
+    assert 'singular' in node._goal_warning
     pose = make_node({'task': 'pose'})
-    far = pose._check_goal(quat.from_xyzw(*GOAL_XYZW), (1.0, 0.0, 0.0))
-    assert 'A1' in far, far  # the wrist centre cannot move
+    far = goal(GOAL_XYZW)
+    far.pose.position.x = 1.0  # the wrist centre cannot move
+    pose._on_target_pose(far)
+    assert pose._goal[1] == (1.0, 0.0, 0.0) and 'A1' in pose._goal_warning
 
 
 def test_rejected_goal_keeps_the_previous_one(make_node):
@@ -244,3 +249,18 @@ def test_diagnostics_warn_near_180_degrees(make_node, context):
                 'state_age_us_p50', 'saturated_ticks'):
         assert key in values
     assert node._task is Task.ORIENTATION
+
+
+def test_current_pose_quaternion_keeps_its_hemisphere(make_node, monkeypatch):
+    """Through eta = 0 the canonical (eta >= 0) quaternion flips; ~/current_pose must not."""
+    node = make_node({'publish_rate_divider': 1})
+    published = []
+    monkeypatch.setattr(node._pose_pub, 'publish', lambda m: published.append(
+        (m.pose.orientation.x, m.pose.orientation.y, m.pose.orientation.z,
+         m.pose.orientation.w)))
+    for q1 in (3.0, 3.1, 3.2, 3.3):  # joint 1 through 180 degrees about z: eta crosses 0
+        node._on_joint_state(state((q1, 0.0, 0.0)))
+    assert len(published) == 4
+    for a, b in zip(published, published[1:]):
+        assert sum(x * y for x, y in zip(a, b)) > 0.9, published
+    assert published[0][3] > 0.0 > published[-1][3]  # it did go past eta = 0

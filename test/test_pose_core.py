@@ -17,9 +17,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 from quat_jt_controller import control_law as cl
-from quat_jt_controller.reference_sim import ClosedLoop
+from quat_jt_controller.reference_sim import ClosedLoop, run_sampled
 from robots import xarm6_model, XARM6_URDF
-from sampled_loop import goal_of, linearized_spectral_radius, load_params, run_sampled
+from sampled_loop import goal_of, linearized_spectral_radius, load_params
 from sampled_loop import time_constant_s, xarm6_gains
 from wrist_sim.simulator import WristSimulator
 
@@ -118,7 +118,8 @@ def test_sampled_delayed_saturated_loop_holds_goal_in_pybullet(model, sim_params
                         viscous_nm_s_per_rad=sim_params['viscous_friction'],
                         coulomb_nm=sim_params['coulomb_friction']) as sim:
         limits = sim.effort_limits_nm.copy()
-        run = run_sampled(model, sim, xarm6_gains(potential), p_d, q_d, 5.0, delay_ticks)
+        run = run_sampled(ClosedLoop(model, xarm6_gains(potential), cl.Task.POSE, q_d, p_d), sim,
+                          5.0, delay_ticks)
     assert run.all_finite
     assert run.max_abs_torque_nm.max() <= limits.max() + 1e-9
     position_m, orientation = run.final(window_s=0.5)

@@ -5,9 +5,9 @@ Issue 6 over real DDS: the pose task (Section 4, Eqs. 24 and 32) on the 6-DOF xA
 ``controller_node`` regulates the full pose of link6 in link_base, each in its own process
 (``local_ros``), with the parameters of config/xarm6_sim.yaml and config/xarm6_controller.yaml
 plus the URDF as ``robot_description``, as launch/xarm6_demo.launch.py starts them. This test
-process only sends goals, sets parameters, resets the simulator and listens. The simulator is
-started after the controller, and every run begins with the arm reset to its start at rest
-(``Rig.start_at_rest``), because the simulator steps with zero torque until the first command.
+process only sends goals, sets parameters, resets the simulator and listens. Every run begins
+with the arm reset to its start at rest (``Rig.start_at_rest``), so each starts from the same
+state.
 
 Every wait is a condition with a deadline; the deadlines are generous because the machine is
 shared, the tolerances are the issue's.
@@ -64,8 +64,7 @@ class Rig:
         self.model = RobotModel(urdf, 'link_base', 'link6')
         self.urdf = urdf
         self.procs: dict[str, subprocess.Popen] = {}
-        # The controller first: the simulator steps with zero torque until the first command
-        # arrives, and the arm (unlike the balanced wrist) falls under gravity meanwhile.
+        # The controller first, so it answers the simulator's first state.
         self.procs['controller_node'] = local_ros.spawn_node(
             'controller_node', self.env, work_dir,
             params={'robot_description': urdf, 'potential': potential},
@@ -164,10 +163,8 @@ class Rig:
         """
         Put the arm at the start of xarm6_sim.yaml, at rest, holding that pose.
 
-        The simulator steps with zero torque until the controller's first command arrives, so
-        the arm falls for as long as DDS discovery takes (seconds on a busy host), and the
-        controller then holds that fallen pose. So: make the start pose the goal, reset the
-        simulator to it (~/reset) and wait until it is held.
+        Make the start pose the goal, reset the simulator to it (~/reset, which also holds the
+        joints until the next command) and wait until it is held.
         """
         p0, R0 = self.model.forward_kinematics(START_Q)
         self.spin_until(lambda: self.reset_client.service_is_ready(), 30.0,

@@ -310,3 +310,21 @@ def test_lockstep_clock_steps_once_per_command(tmp_path):
     finally:
         p.destroy()
         assert s.close() == 0, s.log()
+
+
+def test_joints_are_held_until_the_first_command(tmp_path):
+    """hold_until_first_command: no fall under gravity while no controller has answered."""
+    q0 = [0.0, 0.6, 0.0]  # joint 2 off vertical: gravity pulls it (~0.8 N m), no friction
+    s = SimProcess(tmp_path, {'initial_positions': q0})
+    p = Probe(s.context)
+    try:
+        assert p.spin_until(lambda: len(p.msgs) > 300, 30.0), s.log()
+        first = p.msgs[0]
+        last = p.latest()
+        assert last[1] > first[1]  # time advances
+        assert last[2] == q0 and last[3] == [0.0, 0.0, 0.0], last  # held exactly, at rest
+        p.send([0.0, 0.0, 0.0])  # a controller connects, commanding zero torque: it falls
+        assert p.spin_until(lambda: abs(p.latest()[2][1] - q0[1]) > 0.01, 5.0), s.log()
+    finally:
+        p.destroy()
+        s.close()

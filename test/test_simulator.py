@@ -245,3 +245,16 @@ def test_loop_stats_summary():
     assert out['cmd_latency_us_p99'] == pytest.approx(300.0)
     assert out['window_fresh_fraction'] == pytest.approx(0.5)
     assert out['missed_deadlines'] == 2
+
+
+def test_hold_passes_time_with_the_joints_at_rest(urdf):
+    q0 = [0.2, 0.6, -0.3]
+    with WristSimulator(urdf, initial_positions_rad=q0) as s:
+        for _ in range(100):
+            s.hold()
+        assert s.step_count == 100 and s.time_s == pytest.approx(0.1)
+        np.testing.assert_array_equal(s.q_rad, q0)
+        np.testing.assert_array_equal(s.qdot_rad_s, 0.0)
+        s.step_zero()  # released: gravity moves joint 2
+        s.step_zero()
+        assert s.qdot_rad_s[1] != 0.0

@@ -50,7 +50,8 @@ def test_benchmark_reports_every_figure(tmp_path):
                       '--duration', '3', '--warmup', '1')
     for row in ('state rate (Hz)', 'command rate (Hz)', 'missed ticks (%)',
                 'latency p50 / p99 / max (ms)', 'controller compute p50 / p99 (us)',
-                'CPU % wrist_sim_node / controller_node', 'core tick, xArm6 6-DOF pose'):
+                'CPU % wrist_sim_node / controller_node', 'host CPU steal during the run (%)',
+                'core tick, xArm6 6-DOF pose'):
         assert f'| {row}' in stdout, row
     result = json.loads((tmp_path / 'bench.json').read_text())
     assert result['loop']['sim']['window_steps'] > 1000

@@ -21,9 +21,11 @@ ros2_control robot driven by a JointGroupEffortController:
 Loop (real time): a deadline loop spinning an EventsExecutor. Each state is published exactly
 on its tick (the executor sleeps until just before it, then a busy-wait); the command that
 answers it is applied as soon as it arrives, stepping the simulation, and the new state waits
-for the next tick (see ``_run_real_time``). Timing figures (rate, missed deadlines, step compute time, command
-freshness and latency) are kept in ``node.stats`` (:class:`wrist_sim.simulator.LoopStats`),
-logged at shutdown and written as JSON to ``stats_file`` if set.
+for the next tick (see ``_run_real_time``). Until the first valid command after start-up or
+``~/reset``, the joints are held at rest (``hold_until_first_command``). Timing figures (rate,
+missed deadlines, step compute time, command freshness and latency) are kept in ``node.stats``
+(:class:`wrist_sim.simulator.LoopStats`), logged at shutdown and written as JSON to
+``stats_file`` if set.
 """
 import json
 import math
@@ -164,11 +166,16 @@ class WristSimNode(Node):
         self.declare_parameter('command_timeout', 0.1, desc(
             'seconds (simulation time) without a valid command before the torque goes to '
             'zero; 0 disables the watchdog', floating_point_range=_float_range(0.0, 60.0)))
+        self.declare_parameter('hold_until_first_command', True, desc(
+            'hold the joints at rest (brakes) until the first valid command after start-up or '
+            '~/reset, so the robot does not fall while a controller connects',
+            read_only=True))
         self.declare_parameter('stats_file', '', desc(
             'if set, timing statistics are written there as JSON at shutdown', read_only=True))
         names = ('joints', 'initial_positions', 'rate_hz', 'use_gui', 'publish_clock',
                  'lockstep_timeout', 'max_real_time_factor', 'viscous_friction',
-                 'coulomb_friction', 'command_timeout', 'stats_file')
+                 'coulomb_friction', 'command_timeout', 'hold_until_first_command',
+                 'stats_file')
         self._params: dict[str, Any] = {k: self.get_parameter(k).value for k in names}
         for k in ('initial_positions', 'viscous_friction', 'coulomb_friction'):
             self._params[k] = list(self._params[k])
@@ -248,6 +255,19 @@ class WristSimNode(Node):
 
     # -- the step ------------------------------------------------------------------------
 
+    def _advance_simulation(self) -> None:
+        """
+        Step the physics with the command to apply, or hold the joints until the first one.
+
+        Until the first valid command after start-up or ``~/reset`` (with
+        ``hold_until_first_command``) the joints are held at rest, like a drive whose brakes
+        release when its controller connects; only time advances.
+        """
+        if self._have_cmd or not self._params['hold_until_first_command']:
+            self.sim.step(self._torque_to_apply())
+        else:
+            self.sim.hold()
+
     def _torque_to_apply(self) -> np.ndarray:
         timeout_ns = int(self._params['command_timeout'] * 1e9)
         age_ns = self.sim.step_count * self.dt_ns - self._cmd_sim_ns
@@ -268,7 +288,7 @@ class WristSimNode(Node):
         """Apply the latest command, step once, publish the new state (and /clock)."""
         t0 = time.perf_counter()
         fresh = self._cmd_seq != self._seq_at_publish
-        self.sim.step(self._torque_to_apply())
+        self._advance_simulation()
         self.publish_state()
         self.stats.record_step(t0, time.perf_counter() - t0, late_s, fresh)
 
@@ -342,7 +362,7 @@ class WristSimNode(Node):
                 executor.spin_once(timeout_sec=remaining)
             fresh = self._cmd_seq != self._seq_at_publish
             t0 = clock()
-            self.sim.step(self._torque_to_apply())
+            self._advance_simulation()
             step_s = clock() - t0
             remaining = next_t - clock()
             while remaining > BUSY_WAIT_S:

@@ -10,6 +10,10 @@ Dynamics match Pinocchio's for the same URDF (``RobotModel.forward_dynamics``): 
 from the file (``URDF_USE_INERTIA_FROM_FILE``), PyBullet's default link damping (0.04) and joint
 damping are zeroed, gravity is -9.81 m/s^2 along z, and the default velocity motors are
 disabled, so a joint moves under the commanded torque, gravity and the friction below only.
+One exception: PyBullet rejects a physically impossible inertia tensor (principal moments that
+break the triangle inequality, as xArm6's link2 and link3 in pybullet_data have) and simulates
+that link without rotational inertia, while Pinocchio keeps the tensor; masses and centres of
+mass, hence gravity, still agree. The bundled wrist's inertias are valid.
 
 Friction, per joint:
 
@@ -274,6 +278,16 @@ class WristSimulator:
             raise SimulatorError(f'torques must be finite, got {tau.tolist()}')
         self._step(tau)
         return self._applied.copy()
+
+    def hold(self) -> None:
+        """
+        Let one step of time pass with the joints held at rest, as by engaged brakes.
+
+        No physics is simulated: positions stay, velocities and the applied torque read zero.
+        """
+        self._applied[:] = 0.0
+        self._qdot[:] = 0.0
+        self._step_count += 1
 
     def step_zero(self) -> None:
         """One step with no motor torque (friction and gravity only)."""

@@ -12,7 +12,10 @@ for ``--duration`` seconds. Figures and where they come from:
 * command rate and compute time per tick (JointState callback to command ready): the
   controller's ``/diagnostics``, one window per second; p50 is the median of the windows' p50,
   p99 the largest window p99;
-* CPU % per process: ``/proc/<pid>/stat`` user + system time over the measured interval.
+* CPU % per process: ``/proc/<pid>/stat`` user + system time over the measured interval;
+* host CPU steal % over the same interval (``/proc/stat``): time the hypervisor gave this
+  virtual machine's CPUs to others. On a shared host it dominates the tails; read every
+  figure with it.
 
 Core: control-law ticks per second (forward kinematics, Jacobian, g(q), error, law, clamp) for
 the wrist (3-DOF, orientation task) and the xArm6 (6-DOF, pose task), in one process.
@@ -86,6 +89,11 @@ def _cpu_seconds(pid: int) -> float:
     return (int(fields[11]) + int(fields[12])) / os.sysconf('SC_CLK_TCK')
 
 
+def _cpu_times() -> list[int]:
+    """Aggregate CPU jiffies of the machine: user nice system idle iowait irq softirq steal."""
+    return [int(v) for v in Path('/proc/stat').read_text().split('\n', 1)[0].split()[1:9]]
+
+
 def loop_benchmark(duration_s: float, warmup_s: float, out: Path) -> dict:
     import rclpy
     from rclpy.experimental import EventsExecutor
@@ -137,6 +145,7 @@ def loop_benchmark(duration_s: float, warmup_s: float, out: Path) -> dict:
         goal_pub.publish(goal)
         spin_for(warmup_s)
         cpu0 = {p.pid: _cpu_seconds(p.pid) for p in (sim, ctrl)}
+        host0 = _cpu_times()
         t0 = time.monotonic()
         measuring[0] = True
         print(f'loop: measuring {duration_s} s')
@@ -144,6 +153,7 @@ def loop_benchmark(duration_s: float, warmup_s: float, out: Path) -> dict:
         measuring[0] = False
         wall = time.monotonic() - t0
         cpu = {p.pid: 100.0 * (_cpu_seconds(p.pid) - cpu0[p.pid]) / wall for p in (sim, ctrl)}
+        host = [b - a for a, b in zip(host0, _cpu_times())]
     finally:
         for proc in (ctrl, sim):
             local_ros.stop_node(proc)
@@ -159,6 +169,7 @@ def loop_benchmark(duration_s: float, warmup_s: float, out: Path) -> dict:
         'sim': sim_stats,
         'controller_windows': full,
         'cpu_percent': {'wrist_sim_node': cpu[sim.pid], 'controller_node': cpu[ctrl.pid]},
+        'host_steal_percent': 100.0 * host[7] / max(sum(host), 1),
         'command_rate_hz': statistics.mean(float(w['control_rate_hz']) for w in full),
         'compute_us_p50': statistics.median(float(w['compute_us_p50']) for w in full),
         'compute_us_p99': max(float(w['compute_us_p99']) for w in full),
@@ -188,6 +199,7 @@ def report(loop: dict, core: dict) -> str:
         ('CPU % wrist_sim_node / controller_node',
          f'{loop["cpu_percent"]["wrist_sim_node"]:.0f} / '
          f'{loop["cpu_percent"]["controller_node"]:.0f}', ''),
+        ('host CPU steal during the run (%)', f'{loop["host_steal_percent"]:.1f}', ''),
     ]
     for name, c in core.items():
         rows.append((f'core tick, {name} (us; ticks/s)',

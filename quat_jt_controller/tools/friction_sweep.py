@@ -1,11 +1,12 @@
 """
 Choose the simulated wrist's Coulomb friction so the paper's Section 5 result reproduces.
 
-ROS-free: the PyBullet simulator core and the control law in a sampled loop at 1 kHz with the
-same one-tick command delay as the two nodes (the sim applies, at step k + 1, the torque computed
-from the state it published at step k). For each friction vector of a grid, both controllers run
-the paper's experiment (q(0) = 0, corrected goal, gains Eq. 43-45) and the final ||e|| is
-compared with the paper's 0.2043 (quadratic, Eq. 37) and 5.3184e-3 (tanh, Eq. 38) by
+ROS-free: the PyBullet simulator core and the control law in a sampled loop at 1 kHz, timed as
+the two nodes are when every command arrives in time: the torque computed from the state of
+step k is held over the step from k to k + 1 (``reference_sim.run_sampled``, no extra delay).
+For each friction vector of a grid, both controllers run the paper's experiment (q(0) = 0,
+corrected goal, gains Eq. 43-45) and the final ||e|| is compared with the paper's 0.2043
+(quadratic, Eq. 37) and 5.3184e-3 (tanh, Eq. 38) by
 ``|ln(e_quad / 0.2043)| + |ln(e_tanh / 5.3184e-3)|``. The README's friction values come from
 
     python -m quat_jt_controller.tools.friction_sweep
@@ -21,29 +22,19 @@ import numpy as np
 from quat_jt_controller import control_law as cl
 from quat_jt_controller import paper
 from quat_jt_controller.model import RobotModel
-from quat_jt_controller.reference_sim import ClosedLoop
+from quat_jt_controller.reference_sim import ClosedLoop, run_sampled
 from quat_jt_controller.resources import default_urdf_xml
 from wrist_sim.simulator import WristSimulator
 
 
 def sampled_run(model: RobotModel, potential: str, coulomb_nm: Sequence[float],
                 duration_s: float = 6.0) -> np.ndarray:
-    """||e|| at every 1 ms step of the paper's experiment on the simulated wrist."""
+    """||e|| after every 1 ms step of the paper's experiment on the simulated wrist."""
     gains = cl.Gains.create(potential, paper.KP, paper.KV, paper.LAMBDA, cl.Task.ORIENTATION,
                             model.n)
     loop = ClosedLoop(model, gains, cl.Task.ORIENTATION, paper.Q_DESIRED)
-    errors = np.empty(int(round(duration_s * 1000)))
-    tau_nm = [0.0] * model.n
     with WristSimulator(default_urdf_xml(), model.joint_names, coulomb_nm=coulomb_nm) as sim:
-        for k in range(errors.size):
-            q, qdot = sim.q_rad.tolist(), sim.qdot_rad_s.tolist()
-            y, _, _ = loop.error(q)
-            errors[k] = math.sqrt(sum(c * c for c in y))
-            command = loop.torque(q, qdot)
-            cl.saturate(command, model.effort_limits)
-            sim.step(tau_nm)  # the command of the previous state: one tick of delay
-            tau_nm = command
-    return errors
+        return run_sampled(loop, sim, duration_s, delay_ticks=0).orientation_error
 
 
 def score(final_quadratic: float, final_tanh: float) -> float:
