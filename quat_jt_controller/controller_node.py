@@ -135,6 +135,9 @@ class QuatJtController(Node):
         self._watchdog = self.create_timer(min(0.05, cfg.state_timeout_s / 4.0),
                                            self._on_watchdog)
         self._diag_timer = self.create_timer(1.0, self._on_diagnostics)
+        # Statuses are named after the fully qualified node name: /diagnostics is one topic for
+        # every node on the graph, and a namespace tells two controllers apart.
+        self._diag_name = self.get_fully_qualified_name().lstrip('/')
         self.get_logger().info(
             f'{self._task.value} task, joints {self._joint_names}, {cfg.base_link} -> '
             f'{cfg.tip_link}, potential {self._gains.potential.value}, kp {list(self._gains.kp)}, '
@@ -372,7 +375,7 @@ class QuatJtController(Node):
         else:
             mean_p = jitter_std = float('nan')
 
-        loop = DiagnosticStatus(name=f'{self.get_name()}: control loop',
+        loop = DiagnosticStatus(name=f'{self._diag_name}: control loop',
                                 hardware_id=self._config.tip_link)
         loop_msgs = []
         level = OK
@@ -407,7 +410,7 @@ class QuatJtController(Node):
         ]
         loop.values = [KeyValue(key=k, value=v) for k, v in kv]
 
-        goal = DiagnosticStatus(name=f'{self.get_name()}: goal',
+        goal = DiagnosticStatus(name=f'{self._diag_name}: goal',
                                 hardware_id=self._config.tip_link)
         glevel = OK
         gmsgs = []
