@@ -17,6 +17,7 @@ from typing import Any, Mapping, Optional
 NODE_MODULES = {
     'controller_node': 'quat_jt_controller.controller_node',
     'wrist_sim_node': 'wrist_sim.sim_node',
+    'minimal_pair': 'quat_jt_controller.tools.minimal_pair',  # the benchmark's baseline
 }
 
 
@@ -52,24 +53,24 @@ def write_params_file(path: Path, params: Mapping[str, Any], node: str = '/**') 
 def spawn_node(executable: str, env: Mapping[str, str], work_dir: Path,
                params: Optional[Mapping[str, Any]] = None,
                params_files: tuple[Path, ...] = (), ros_args: tuple[str, ...] = (),
-               name: Optional[str] = None) -> subprocess.Popen:
+               name: Optional[str] = None, args: tuple[str, ...] = ()) -> subprocess.Popen:
     """
     Start ``executable`` (a key of NODE_MODULES) as ``python -m module --ros-args ...``.
 
-    Its stdout and stderr go to ``work_dir/<name>.log``.
+    ``args`` go before ``--ros-args``. Its stdout and stderr go to ``work_dir/<name>.log``.
     """
     name = name or executable
     work_dir = Path(work_dir)
-    args = [sys.executable, '-m', NODE_MODULES[executable], '--ros-args']
+    argv = [sys.executable, '-m', NODE_MODULES[executable], *args, '--ros-args']
     for f in params_files:
-        args += ['--params-file', str(f)]
+        argv += ['--params-file', str(f)]
     if params:
-        args += ['--params-file', str(write_params_file(work_dir / f'{name}.params.yaml',
+        argv += ['--params-file', str(write_params_file(work_dir / f'{name}.params.yaml',
                                                         params))]
-    args += list(ros_args)
+    argv += list(ros_args)
     log = open(work_dir / f'{name}.log', 'wb')
     try:
-        return subprocess.Popen(args, env=dict(env), stdout=log, stderr=subprocess.STDOUT,
+        return subprocess.Popen(argv, env=dict(env), stdout=log, stderr=subprocess.STDOUT,
                                 stdin=subprocess.DEVNULL, start_new_session=True)
     finally:
         log.close()

@@ -17,6 +17,10 @@ for ``--duration`` seconds. Figures and where they come from:
   virtual machine's CPUs to others. On a shared host it dominates the tails; read every
   figure with it.
 
+Baseline: the same loop figures for a minimal rclpy pair with nothing to compute
+(``tools/minimal_pair.py``), run just before, for the same duration: the floor this machine
+sets at that moment. What the real nodes show beyond it is theirs.
+
 Core: control-law ticks per second (forward kinematics, Jacobian, g(q), error, law, clamp) for
 the wrist (3-DOF, orientation task) and the xArm6 (6-DOF, pose task), in one process.
 
@@ -92,6 +96,28 @@ def _cpu_seconds(pid: int) -> float:
 def _cpu_times() -> list[int]:
     """Aggregate CPU jiffies of the machine: user nice system idle iowait irq softirq steal."""
     return [int(v) for v in Path('/proc/stat').read_text().split('\n', 1)[0].split()[1:9]]
+
+
+def baseline_benchmark(duration_s: float, warmup_s: float, out: Path) -> dict:
+    """Run the minimal pair; return its loop statistics (LoopStats.summary of its sim)."""
+    out = out / 'baseline'
+    out.mkdir(parents=True, exist_ok=True)
+    env = local_ros.isolated_env(out, random.randint(1, 100))
+    stats_file = out / 'minimal_pair_stats.json'
+    stats_file.unlink(missing_ok=True)
+    ctrl = local_ros.spawn_node('minimal_pair', env, out, name='minimal_controller',
+                                args=('--role', 'controller'))
+    sim = local_ros.spawn_node('minimal_pair', env, out, name='minimal_sim',
+                               args=('--role', 'sim', '--duration', str(duration_s),
+                                     '--warmup', str(warmup_s), '--stats', str(stats_file)))
+    try:
+        sim.wait(timeout=duration_s + warmup_s + 60.0)
+    finally:
+        for proc in (sim, ctrl):
+            local_ros.stop_node(proc)
+    if not stats_file.exists():
+        raise RuntimeError(f'the minimal pair wrote no statistics; logs in {out}')
+    return json.loads(stats_file.read_text())
 
 
 def loop_benchmark(duration_s: float, warmup_s: float, out: Path) -> dict:
@@ -176,36 +202,44 @@ def loop_benchmark(duration_s: float, warmup_s: float, out: Path) -> dict:
     }
 
 
-def report(loop: dict, core: dict) -> str:
+def _loop_rows(s: dict) -> list[str]:
+    """Missed ticks, jitter and latency from a LoopStats summary, as table cells."""
+    return [f'{100.0 * s["window_stale_steps"] / s["window_steps"]:.3f} '
+            f'({s["window_stale_steps"]} of {s["window_steps"]})',
+            f'{s["jitter_us_p50"]:.1f} / {s["jitter_us_p99"]:.1f} / {s["jitter_us_max"]:.1f}',
+            f'{s["cmd_latency_us_p50"] / 1e3:.3f} / {s["cmd_latency_us_p99"] / 1e3:.3f} / '
+            f'{s["cmd_latency_us_max"] / 1e3:.3f}']
+
+
+def report(loop: dict, core: dict, baseline: dict) -> str:
     s = loop['sim']
-    missed_pct = 100.0 * s['window_stale_steps'] / s['window_steps']
+    ours, floor = _loop_rows(s), _loop_rows(baseline)
     rows = [
-        ('state rate (Hz)', f'{s["window_rate_hz"]:.1f}', ''),
-        ('command rate (Hz)', f'{loop["command_rate_hz"]:.1f}', TARGETS['command rate (Hz)']),
-        ('missed ticks (%)', f'{missed_pct:.3f} ({s["window_stale_steps"]} of '
-                             f'{s["window_steps"]} steps without a fresh command)',
+        ('state rate (Hz)', f'{s["window_rate_hz"]:.1f}', f'{baseline["window_rate_hz"]:.1f}',
+         ''),
+        ('command rate (Hz)', f'{loop["command_rate_hz"]:.1f}', '',
+         TARGETS['command rate (Hz)']),
+        ('missed ticks: steps without a fresh command (%)', ours[0], floor[0],
          TARGETS['missed ticks (%)']),
-        ('late deadlines (total, incl. start-up)', str(s['missed_deadlines']), ''),
-        ('period jitter p50 / p99 / max (us)',
-         f'{s["jitter_us_p50"]:.1f} / {s["jitter_us_p99"]:.1f} / {s["jitter_us_max"]:.1f}', ''),
-        ('latency p50 / p99 / max (ms)',
-         f'{s["cmd_latency_us_p50"] / 1e3:.3f} / {s["cmd_latency_us_p99"] / 1e3:.3f} / '
-         f'{s["cmd_latency_us_max"] / 1e3:.3f}', TARGETS['latency p99 (ms)']),
+        ('late deadlines (total, incl. start-up)', str(s['missed_deadlines']),
+         str(baseline['missed_deadlines']), ''),
+        ('period jitter p50 / p99 / max (us)', ours[1], floor[1], ''),
+        ('latency p50 / p99 / max (ms)', ours[2], floor[2], TARGETS['latency p99 (ms)']),
         ('controller compute p50 / p99 (us)',
-         f'{loop["compute_us_p50"]:.1f} / {loop["compute_us_p99"]:.1f}',
+         f'{loop["compute_us_p50"]:.1f} / {loop["compute_us_p99"]:.1f}', '',
          TARGETS['compute p50 (us)']),
-        ('sim step p50 / p99 (us)',
-         f'{s["step_compute_us_p50"]:.1f} / {s["step_compute_us_p99"]:.1f}', ''),
+        ('sim step + publish p50 / p99 (us)',
+         f'{s["step_compute_us_p50"]:.1f} / {s["step_compute_us_p99"]:.1f}', '', ''),
         ('CPU % wrist_sim_node / controller_node',
          f'{loop["cpu_percent"]["wrist_sim_node"]:.0f} / '
-         f'{loop["cpu_percent"]["controller_node"]:.0f}', ''),
-        ('host CPU steal during the run (%)', f'{loop["host_steal_percent"]:.1f}', ''),
+         f'{loop["cpu_percent"]["controller_node"]:.0f}', '', ''),
+        ('host CPU steal during the run (%)', f'{loop["host_steal_percent"]:.1f}', '', ''),
     ]
     for name, c in core.items():
         rows.append((f'core tick, {name} (us; ticks/s)',
-                     f'{c["us_per_tick"]:.1f}; {c["ticks_per_s"]:,.0f}', ''))
-    lines = ['| figure | measured | target |', '|---|---|---|']
-    lines += [f'| {a} | {b} | {c} |' for a, b, c in rows]
+                     f'{c["us_per_tick"]:.1f}; {c["ticks_per_s"]:,.0f}', '', ''))
+    lines = ['| figure | our nodes | minimal pair (host floor) | target |', '|---|---|---|---|']
+    lines += [f'| {a} | {b} | {c} | {d} |' for a, b, c, d in rows]
     return '\n'.join(lines)
 
 
@@ -218,9 +252,12 @@ def main(argv: Optional[list] = None) -> int:
     args.out.mkdir(parents=True, exist_ok=True)
     print('core: timing the control tick in one process')
     core = core_benchmark()
+    print(f'baseline: a minimal rclpy pair for {args.duration} s')
+    baseline = baseline_benchmark(args.duration, args.warmup, args.out)
     loop = loop_benchmark(args.duration, args.warmup, args.out)
-    text = report(loop, core)
-    (args.out / 'bench.json').write_text(json.dumps({'loop': loop, 'core': core}, indent=1))
+    text = report(loop, core, baseline)
+    (args.out / 'bench.json').write_text(json.dumps(
+        {'loop': loop, 'core': core, 'baseline': baseline}, indent=1))
     (args.out / 'bench.md').write_text(text + '\n')
     print()
     print(text)

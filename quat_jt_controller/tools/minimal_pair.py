@@ -1,0 +1,109 @@
+"""
+The floor of the host: a minimal rclpy state/command pair, for the benchmark's baseline.
+
+Two processes, like ``wrist_sim_node`` and ``controller_node`` but with nothing to compute:
+``--role sim`` publishes a 3-joint ``JointState`` on each 1 kHz tick (the same deadline loop:
+the executor sleeps until just before the tick, then a busy-wait) and counts how many ticks get
+an answer before the next one; ``--role controller`` answers each state at once with a
+``Float64MultiArray``. The sim's figures use the simulator's own ``LoopStats``, so they compare
+one to one with ``wrist_sim_node``'s: whatever the real nodes add beyond this pair is theirs,
+the rest is the machine.
+
+    python -m quat_jt_controller.tools.minimal_pair --role controller &
+    python -m quat_jt_controller.tools.minimal_pair --role sim --duration 30 --stats out.json
+"""
+import argparse
+import json
+from pathlib import Path
+import time
+
+import rclpy
+from rclpy.executors import ExternalShutdownException
+from rclpy.experimental import EventsExecutor
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64MultiArray
+
+from wrist_sim.simulator import LoopStats
+
+BUSY_WAIT_S = 2.5e-4  # as wrist_sim_node
+
+
+def run_controller(node, executor) -> None:
+    pub = node.create_publisher(Float64MultiArray, 'effort_controller/commands', 10)
+    out = Float64MultiArray(data=[0.0, 0.0, 0.0])
+
+    def answer(msg: JointState) -> None:
+        out.data = [msg.position[0], 0.0, 0.0]
+        pub.publish(out)
+    node.create_subscription(JointState, 'joint_states', answer, 10)
+    while rclpy.ok(context=node.context):
+        executor.spin_once(timeout_sec=0.5)
+
+
+def run_sim(node, executor, duration_s: float, warmup_s: float, stats_path: Path) -> None:
+    pub = node.create_publisher(JointState, 'joint_states', 10)
+    state = {'published': 0, 'answered': 0, 't_pub': 0.0, 'measuring': False}
+    stats = LoopStats(capacity=int(duration_s * 1000) + 10)
+
+    def on_command(_msg: Float64MultiArray) -> None:
+        if state['answered'] != state['published']:
+            if state['measuring']:
+                stats.record_latency(time.perf_counter() - state['t_pub'])
+            state['answered'] = state['published']
+    node.create_subscription(Float64MultiArray, 'effort_controller/commands', on_command, 10)
+    js = JointState(name=['joint1', 'joint2', 'joint3'], position=[0.0] * 3,
+                    velocity=[0.0] * 3, effort=[0.0] * 3)
+    clock = time.perf_counter
+    period = 1e-3
+    next_t = clock() + period
+    measure_from = clock() + warmup_s
+    end = measure_from + duration_s
+    while clock() < end and rclpy.ok(context=node.context):
+        remaining = next_t - clock()
+        while remaining > BUSY_WAIT_S:
+            executor.spin_once(timeout_sec=remaining - BUSY_WAIT_S)
+            remaining = next_t - clock()
+        while clock() < next_t:
+            pass
+        now = clock()
+        fresh = state['answered'] == state['published']
+        if state['measuring']:
+            if now - next_t > 0.5 * period:
+                stats.missed_deadlines += 1
+            stats.record_step(now, 0.0, now - next_t, fresh)
+        state['measuring'] = now >= measure_from
+        js.header.stamp = node.get_clock().now().to_msg()
+        state['published'] += 1
+        state['t_pub'] = clock()
+        pub.publish(js)
+        next_t += period
+        if clock() - next_t > period:
+            next_t = clock() + period
+    stats_path.write_text(json.dumps(stats.summary(), indent=1))
+
+
+def main(argv=None) -> None:
+    parser = argparse.ArgumentParser(description=__doc__.split('\n')[1])
+    parser.add_argument('--role', choices=('sim', 'controller'), required=True)
+    parser.add_argument('--duration', type=float, default=30.0)
+    parser.add_argument('--warmup', type=float, default=3.0)
+    parser.add_argument('--stats', type=Path, default=Path('minimal_pair_stats.json'))
+    args, ros_args = parser.parse_known_args(argv)
+    rclpy.init(args=ros_args)
+    node = rclpy.create_node(f'minimal_{args.role}')
+    executor = EventsExecutor()
+    executor.add_node(node)
+    try:
+        if args.role == 'sim':
+            run_sim(node, executor, args.duration, args.warmup, args.stats)
+        else:
+            run_controller(node, executor)
+    except (KeyboardInterrupt, ExternalShutdownException):
+        pass
+    finally:
+        node.destroy_node()
+        rclpy.try_shutdown()
+
+
+if __name__ == '__main__':
+    main()
