@@ -110,14 +110,17 @@ def baseline_benchmark(duration_s: float, warmup_s: float, out: Path) -> dict:
     sim = local_ros.spawn_node('minimal_pair', env, out, name='minimal_sim',
                                args=('--role', 'sim', '--duration', str(duration_s),
                                      '--warmup', str(warmup_s), '--stats', str(stats_file)))
+    host0 = _cpu_times()
     try:
         sim.wait(timeout=duration_s + warmup_s + 60.0)
     finally:
         for proc in (sim, ctrl):
             local_ros.stop_node(proc)
+    host = [b - a for a, b in zip(host0, _cpu_times())]
     if not stats_file.exists():
         raise RuntimeError(f'the minimal pair wrote no statistics; logs in {out}')
-    return json.loads(stats_file.read_text())
+    return {**json.loads(stats_file.read_text()),
+            'host_steal_percent': 100.0 * host[7] / max(sum(host), 1)}
 
 
 def loop_benchmark(duration_s: float, warmup_s: float, out: Path) -> dict:
@@ -181,7 +184,7 @@ def loop_benchmark(duration_s: float, warmup_s: float, out: Path) -> dict:
         cpu = {p.pid: 100.0 * (_cpu_seconds(p.pid) - cpu0[p.pid]) / wall for p in (sim, ctrl)}
         host = [b - a for a, b in zip(host0, _cpu_times())]
     finally:
-        for proc in (ctrl, sim):
+        for proc in (sim, ctrl):  # the sim first: its statistics end with the controller alive
             local_ros.stop_node(proc)
         executor.shutdown(timeout_sec=1.0)
         node.destroy_node()
@@ -233,7 +236,8 @@ def report(loop: dict, core: dict, baseline: dict) -> str:
         ('CPU % wrist_sim_node / controller_node',
          f'{loop["cpu_percent"]["wrist_sim_node"]:.0f} / '
          f'{loop["cpu_percent"]["controller_node"]:.0f}', '', ''),
-        ('host CPU steal during the run (%)', f'{loop["host_steal_percent"]:.1f}', '', ''),
+        ('host CPU steal during the run (%)', f'{loop["host_steal_percent"]:.1f}',
+         f'{baseline["host_steal_percent"]:.1f}', ''),
     ]
     for name, c in core.items():
         rows.append((f'core tick, {name} (us; ticks/s)',

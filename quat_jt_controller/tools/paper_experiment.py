@@ -163,7 +163,7 @@ def run_once(potential: str, duration_s: float, out_dir: Path, model: RobotModel
             progress(f'[{potential}]   t = {report_at:4.1f} s   ||e|| = {last_error_norm():.4g}')
             report_at += 1.0
     finally:
-        for proc in (ctrl, sim):
+        for proc in (sim, ctrl):  # the sim first: its statistics end with the controller alive
             local_ros.stop_node(proc)
         executor.shutdown(timeout_sec=1.0)
         node.destroy_node()
