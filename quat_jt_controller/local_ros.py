@@ -14,6 +14,8 @@ import subprocess
 import sys
 from typing import Any, Mapping, Optional
 
+from quat_jt_controller.resources import share_path
+
 NODE_MODULES = {
     'controller_node': 'quat_jt_controller.controller_node',
     'wrist_sim_node': 'wrist_sim.sim_node',
@@ -74,6 +76,23 @@ def spawn_node(executable: str, env: Mapping[str, str], work_dir: Path,
                                 stdin=subprocess.DEVNULL, start_new_session=True)
     finally:
         log.close()
+
+
+def spawn_wrist_pair(env: Mapping[str, str], work_dir: Path,
+                     sim_params: Optional[Mapping[str, Any]] = None,
+                     controller_params: Optional[Mapping[str, Any]] = None
+                     ) -> tuple[subprocess.Popen, subprocess.Popen]:
+    """
+    Start ``wrist_sim_node`` and ``controller_node`` as the wrist demo does.
+
+    Each reads the package's ``config/wrist_sim.yaml`` / ``config/wrist_controller.yaml`` (the
+    paper's experiment), then the given overrides. Returns ``(sim, controller)``.
+    """
+    sim = spawn_node('wrist_sim_node', env, work_dir, params=sim_params,
+                     params_files=(share_path('config/wrist_sim.yaml'),))
+    controller = spawn_node('controller_node', env, work_dir, params=controller_params,
+                            params_files=(share_path('config/wrist_controller.yaml'),))
+    return sim, controller
 
 
 def stop_node(proc: subprocess.Popen, timeout: float = 10.0) -> int:

@@ -23,6 +23,7 @@ from typing import Callable, Optional, Sequence
 
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped
+from process_harness import ProcessHarnessMixin
 import pytest
 from quat_jt_controller import local_ros
 from quat_jt_controller import quaternion as quat
@@ -49,7 +50,7 @@ DT = 1e-3
 
 
 # ------------------------------------------------------------------------------- harness
-class Harness:
+class Harness(ProcessHarnessMixin):
     """One rclpy context, a test node, an EventsExecutor and the spawned processes."""
 
     def __init__(self, work_dir: Path, namespace: str = '/') -> None:
@@ -75,25 +76,6 @@ class Harness:
     def spawn(self, executable: str, params: dict, ros_args: Sequence[str] = ()) -> None:
         self.procs[executable] = local_ros.spawn_node(
             executable, self.env, self.work_dir, params=params, ros_args=tuple(ros_args))
-
-    def node_log(self) -> str:
-        out = []
-        for name in self.procs:
-            path = self.work_dir / f'{name}.log'
-            if path.exists():
-                out.append(f'--- {name}.log ---\n{path.read_text(errors="replace")[-6000:]}')
-        return '\n'.join(out)
-
-    def spin_until(self, condition: Callable[[], bool], timeout: float, what: str) -> None:
-        deadline = time.monotonic() + timeout
-        while not condition():
-            for name, proc in self.procs.items():
-                if proc.poll() is not None:
-                    pytest.fail(f'{name} exited with {proc.returncode} while waiting for {what}'
-                                f'\n{self.node_log()}')
-            if time.monotonic() > deadline:
-                pytest.fail(f'timed out after {timeout} s waiting for {what}\n{self.node_log()}')
-            self.executor.spin_once(timeout_sec=0.05)
 
     def wait_future(self, future, timeout: float = 10.0, what: str = 'a service reply'):
         self.spin_until(future.done, timeout, what)

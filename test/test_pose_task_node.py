@@ -17,9 +17,9 @@ import os
 from pathlib import Path
 import subprocess
 import time
-from typing import Callable
 
 from geometry_msgs.msg import PoseStamped, Vector3Stamped
+from process_harness import ProcessHarnessMixin
 import pytest
 from quat_jt_controller import local_ros
 from quat_jt_controller import quaternion as quat
@@ -54,7 +54,7 @@ def norm(v: Vector3Stamped) -> float:
     return math.sqrt(v.vector.x ** 2 + v.vector.y ** 2 + v.vector.z ** 2)
 
 
-class Rig:
+class Rig(ProcessHarnessMixin):
     """The two nodes in their own processes, and a listening node in this one."""
 
     def __init__(self, work_dir: Path, potential: str) -> None:
@@ -106,26 +106,6 @@ class Rig:
             self.logs.append(msg.msg)
             if msg.level == Log.WARN:
                 self.warnings.append(msg.msg)
-
-    def node_log(self) -> str:
-        out = []
-        for name in self.procs:
-            path = self.work_dir / f'{name}.log'
-            if path.exists():
-                text = path.read_text(errors='replace')
-                out.append(f'--- {name}.log (last 6000 chars) ---\n{text[-6000:]}')
-        return '\n'.join(out)
-
-    def spin_until(self, condition: Callable[[], bool], timeout: float, what: str) -> None:
-        deadline = time.monotonic() + timeout
-        while not condition():
-            for name, proc in self.procs.items():
-                if proc.poll() is not None:
-                    pytest.fail(f'{name} exited with {proc.returncode} while waiting for '
-                                f'{what}\n{self.node_log()}')
-            if time.monotonic() > deadline:
-                pytest.fail(f'timed out after {timeout} s waiting for {what}\n{self.node_log()}')
-            self.executor.spin_once(timeout_sec=0.05)
 
     def spin_for(self, duration_s: float) -> None:
         """Keep listening for ``duration_s`` (the condition is the clock: a hold period)."""

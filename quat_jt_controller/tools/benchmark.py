@@ -41,7 +41,7 @@ from quat_jt_controller import local_ros
 from quat_jt_controller import paper
 from quat_jt_controller import quaternion as quat
 from quat_jt_controller.model import RobotModel
-from quat_jt_controller.resources import default_urdf_xml, share_path
+from quat_jt_controller.resources import default_urdf_xml
 
 CONTROLLER = 'quat_jt_controller'
 TARGETS = {'command rate (Hz)': '>= 995', 'missed ticks (%)': '<= 0.5',
@@ -133,13 +133,9 @@ def loop_benchmark(duration_s: float, warmup_s: float, out: Path) -> dict:
     env = local_ros.isolated_env(out, domain_id)
     stats_file = out / 'sim_stats.json'
     stats_file.unlink(missing_ok=True)
-    sim = local_ros.spawn_node('wrist_sim_node', env, out,
-                               params_files=(share_path('config/wrist_sim.yaml'),),
-                               params={'stats_file': str(stats_file),
-                                       'coulomb_friction': [0.0, 0.0, 0.0]})
-    ctrl = local_ros.spawn_node('controller_node', env, out,
-                                params_files=(share_path('config/wrist_controller.yaml'),),
-                                params={'potential': 'tanh'})
+    sim, ctrl = local_ros.spawn_wrist_pair(
+        env, out, sim_params={'stats_file': str(stats_file), 'coulomb_friction': [0.0] * 3},
+        controller_params={'potential': 'tanh'})
     context = rclpy.Context()
     rclpy.init(context=context, domain_id=domain_id)
     node = rclpy.create_node('benchmark_probe', context=context)

@@ -36,7 +36,7 @@ from quat_jt_controller import paper
 from quat_jt_controller import quaternion as quat
 from quat_jt_controller.model import RobotModel
 from quat_jt_controller.reference_sim import ClosedLoop
-from quat_jt_controller.resources import default_urdf_xml, share_path
+from quat_jt_controller.resources import default_urdf_xml
 
 POTENTIALS = ('quadratic', 'tanh')
 EQUATION = {'quadratic': 'Eq. 37', 'tanh': 'Eq. 38'}
@@ -87,12 +87,9 @@ def run_once(potential: str, duration_s: float, out_dir: Path, model: RobotModel
     env = local_ros.isolated_env(work, domain_id)
     stats_file = work / 'sim_stats.json'
     stats_file.unlink(missing_ok=True)
-    sim = local_ros.spawn_node('wrist_sim_node', env, work,
-                               params_files=(share_path('config/wrist_sim.yaml'),),
-                               params={'stats_file': str(stats_file), 'publish_clock': lockstep})
-    ctrl = local_ros.spawn_node('controller_node', env, work,
-                                params_files=(share_path('config/wrist_controller.yaml'),),
-                                params={'potential': potential, 'use_sim_time': lockstep})
+    sim, ctrl = local_ros.spawn_wrist_pair(
+        env, work, sim_params={'stats_file': str(stats_file), 'publish_clock': lockstep},
+        controller_params={'potential': potential, 'use_sim_time': lockstep})
     context = rclpy.Context()
     rclpy.init(context=context, domain_id=domain_id)
     node = rclpy.create_node('paper_experiment_recorder', context=context)

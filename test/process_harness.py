@@ -1,0 +1,34 @@
+"""What the multi-process test harnesses share: reading node logs, waiting on conditions."""
+import time
+from typing import Callable
+
+import pytest
+
+
+class ProcessHarnessMixin:
+    """
+    For a harness with ``work_dir``, ``procs`` (name -> Popen) and an ``executor``.
+
+    Waits fail the test with the nodes' logs attached, as soon as a node process exits or the
+    deadline passes.
+    """
+
+    def node_log(self) -> str:
+        out = []
+        for name in self.procs:
+            path = self.work_dir / f'{name}.log'
+            if path.exists():
+                text = path.read_text(errors='replace')
+                out.append(f'--- {name}.log (last 6000 chars) ---\n{text[-6000:]}')
+        return '\n'.join(out)
+
+    def spin_until(self, condition: Callable[[], bool], timeout: float, what: str) -> None:
+        deadline = time.monotonic() + timeout
+        while not condition():
+            for name, proc in self.procs.items():
+                if proc.poll() is not None:
+                    pytest.fail(f'{name} exited with {proc.returncode} while waiting for '
+                                f'{what}\n{self.node_log()}')
+            if time.monotonic() > deadline:
+                pytest.fail(f'timed out after {timeout} s waiting for {what}\n{self.node_log()}')
+            self.executor.spin_once(timeout_sec=0.05)
