@@ -12,6 +12,8 @@ from typing import Optional, Sequence
 import numpy as np
 import pinocchio as pin
 
+from quat_jt_controller.joints import select_joints
+
 
 class ModelError(ValueError):
     """The URDF, or the links and joints asked of it, cannot make a controllable model."""
@@ -33,17 +35,7 @@ class RobotModel:
         except Exception as exc:  # Pinocchio raises plain RuntimeError/ValueError
             raise ModelError(f'cannot parse the URDF: {exc}') from exc
         movable = [full.names[i] for i in range(1, full.njoints)]
-        if joint_names is None:
-            joint_names = movable
-        joint_names = [str(n) for n in joint_names]
-        unknown = [n for n in joint_names if n not in movable]
-        if unknown:
-            raise ModelError(f'joints {unknown} are not movable joints of the URDF '
-                             f'(it has {movable})')
-        if len(set(joint_names)) != len(joint_names):
-            raise ModelError(f'joint names repeat: {joint_names}')
-        if not joint_names:
-            raise ModelError('no joints to control')
+        joint_names = select_joints(joint_names, movable, ModelError)
         locked = [full.getJointId(n) for n in movable if n not in joint_names]
         model = (pin.buildReducedModel(full, locked, pin.neutral(full)) if locked else full)
         for name in (base_link, tip_link):

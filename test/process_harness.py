@@ -1,16 +1,19 @@
-"""What the multi-process test harnesses share: reading node logs, waiting on conditions."""
+"""What the multi-process test harnesses share: node logs, waits on conditions, teardown."""
 import time
 from typing import Callable
 
 import pytest
+from quat_jt_controller import local_ros
+import rclpy
 
 
 class ProcessHarnessMixin:
     """
-    For a harness with ``work_dir``, ``procs`` (name -> Popen) and an ``executor``.
+    Node logs, condition waits and teardown for a multi-process test harness.
 
-    Waits fail the test with the nodes' logs attached, as soon as a node process exits or the
-    deadline passes.
+    The harness has ``work_dir``, ``procs`` (name -> Popen), ``node``, ``executor`` and
+    ``context``. Waits fail the test with the nodes' logs attached, as soon as a node process
+    exits or the deadline passes.
     """
 
     def node_log(self) -> str:
@@ -32,3 +35,10 @@ class ProcessHarnessMixin:
             if time.monotonic() > deadline:
                 pytest.fail(f'timed out after {timeout} s waiting for {what}\n{self.node_log()}')
             self.executor.spin_once(timeout_sec=0.05)
+
+    def close(self) -> None:
+        for proc in self.procs.values():
+            local_ros.stop_node(proc)
+        self.executor.shutdown(timeout_sec=1.0)
+        self.node.destroy_node()
+        rclpy.try_shutdown(context=self.context)

@@ -87,13 +87,6 @@ class Harness(ProcessHarnessMixin):
         self.spin_until(found, timeout, f'log line containing {fragment!r}')
         return next(line for line in self.logs if fragment in line)
 
-    def close(self) -> None:
-        for proc in self.procs.values():
-            local_ros.stop_node(proc)
-        self.executor.shutdown(timeout_sec=1.0)
-        self.node.destroy_node()
-        rclpy.try_shutdown(context=self.context)
-
 
 class FakePlant:
     """Publishes joint states and records commands; optionally steps the wrist in lockstep."""

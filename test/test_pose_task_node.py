@@ -182,13 +182,6 @@ class Rig(ProcessHarnessMixin):
         return (all(v < position_m for t, v in pe if t >= start)
                 and all(v < orientation for t, v in oe if t >= start))
 
-    def close(self) -> None:
-        for proc in self.procs.values():
-            local_ros.stop_node(proc)
-        self.executor.shutdown(timeout_sec=1.0)
-        self.node.destroy_node()
-        rclpy.try_shutdown(context=self.context)
-
 
 @pytest.fixture
 def make_rig(tmp_path):

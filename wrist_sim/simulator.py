@@ -45,6 +45,7 @@ import numpy as np
 import pybullet
 import pybullet_data
 from pybullet_utils.bullet_client import BulletClient
+from quat_jt_controller.joints import select_joints
 
 GRAVITY_MPS2 = 9.81
 _MOVABLE = (pybullet.JOINT_REVOLUTE, pybullet.JOINT_PRISMATIC)
@@ -194,17 +195,7 @@ class WristSimulator:
             c.changeDynamics(self._body, j, linearDamping=0.0, angularDamping=0.0,
                              jointDamping=0.0)
         c.changeDynamics(self._body, -1, linearDamping=0.0, angularDamping=0.0)
-        if joint_names is None:
-            joint_names = movable
-        names = [str(n) for n in joint_names]
-        unknown = [n for n in names if n not in movable]
-        if unknown:
-            raise SimulatorError(f'joints {unknown} are not movable joints of the URDF '
-                                 f'(it has {movable})')
-        if len(set(names)) != len(names):
-            raise SimulatorError(f'joint names repeat: {names}')
-        if not names:
-            raise SimulatorError('no joints to drive')
+        names = select_joints(joint_names, movable, SimulatorError)
         self.joint_names: tuple[str, ...] = tuple(names)
         self.n = len(names)
         self._idx = [by_name[n] for n in names]
