@@ -95,6 +95,9 @@ class WristSimNode(Node):
         self.n = self.sim.n
         self.publish_clock = bool(p['publish_clock'])
         self.stats = LoopStats(capacity=STATS_WINDOW_STEPS)
+        # Without use_sim_time the node's ROS clock is the system clock: stamp from it directly
+        # (time.time_ns) rather than through rclpy's Clock object on every tick.
+        self._system_clock = not self.get_parameter('use_sim_time').value
 
         # Command state (touched only from the executor thread, which is also the loop's).
         self._cmd = np.zeros(self.n)
@@ -228,15 +231,14 @@ class WristSimNode(Node):
                 f'rejected command: {len(data)} values for {self.n} joints '
                 f'{list(self.sim.joint_names)}', throttle_duration_sec=THROTTLE_S)
             return
-        cmd = np.asarray(data, dtype=float)
-        if not np.all(np.isfinite(cmd)):
+        if not all(math.isfinite(v) for v in data):
             self.stats.rejected_commands += 1
             self.get_logger().warning(f'rejected command with non-finite values: {list(data)}',
                                       throttle_duration_sec=THROTTLE_S)
             return
         if self._cmd_seq == self._seq_at_publish:  # first command since the last state
             self.stats.record_latency(time.perf_counter() - self._publish_wall_s)
-        self._cmd[:] = cmd
+        self._cmd[:] = data
         self._cmd_seq += 1
         self._cmd_sim_ns = self.sim.step_count * self.dt_ns
         self._have_cmd = True
@@ -301,7 +303,7 @@ class WristSimNode(Node):
         if self.publish_clock:
             stamp_ns = self.sim.step_count * self.dt_ns
         else:
-            stamp_ns = self.get_clock().now().nanoseconds
+            stamp_ns = time.time_ns() if self._system_clock else self.get_clock().now().nanoseconds
         if stamp_ns <= self._last_stamp_ns:  # strictly monotonic stamps
             stamp_ns = self._last_stamp_ns + 1
         self._last_stamp_ns = stamp_ns
