@@ -26,6 +26,12 @@ def y_of_q(model, q, p_d, q_d, task):
     return np.array(cl.output_error(p, R, p_d, q_d, task)[0])
 
 
+def random_goal(model, rng):
+    """Return a reachable goal (p_d, q_d): the pose at random joint angles (A1)."""
+    p_d, R_d = model.forward_kinematics(random_q(model, rng))
+    return p_d, quat.from_rotation_matrix(R_d)
+
+
 CASES = [(wrist_model, ORI), (wrist_model, POSE), (xarm6_model, ORI), (xarm6_model, POSE)]
 
 
@@ -35,9 +41,7 @@ def test_eq21_error_jacobian_is_minus_q_times_geometric_jacobian(make_model, tas
     model = make_model()
     rng = np.random.default_rng(21)
     for _ in range(20):
-        q_goal = random_q(model, rng)
-        p_d, R_d = model.forward_kinematics(q_goal)
-        q_d = quat.from_rotation_matrix(R_d)
+        p_d, q_d = random_goal(model, rng)
         q = random_q(model, rng)
         p, R, J = model.kinematics(q)
         y, eta_e = cl.output_error(p, R, p_d, q_d, task)
@@ -58,9 +62,7 @@ def test_torque_is_minus_gradient_of_potential(make_model, task, potential):
     rng = np.random.default_rng(23)
     g = gains(potential, task, model.n)
     for _ in range(10):
-        q_goal = random_q(model, rng)
-        p_d, R_d = model.forward_kinematics(q_goal)
-        q_d = quat.from_rotation_matrix(R_d)
+        p_d, q_d = random_goal(model, rng)
         q = random_q(model, rng)
         p, R, J = model.kinematics(q)
         y, eta_e = cl.output_error(p, R, p_d, q_d, task)

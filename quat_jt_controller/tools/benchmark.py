@@ -124,9 +124,8 @@ def baseline_benchmark(duration_s: float, warmup_s: float, out: Path) -> dict:
 
 
 def loop_benchmark(duration_s: float, warmup_s: float, out: Path) -> dict:
-    import rclpy
-    from rclpy.experimental import EventsExecutor
     from diagnostic_msgs.msg import DiagnosticArray
+    from quat_jt_controller.tools.probe import ProbeNode
     from geometry_msgs.msg import PoseStamped
 
     domain_id = random.randint(1, 100)
@@ -136,11 +135,8 @@ def loop_benchmark(duration_s: float, warmup_s: float, out: Path) -> dict:
     sim, ctrl = local_ros.spawn_wrist_pair(
         env, out, sim_params={'stats_file': str(stats_file), 'coulomb_friction': [0.0] * 3},
         controller_params={'potential': 'tanh'})
-    context = rclpy.Context()
-    rclpy.init(context=context, domain_id=domain_id)
-    node = rclpy.create_node('benchmark_probe', context=context)
-    executor = EventsExecutor(context=context)
-    executor.add_node(node)
+    probe = ProbeNode('benchmark_probe', domain_id)
+    node, executor = probe.node, probe.executor
     windows: list[dict] = []
     measuring = [False]
 
@@ -182,9 +178,7 @@ def loop_benchmark(duration_s: float, warmup_s: float, out: Path) -> dict:
     finally:
         for proc in (sim, ctrl):  # the sim first: its statistics end with the controller alive
             local_ros.stop_node(proc)
-        executor.shutdown(timeout_sec=1.0)
-        node.destroy_node()
-        rclpy.try_shutdown(context=context)
+        probe.close()
     sim_stats = json.loads(stats_file.read_text())
     if not windows:
         raise RuntimeError(f'no controller diagnostics received; logs in {out}')

@@ -72,9 +72,9 @@ def error_norm(model: RobotModel, q_rad) -> float:
 def run_once(potential: str, duration_s: float, out_dir: Path, model: RobotModel,
              lockstep: bool = False, progress=print) -> Run:
     """One experiment: two node processes over DDS, recorded by a node in this process."""
-    import rclpy
-    from rclpy.experimental import EventsExecutor
     from rclpy.serialization import deserialize_message
+
+    from quat_jt_controller.tools.probe import ProbeNode
     from geometry_msgs.msg import PoseStamped, Vector3Stamped
     from sensor_msgs.msg import JointState
     from std_msgs.msg import Float64MultiArray
@@ -90,11 +90,8 @@ def run_once(potential: str, duration_s: float, out_dir: Path, model: RobotModel
     sim, ctrl = local_ros.spawn_wrist_pair(
         env, work, sim_params={'stats_file': str(stats_file), 'publish_clock': lockstep},
         controller_params={'potential': potential, 'use_sim_time': lockstep})
-    context = rclpy.Context()
-    rclpy.init(context=context, domain_id=domain_id)
-    node = rclpy.create_node('paper_experiment_recorder', context=context)
-    executor = EventsExecutor(context=context)
-    executor.add_node(node)
+    probe = ProbeNode('paper_experiment_recorder', domain_id)
+    node, executor = probe.node, probe.executor
     mcap = McapLog(work / f'{potential}.mcap')
     records: dict[str, list] = {'states': [], 'commands': [], 'errors': []}
     channels = {}
@@ -162,9 +159,7 @@ def run_once(potential: str, duration_s: float, out_dir: Path, model: RobotModel
     finally:
         for proc in (sim, ctrl):  # the sim first: its statistics end with the controller alive
             local_ros.stop_node(proc)
-        executor.shutdown(timeout_sec=1.0)
-        node.destroy_node()
-        rclpy.try_shutdown(context=context)
+        probe.close()
         mcap.close()
     sim_stats = json.loads(stats_file.read_text()) if stats_file.exists() else {}
 
