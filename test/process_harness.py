@@ -3,7 +3,7 @@ import time
 from typing import Callable
 
 import pytest
-from quat_jt_controller import local_ros
+from quat_jt_controller.tools import local_ros
 import rclpy
 
 

@@ -13,7 +13,7 @@ import time
 
 import numpy as np
 import pytest
-from quat_jt_controller import local_ros
+from quat_jt_controller.tools import local_ros
 import rclpy
 from rclpy.experimental import EventsExecutor
 from rclpy.parameter import Parameter

@@ -31,7 +31,7 @@ from typing import Optional
 import numpy as np
 
 from quat_jt_controller import control_law as cl
-from quat_jt_controller import local_ros
+from quat_jt_controller.tools import local_ros
 from quat_jt_controller import paper
 from quat_jt_controller import quaternion as quat
 from quat_jt_controller.model import RobotModel
