@@ -25,12 +25,12 @@ from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped
 from process_harness import ProcessHarnessMixin
 import pytest
-from quat_jt_controller.tools import local_ros
 from quat_jt_controller import quaternion as quat
 from quat_jt_controller.control_law import control_torque, Gains, output_error, saturate
 from quat_jt_controller.control_law import Task
 from quat_jt_controller.model import RobotModel
 from quat_jt_controller.resources import default_urdf_xml
+from quat_jt_controller.tools import local_ros
 from rcl_interfaces.msg import Log
 import rclpy
 from rclpy.experimental import EventsExecutor

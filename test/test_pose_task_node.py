@@ -21,9 +21,9 @@ import time
 from geometry_msgs.msg import PoseStamped, Vector3Stamped
 from process_harness import ProcessHarnessMixin
 import pytest
-from quat_jt_controller.tools import local_ros
 from quat_jt_controller import quaternion as quat
 from quat_jt_controller.model import RobotModel
+from quat_jt_controller.tools import local_ros
 from rcl_interfaces.msg import Log
 import rclpy
 from rclpy.experimental import EventsExecutor

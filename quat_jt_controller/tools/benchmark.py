@@ -37,11 +37,11 @@ import time
 from typing import Optional
 
 from quat_jt_controller import control_law as cl
-from quat_jt_controller.tools import local_ros
 from quat_jt_controller import paper
 from quat_jt_controller import quaternion as quat
 from quat_jt_controller.model import RobotModel
 from quat_jt_controller.resources import default_urdf_xml
+from quat_jt_controller.tools import local_ros
 
 CONTROLLER = 'quat_jt_controller'
 TARGETS = {'command rate (Hz)': '>= 995', 'missed ticks (%)': '<= 0.5',

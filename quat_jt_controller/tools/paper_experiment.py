@@ -31,12 +31,12 @@ from typing import Optional
 import numpy as np
 
 from quat_jt_controller import control_law as cl
-from quat_jt_controller.tools import local_ros
 from quat_jt_controller import paper
 from quat_jt_controller import quaternion as quat
 from quat_jt_controller.model import RobotModel
 from quat_jt_controller.reference_sim import ClosedLoop
 from quat_jt_controller.resources import default_urdf_xml
+from quat_jt_controller.tools import local_ros
 
 POTENTIALS = ('quadratic', 'tanh')
 EQUATION = {'quadratic': 'Eq. 37', 'tanh': 'Eq. 38'}
