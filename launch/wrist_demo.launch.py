@@ -8,7 +8,7 @@ The nodes read their parameters from this package's ``config/wrist_sim.yaml`` an
 ``config/wrist_controller.yaml`` (the paper's experiment; the xarm6_*.yaml files in the same
 folder are for another robot and use the same node names, so they are not loaded here);
 ``potential`` overrides the controller's, ``use_gui`` opens the PyBullet window. Then send a
-goal, e.g. the paper's corrected one (ERRATA.md, note 2):
+goal, e.g. the paper's corrected one (docs/errata.md, note 2):
 
     ros2 topic pub --once /quat_jt_controller/target_pose geometry_msgs/msg/PoseStamped \
       "{header: {frame_id: base_link},

@@ -65,7 +65,7 @@ class Gains:
     """
     Validated, immutable controller gains (diagonals of K_p, K_v, Lambda).
 
-    Units (ERRATA.md, note 7): K_p in N m (orientation rows) or N/m (position rows), K_v in
+    Units (docs/errata.md, note 7): K_p in N m (orientation rows) or N/m (position rows), K_v in
     N m s/rad, Lambda dimensionless (orientation) or 1/m (position). Build with :meth:`create`,
     which validates; the 1 kHz loop reads one instance and a parameter change swaps in a new one.
     """

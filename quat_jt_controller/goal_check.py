@@ -3,13 +3,23 @@ Check a goal against the paper's assumptions A1 (reachable) and A2 (no self-moti
 
 A damped-least-squares inverse kinematics on the URDF model looks for a joint configuration
 within the limits that reaches the goal. It starts from the measured q (the branch the
-regulator most likely ends on), then from other configurations, within a wall-time budget;
-joints whose range spans a full turn are wrapped, not clamped. At the solution, the smallest
-singular value of J_o (orientation task) or J_G (pose task) tells whether it is singular. The
-regulator itself never uses this: it is advice for the user, given when a goal arrives.
+regulator most likely ends on), then from the middle of the ranges, then from seeded random
+configurations; joints whose range spans a full turn are wrapped, not clamped. The work is
+bounded by a number of starts and of iterations, never by wall time, so the same start and goal
+give the same verdict on any host. At the solution, the smallest singular value of J_o
+(orientation task) or J_G (pose task) tells whether it is singular.
+
+The regulator itself never uses this: it is advice for the user. It costs milliseconds, so the
+controller runs it in :class:`GoalCheckWorker`, a separate process, never on the control thread.
 """
+from dataclasses import dataclass
+import json
 from math import atan2, pi, sqrt
-import time
+import os
+import queue
+import subprocess
+import sys
+import threading
 from typing import Optional, Sequence
 
 import numpy as np
@@ -62,18 +72,21 @@ def solve_ik(model: RobotModel, q_start: Sequence[float], q_desired: Sequence[fl
     return q, float(np.linalg.norm(err)), J
 
 
+MAX_STARTS = 12  # IK starts per check: measured q, mid-range, then seeded random ones
+
+
 def check_goal(model: RobotModel, q_measured: Optional[Sequence[float]],
                q_desired: Sequence[float], p_desired: Sequence[float], task: Task,
-               budget_s: float = 0.005, seed: int = 0) -> str:
+               max_starts: int = MAX_STARTS, seed: int = 0) -> str:
     """
     Return a warning if the goal breaks assumption A1 or A2, or '' if it is fine.
 
     Tries the measured q (nudged off an exact singularity), then the middle of the joint
-    ranges, then random configurations within the limits, until one reaches the goal or
-    ``budget_s`` of wall time is spent. A goal reached only at a singular configuration
-    violates A2; a goal no start reaches may violate A1 (it is not proven unreachable).
+    ranges, then random configurations within the limits (seeded), until one reaches the goal
+    at a regular configuration or ``max_starts`` starts are spent. A goal reached only at a
+    singular configuration violates A2; a goal no start reaches may violate A1 (it is not
+    proven unreachable). Deterministic: the same arguments give the same verdict.
     """
-    deadline = time.perf_counter() + budget_s
     lower = np.maximum(np.array(model.position_lower), -pi)
     upper = np.minimum(np.array(model.position_upper), pi)
     rng = np.random.default_rng(seed)
@@ -81,7 +94,7 @@ def check_goal(model: RobotModel, q_measured: Optional[Sequence[float]],
               0.5 * (lower + upper)]
     best = None
     singular = None
-    while True:
+    for _ in range(max_starts):
         q_start = starts.pop(0) if starts else rng.uniform(lower, upper)
         q, residual, J = solve_ik(model, q_start + 1e-3, q_desired, p_desired, task)
         if best is None or residual < best[1]:
@@ -91,8 +104,6 @@ def check_goal(model: RobotModel, q_measured: Optional[Sequence[float]],
             if sigma_min >= SINGULAR_SIGMA_MIN:
                 return ''
             singular = (q, sigma_min)
-        if time.perf_counter() > deadline:
-            break
     if singular is not None:
         q_text = [round(float(x), 4) for x in singular[0]]
         return (f'it is reached at a singular configuration q = {q_text} (sigma_min(J) = '
@@ -101,3 +112,136 @@ def check_goal(model: RobotModel, q_measured: Optional[Sequence[float]],
     q_text = [round(float(x), 4) for x in best[0]]
     return (f'no joint configuration within the limits was found that reaches it (best IK '
             f'residual {best[1]:.3g} at q = {q_text}): assumption A1 may not hold')
+
+
+@dataclass(frozen=True)
+class ModelSpec:
+    """What the worker process needs to build the same RobotModel."""
+
+    urdf_xml: str
+    base_link: str
+    tip_link: str
+    joint_names: tuple[str, ...]
+    task: Task
+
+
+class GoalCheckWorker:
+    """
+    :func:`check_goal` in a separate process, fed the newest goal only.
+
+    The worker is ``python -m quat_jt_controller.goal_check`` (niced), talking JSON lines over
+    its stdin/stdout; it exits when its stdin closes, so it never outlives its parent. A
+    reader thread waits on its output (blocked in I/O, it holds no lock the tick needs).
+    :meth:`submit` never blocks: if a check is running, the goal waits as the next one and a
+    newer goal replaces it, so a flood of goals costs one check at a time and the newest goal
+    is always checked. :meth:`poll` returns finished verdicts. Call :meth:`close` at the end.
+    """
+
+    def __init__(self, spec: ModelSpec) -> None:
+        self._proc = subprocess.Popen(
+            [sys.executable, '-m', 'quat_jt_controller.goal_check'], stdin=subprocess.PIPE,
+            stdout=subprocess.PIPE, stderr=None, text=True, bufsize=1)
+        self._send({'urdf_xml': spec.urdf_xml, 'base_link': spec.base_link,
+                    'tip_link': spec.tip_link, 'joint_names': list(spec.joint_names),
+                    'task': Task(spec.task).value})
+        self._done: queue.SimpleQueue = queue.SimpleQueue()
+        self._reader = threading.Thread(target=self._read, name='goal_check_reader',
+                                        daemon=True)
+        self._reader.start()
+        self._keys: dict[int, object] = {}
+        self._next_id = 0
+        self._running: Optional[int] = None
+        self._next: Optional[tuple[object, dict]] = None
+
+    def _send(self, obj: dict) -> bool:
+        try:
+            self._proc.stdin.write(json.dumps(obj) + '\n')
+            self._proc.stdin.flush()
+            return True
+        except (BrokenPipeError, OSError, ValueError):
+            return False
+
+    def _read(self) -> None:
+        for line in self._proc.stdout:
+            try:
+                self._done.put(json.loads(line))
+            except ValueError:
+                pass
+        self._done.put({'id': None, 'verdict': 'the goal-check worker exited'})
+
+    def submit(self, key: object, q_measured: Optional[Sequence[float]],
+               q_desired: Sequence[float], p_desired: Sequence[float]) -> None:
+        """Queue a check; ``key`` comes back with its verdict (e.g. the goal object)."""
+        request = {'q_measured': None if q_measured is None else [float(x) for x in q_measured],
+                   'q_desired': [float(x) for x in q_desired],
+                   'p_desired': [float(x) for x in p_desired]}
+        self._next = (key, request)
+        if self._running is None:
+            self._start_next()
+
+    def _start_next(self) -> None:
+        key, request = self._next
+        self._next = None
+        self._next_id += 1
+        self._keys[self._next_id] = key
+        self._running = self._next_id
+        if not self._send({'id': self._next_id, **request}):
+            self._done.put({'id': self._next_id, 'verdict': 'the goal-check worker is gone'})
+
+    @property
+    def busy(self) -> bool:
+        """Tell whether a check is running or waiting."""
+        return self._running is not None or self._next is not None
+
+    def poll(self) -> list[tuple[object, str]]:
+        """Return ``[(key, verdict)]`` of the checks finished since the last call."""
+        out = []
+        while not self._done.empty():
+            reply = self._done.get()
+            key = self._keys.pop(reply.get('id'), None)
+            if reply.get('id') == self._running or reply.get('id') is None:
+                self._running = None
+            out.append((key, str(reply.get('verdict', ''))))
+        if self._running is None and self._next is not None:
+            self._start_next()
+        return out
+
+    def close(self) -> None:
+        """Stop the worker (closing its stdin ends it); idempotent."""
+        self._next = None
+        if self._proc.poll() is None:
+            try:
+                self._proc.stdin.close()
+            except OSError:
+                pass
+            try:
+                self._proc.wait(timeout=2.0)
+            except subprocess.TimeoutExpired:
+                self._proc.kill()
+                self._proc.wait()
+
+
+def _serve() -> None:
+    """Worker process: a spec line, then one verdict line per request line, until EOF."""
+    try:
+        os.nice(10)  # advice only: leave the CPU to the 1 kHz nodes
+    except OSError:
+        pass
+    lines = iter(sys.stdin)
+    spec = json.loads(next(lines))
+    model = RobotModel(spec['urdf_xml'], spec['base_link'], spec['tip_link'],
+                       spec['joint_names'])
+    task = Task(spec['task'])
+    for line in lines:
+        request = json.loads(line)
+        try:
+            verdict = check_goal(model, request['q_measured'], request['q_desired'],
+                                 request['p_desired'], task)
+        except Exception as exc:  # noqa: B902 - reported to the node, which logs it
+            verdict = f'the goal check failed: {exc!r}'
+        sys.stdout.write(json.dumps({'id': request['id'], 'verdict': verdict}) + '\n')
+        sys.stdout.flush()
+
+
+if __name__ == '__main__':
+    _serve()

@@ -1,5 +1,23 @@
-"""Choosing the controlled joints of a URDF by name (shared by the model and the simulator)."""
+"""Joints of a URDF: which can move, and choosing the controlled ones by name (one way)."""
 from typing import Optional, Sequence
+from xml.etree import ElementTree
+
+MOVABLE_TYPES = ('revolute', 'continuous', 'prismatic')
+
+
+def movable_joints(urdf_xml: str) -> list[str]:
+    """
+    Names of the revolute, continuous and prismatic joints of a URDF, in document order.
+
+    The one definition of 'movable joint' in this package: the model (Pinocchio), the
+    simulator (PyBullet) and the simulator node all default their joint lists to it. Raises
+    ValueError if the text is not XML.
+    """
+    try:
+        root = ElementTree.fromstring(urdf_xml)
+    except ElementTree.ParseError as exc:
+        raise ValueError(f'the URDF is not valid XML: {exc}') from exc
+    return [j.get('name') for j in root.iter('joint') if j.get('type') in MOVABLE_TYPES]
 
 
 def select_joints(requested: Optional[Sequence[str]], movable: Sequence[str],
@@ -19,3 +37,58 @@ def select_joints(requested: Optional[Sequence[str]], movable: Sequence[str],
     if not names:
         raise error('no joints selected')
     return names
+
+
+class StateLayout:
+    """
+    Pick the controlled joints out of joint states whose name lists come in any order.
+
+    The index map of a name list is built once and cached (a sensor_msgs/JointState usually
+    repeats the same list every tick). :meth:`extract` raises ValueError saying why a state is
+    unusable: a controlled joint missing, a name repeated, lengths that differ, NaN or Inf.
+    """
+
+    def __init__(self, joint_names: Sequence[str]) -> None:
+        self.joint_names = tuple(joint_names)
+        self._last_names: Optional[list[str]] = None
+        self._last: object = None
+        self._cache: dict[tuple[str, ...], object] = {}
+
+    def _index(self, names: Sequence[str]) -> object:
+        """Return the list of indices, or the reason (str) why this name list is unusable."""
+        if names == self._last_names:
+            return self._last
+        key = tuple(names)
+        index = self._cache.get(key)
+        if index is None:
+            if len(set(key)) != len(key):
+                repeated = sorted({n for n in key if key.count(n) > 1})
+                index = f'joint names repeat {repeated}: {list(key)}'
+            else:
+                where = {name: i for i, name in enumerate(key)}
+                missing = [j for j in self.joint_names if j not in where]
+                index = (f'missing controlled joint(s) {missing}: have {list(key)}, need '
+                         f'{list(self.joint_names)}' if missing
+                         else [where[j] for j in self.joint_names])
+            if len(self._cache) < 64:
+                self._cache[key] = index
+        self._last_names = list(names)
+        self._last = index
+        return index
+
+    def extract(self, names: Sequence[str], position: Sequence[float],
+                velocity: Sequence[float]) -> tuple[list[float], list[float]]:
+        """Return (q, qdot) of the controlled joints, in ``joint_names`` order."""
+        index = self._index(names)
+        if isinstance(index, str):
+            raise ValueError(index)
+        if len(position) != len(names) or len(velocity) != len(names):
+            raise ValueError(f'{len(names)} names but {len(position)} positions and '
+                             f'{len(velocity)} velocities (positions and velocities are '
+                             'required)')
+        q = [position[i] for i in index]
+        qdot = [velocity[i] for i in index]
+        total = sum(q) + sum(qdot)
+        if total - total != 0.0:
+            raise ValueError(f'non-finite position or velocity: q = {q}, qdot = {qdot}')
+        return q, qdot

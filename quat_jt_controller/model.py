@@ -12,7 +12,7 @@ from typing import Optional, Sequence
 import numpy as np
 import pinocchio as pin
 
-from quat_jt_controller.joints import select_joints
+from quat_jt_controller.joints import movable_joints, select_joints
 
 
 class ModelError(ValueError):
@@ -24,8 +24,9 @@ class RobotModel:
     A fixed-base serial manipulator between ``base_link`` and ``tip_link``.
 
     ``joint_names`` gives the order of q, qdot and tau everywhere in this package; by default
-    the URDF's movable joints in tree order. Each controlled joint must be revolute or
-    prismatic with one coordinate (a URDF ``continuous`` joint has two in Pinocchio).
+    the URDF's movable joints (``joints.movable_joints``) in document order. Each controlled
+    joint must be revolute or prismatic with one coordinate (a URDF ``continuous`` joint has
+    two in Pinocchio).
     """
 
     def __init__(self, urdf_xml: str, base_link: str, tip_link: str,
@@ -34,8 +35,12 @@ class RobotModel:
             full = pin.buildModelFromXML(urdf_xml)
         except Exception as exc:  # Pinocchio raises plain RuntimeError/ValueError
             raise ModelError(f'cannot parse the URDF: {exc}') from exc
-        movable = [full.names[i] for i in range(1, full.njoints)]
+        try:
+            movable = movable_joints(urdf_xml)
+        except ValueError as exc:
+            raise ModelError(str(exc)) from exc
         joint_names = select_joints(joint_names, movable, ModelError)
+        movable = [full.names[i] for i in range(1, full.njoints)]
         locked = [full.getJointId(n) for n in movable if n not in joint_names]
         model = (pin.buildReducedModel(full, locked, pin.neutral(full)) if locked else full)
         for name in (base_link, tip_link):

@@ -1,21 +1,27 @@
 """
-ROS parameters of the controller node: declared in one place, validated in one place.
+ROS parameters, one idiom for every node: declared once, validated once, applied whole.
 
-Not part of the ROS-free core (it imports rclpy). The live gains become one immutable
-:class:`~quat_jt_controller.control_law.Gains`, validated by ``Gains.create``; the structural
-parameters (task, joints, links, URDF, timeouts) are read-only and read once at start-up.
+Not part of the ROS-free core (it imports rclpy). :class:`LiveParameters` is the idiom: the
+live parameters of a node are validated in the on-set callback by building the node's immutable
+snapshot from the current values merged with the incoming ones (a ValueError rejects the whole
+set, with its message as the reason), and the post-set callback swaps the snapshot in; the
+1 kHz tick reads the snapshot, never ``get_parameter``. Structural parameters are read-only and
+read once at start-up.
+
+For the controller the snapshot is :class:`~quat_jt_controller.control_law.Gains`, validated by
+``Gains.create``.
 
 Defaults are the paper's wrist experiment (Section 5, Eqs. 43-45, orientation task Eq. 37/38):
 K_p = (4.5, 20.5, 17.5) N m, K_v = (1, 1, 1) N m s/rad, Lambda = (30, 30, 30).
 """
 from dataclasses import dataclass
-from typing import Any, Mapping, Optional, Sequence
+from typing import Any, Callable, Generic, Mapping, Optional, Sequence, TypeVar
 
 from quat_jt_controller import paper
-from quat_jt_controller.control_law import Gains, GainsError, Potential, Task
+from quat_jt_controller.control_law import Gains, Potential, Task
 from quat_jt_controller.resources import default_urdf_xml
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
-from rcl_interfaces.msg import ParameterType
+from rcl_interfaces.msg import ParameterType, SetParametersResult
 from rclpy.node import Node
 
 # Pose task (Eq. 24/32): position rows (N/m, 1/m) then the paper's orientation rows.
@@ -43,6 +49,55 @@ class StructuralConfig:
     robot_description: str
     state_timeout_s: float
     publish_rate_divider: int
+
+
+Snapshot = TypeVar('Snapshot')
+
+
+class LiveParameters(Generic[Snapshot]):
+    """
+    Live parameters of ``node`` named ``names`` (already declared), as one immutable snapshot.
+
+    ``build`` turns a complete ``{name: value}`` mapping into the snapshot or raises ValueError
+    naming the bad value. ``current`` is the snapshot in force; ``on_apply`` is called with
+    each new one after a successful set (for a log line or to push it to a model).
+    """
+
+    def __init__(self, node: Node, names: Sequence[str],
+                 build: Callable[[Mapping[str, Any]], Snapshot],
+                 on_apply: Optional[Callable[[Snapshot], None]] = None) -> None:
+        self._node = node
+        self._names = frozenset(names)
+        self._build = build
+        self._on_apply = on_apply
+        self.values = {name: node.get_parameter(name).value for name in names}
+        self.current: Snapshot = build(self.values)  # a bad start-up value raises here
+        self._pending: Optional[tuple[dict, Snapshot]] = None
+        node.add_on_set_parameters_callback(self._validate)
+        node.add_post_set_parameters_callback(self._apply)
+
+    def _validate(self, params) -> SetParametersResult:
+        merged = dict(self.values)
+        touched = [p.name for p in params if p.name in self._names]
+        if not touched:
+            return SetParametersResult(successful=True)
+        merged.update({p.name: p.value for p in params if p.name in self._names})
+        try:
+            self._pending = (merged, self._build(merged))
+        except ValueError as exc:
+            self._pending = None
+            reason = f'rejected, nothing changed: {exc}'
+            self._node.get_logger().warn(f'parameter set {touched} {reason}')
+            return SetParametersResult(successful=False, reason=reason)
+        return SetParametersResult(successful=True)
+
+    def _apply(self, params) -> None:
+        if self._pending is None or not any(p.name in self._names for p in params):
+            return
+        self.values, self.current = self._pending
+        self._pending = None
+        if self._on_apply is not None:
+            self._on_apply(self.current)
 
 
 def _descriptor(description: str, ptype: int, read_only: bool = False,
@@ -125,9 +180,12 @@ def default_gains(task: Task, n_joints: int) -> dict[str, Any]:
             'lambda': list(lam), 'gravity_compensation': True}
 
 
-def declare_gains(node: Node, config: StructuralConfig) -> Gains:
+def declare_gains(node: Node, config: StructuralConfig,
+                  on_apply: Optional[Callable[[Gains], None]] = None) -> LiveParameters[Gains]:
     """
-    Declare the live gain parameters and return the validated initial Gains.
+    Declare the live gain parameters; return them as LiveParameters of a Gains.
+
+    ``on_apply`` is called with each new Gains after a successful parameter set.
 
     Raises GainsError (naming the bad value) if the start-up values are invalid.
     """
@@ -135,63 +193,34 @@ def declare_gains(node: Node, config: StructuralConfig) -> Gains:
     n = len(config.joints)
     axes = 'x, y, z, rx, ry, rz' if dim == 6 else 'rx, ry, rz'
     defaults = default_gains(config.task, n)
-    values = {
-        'potential': node.declare_parameter(
-            'potential', defaults['potential'],
-            _descriptor("Artificial potential: 'quadratic' (Eq. 23 -> law 24/37) or 'tanh' "
-                        '(Eq. 31 -> law 32/38). Live.',
-                        ParameterType.PARAMETER_STRING,
-                        constraints="one of 'quadratic', 'tanh'")).value,
-        'kp': node.declare_parameter(
-            'kp', defaults['kp'],
-            _descriptor(f'Diagonal of K_p, {dim} values ({axes}); N/m for position rows, N m '
-                        'for orientation rows. Finite, > 0. Live.',
-                        ParameterType.PARAMETER_DOUBLE_ARRAY,
-                        constraints=f'{dim} finite values > 0')).value,
-        'kv': node.declare_parameter(
-            'kv', defaults['kv'],
-            _descriptor(f'Diagonal of K_v (joint damping), one per joint ({n}), N m s/rad. '
-                        'Finite, > 0. Live.',
-                        ParameterType.PARAMETER_DOUBLE_ARRAY,
-                        constraints=f'{n} finite values > 0')).value,
-        'lambda': node.declare_parameter(
-            'lambda', defaults['lambda'],
-            _descriptor(f'Diagonal of Lambda in tanh(Lambda y) (Eq. 32/38), {dim} values '
-                        f'({axes}); used by the tanh potential. Finite, > 0. Live.',
-                        ParameterType.PARAMETER_DOUBLE_ARRAY,
-                        constraints=f'{dim} finite values > 0')).value,
-        'gravity_compensation': node.declare_parameter(
-            'gravity_compensation', defaults['gravity_compensation'],
-            _descriptor('Add g(q) from the URDF model to the torque (Eq. 22). Live.',
-                        ParameterType.PARAMETER_BOOL)).value,
+    descriptors = {
+        'potential': _descriptor(
+            "Artificial potential: 'quadratic' (Eq. 23 -> law 24/37) or 'tanh' (Eq. 31 -> law "
+            '32/38). Live.', ParameterType.PARAMETER_STRING,
+            constraints="one of 'quadratic', 'tanh'"),
+        'kp': _descriptor(
+            f'Diagonal of K_p, {dim} values ({axes}); N/m for position rows, N m for '
+            'orientation rows. Finite, > 0. Live.', ParameterType.PARAMETER_DOUBLE_ARRAY,
+            constraints=f'{dim} finite values > 0'),
+        'kv': _descriptor(
+            f'Diagonal of K_v (joint damping), one per joint ({n}), N m s/rad. Finite, > 0. '
+            'Live.', ParameterType.PARAMETER_DOUBLE_ARRAY,
+            constraints=f'{n} finite values > 0'),
+        'lambda': _descriptor(
+            f'Diagonal of Lambda in tanh(Lambda y) (Eq. 32/38), {dim} values ({axes}); used by '
+            'the tanh potential. Finite, > 0. Live.', ParameterType.PARAMETER_DOUBLE_ARRAY,
+            constraints=f'{dim} finite values > 0'),
+        'gravity_compensation': _descriptor(
+            'Add g(q) from the URDF model to the torque (Eq. 22). Live.',
+            ParameterType.PARAMETER_BOOL),
     }
-    return build_gains(values, config)
+    for name in GAIN_PARAMETERS:
+        node.declare_parameter(name, defaults[name], descriptors[name])
+    return LiveParameters(node, GAIN_PARAMETERS, lambda values: build_gains(values, config),
+                          on_apply)
 
 
 def build_gains(values: Mapping[str, Any], config: StructuralConfig) -> Gains:
     """Gains from parameter values keyed by parameter name. Raises GainsError."""
     return Gains.create(values['potential'], values['kp'], values['kv'], values['lambda'],
                         config.task, len(config.joints), values['gravity_compensation'])
-
-
-def gains_update(current: Mapping[str, Any], changes: Sequence[Any],
-                 config: StructuralConfig) -> tuple[Optional[Gains], str]:
-    """
-    Validate a parameter change: the union of current values and the incoming ones.
-
-    ``changes`` are rclpy Parameters. Returns ``(gains, '')`` when a gain parameter changes and
-    the result is valid, ``(None, '')`` when no gain parameter is involved, and
-    ``(None, reason)`` when the change must be rejected.
-    """
-    merged = dict(current)
-    touched = False
-    for param in changes:
-        if param.name in GAIN_PARAMETERS:
-            merged[param.name] = param.value
-            touched = True
-    if not touched:
-        return None, ''
-    try:
-        return build_gains(merged, config), ''
-    except GainsError as exc:
-        return None, f'rejected, gains unchanged: {exc}'

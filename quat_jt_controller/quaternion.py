@@ -87,7 +87,7 @@ def from_rotation_matrix(R: Matrix3) -> Quaternion:
     """
     Convert a rotation matrix to a unit quaternion by Shepperd's method, with eta >= 0.
 
-    Replaces Eqs. (4)-(5) of the paper (see ERRATA.md, note 1): the component with the largest
+    Replaces Eqs. (4)-(5) of the paper (see docs/errata.md, note 1): the component with the largest
     of 1 + tr R and 1 + 2 r_ii - tr R is found by a square root, the others from sums and
     differences of off-diagonal entries, so the result is accurate near 0 and 180 degrees.
     """
@@ -157,3 +157,10 @@ def q_transpose_times(eta_e: float, e: Sequence[float], w: Sequence[float]) -> V
     return (0.5 * (eta_e * w[0] - c[0]),
             0.5 * (eta_e * w[1] - c[1]),
             0.5 * (eta_e * w[2] - c[2]))
+
+
+def same_hemisphere(q: Sequence[float], reference: Sequence[float]) -> Quaternion:
+    """Return ``q`` or ``-q`` (the same rotation), whichever is closer to ``reference``."""
+    if q[0] * reference[0] + q[1] * reference[1] + q[2] * reference[2] + q[3] * reference[3] < 0:
+        return (-q[0], -q[1], -q[2], -q[3])
+    return (q[0], q[1], q[2], q[3])

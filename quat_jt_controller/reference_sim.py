@@ -13,6 +13,7 @@ import numpy as np
 
 from quat_jt_controller import control_law as cl
 from quat_jt_controller.model import RobotModel
+from quat_jt_controller.regulator import Goal, Regulator
 
 
 @dataclass
@@ -25,26 +26,33 @@ class Trajectory:
 
 
 class ClosedLoop:
-    """Robot + regulator towards the goal ``(p_desired, q_desired)``, with gravity compensated."""
+    """
+    Robot + regulator towards the goal ``(p_desired, q_desired)``, with gravity compensated.
+
+    The law is the node's :class:`~quat_jt_controller.regulator.Regulator` tick; the ideal loop
+    (:meth:`run`) gives it no effort limits, the sampled loop (:func:`run_sampled`) the URDF's.
+    """
 
     def __init__(self, model: RobotModel, gains: cl.Gains, task: cl.Task,
                  q_desired: Sequence[float], p_desired: Optional[Sequence[float]] = None):
         self.model, self.gains, self.task = model, gains, cl.Task(task)
-        self.q_desired, self.p_desired = tuple(q_desired), p_desired
+        goal = Goal(tuple(q_desired), tuple(p_desired) if p_desired is not None
+                    else (0.0, 0.0, 0.0))
+        self.regulator = Regulator(model, task, gains, [float('inf')] * model.n, goal)
+        self.clamped = Regulator(model, task, gains, None, goal)
 
     def error(self, q: Sequence[float]) -> tuple[tuple[float, ...], float, list[list[float]]]:
-        p, R, J = self.model.kinematics(q)
-        y, eta_e = cl.output_error(p, R, self.p_desired, self.q_desired, self.task)
-        return y, eta_e, (J if self.task is cl.Task.POSE else J[3:])
+        """Return y_tilde (Eq. 8), eta_e and the task Jacobian at ``q``."""
+        y, eta_e, rows, _, _ = self.regulator.error(q)
+        return y, eta_e, rows
 
     def torque(self, q: Sequence[float], qdot: Sequence[float]) -> list[float]:
-        y, eta_e, rows = self.error(q)
-        return cl.control_torque(rows, y, eta_e, qdot, self.model.gravity(q), self.gains)
+        """Eq. (22) + g(q), unclamped: the ideal loop's torque."""
+        return self.regulator.update(q, qdot).tau_nm
 
     def lyapunov(self, q: np.ndarray, qdot: np.ndarray) -> float:
         """V = 1/2 qdot^T M(q) qdot + U_a(y_tilde(q)), Eq. (27) / (34)."""
-        y, _, _ = self.error(q)
-        return 0.5 * qdot @ self.model.mass_matrix(q) @ qdot + cl.potential_energy(y, self.gains)
+        return self.regulator.lyapunov(q, qdot)
 
     def _f(self, x: np.ndarray) -> np.ndarray:
         n = self.model.n
@@ -102,12 +110,12 @@ def run_sampled(loop: ClosedLoop, sim, duration_s: float, delay_ticks: int = 1) 
 
     ``sim`` is a simulator of the same URDF and joints (``wrist_sim.simulator.WristSimulator``
     or anything with ``q_rad``, ``qdot_rad_s``, ``dt_s`` and ``step(tau) -> applied``). Each
-    step applies (zero-order hold) the torque of Eq. (22) + g(q) computed from the state
-    measured ``delay_ticks`` steps earlier, clamped to the URDF effort limits. The nodes run
+    step applies (zero-order hold) the torque of the node's tick (Regulator.update: Eq. (22) +
+    g(q), clamped to the URDF effort limits) computed from the state measured ``delay_ticks``
+    steps earlier. The nodes run
     with no extra delay (0) while every command arrives in time: the sim steps from the state
     it published with the command computed from it. Records the errors after each step.
     """
-    limits = list(loop.model.effort_limits)
     history = [(sim.q_rad.tolist(), sim.qdot_rad_s.tolist())] * (delay_ticks + 1)
     steps = int(round(duration_s / sim.dt_s))
     pos, ori, tau_max = np.zeros(steps), np.empty(steps), np.empty(steps)
@@ -115,13 +123,12 @@ def run_sampled(loop: ClosedLoop, sim, duration_s: float, delay_ticks: int = 1) 
     finite = True
     for k in range(steps):
         q, qdot = history[-1 - delay_ticks]
-        tau = loop.torque(q, qdot)
-        if cl.saturate(tau, limits):
-            saturated += 1
-        if not all(np.isfinite(tau)):
+        out = loop.clamped.update(q, qdot)
+        saturated += out.saturated
+        if not out.finite:
             finite = False
             break
-        applied = sim.step(tau)
+        applied = sim.step(out.tau_nm)
         history.append((sim.q_rad.tolist(), sim.qdot_rad_s.tolist()))
         del history[0]
         y, _, _ = loop.error(history[-1][0])

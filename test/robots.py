@@ -4,17 +4,18 @@ from pathlib import Path
 import numpy as np
 import pybullet_data
 
+from quat_jt_controller import paper
 from quat_jt_controller.model import RobotModel
 from quat_jt_controller.resources import default_urdf_xml
 
 XARM6_URDF = Path(pybullet_data.getDataPath()) / 'xarm' / 'xarm6_robot.urdf'
 
-# ERRATA.md note 2: corrected goal (scalar first) and where the wrist reaches it.
-Q_DESIRED = (0.5566, 0.0, 0.4226, 0.7152)
-Q_JOINT_DESIRED = (0.9095, 0.8727, 0.9095)
-PAPER_KP = (4.5, 20.5, 17.5)
-PAPER_KV = (1.0, 1.0, 1.0)
-PAPER_LAMBDA = (30.0, 30.0, 30.0)
+# The paper's experiment, from its one source in the package (docs/errata.md applied).
+Q_DESIRED = paper.Q_DESIRED
+Q_JOINT_DESIRED = paper.Q_JOINT_DESIRED_RAD
+PAPER_KP = paper.KP
+PAPER_KV = paper.KV
+PAPER_LAMBDA = paper.LAMBDA
 
 
 def wrist_model() -> RobotModel:

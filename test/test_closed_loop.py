@@ -12,13 +12,16 @@ from quat_jt_controller import quaternion as quat
 from quat_jt_controller.reference_sim import ClosedLoop
 from robots import PAPER_KP, PAPER_KV, PAPER_LAMBDA, Q_DESIRED, Q_JOINT_DESIRED, wrist_model
 
+pytestmark = pytest.mark.unit
+
 
 @pytest.mark.parametrize('potential, duration_s', [('quadratic', 8.0), ('tanh', 3.0)])
 def test_wrist_converges_from_singular_start_and_lyapunov_never_increases(potential,
                                                                           duration_s):
     model = wrist_model()
     _, _, J0 = model.kinematics([0.0, 0.0, 0.0])
-    assert np.linalg.matrix_rank(np.array(J0)[3:]) == 2  # q(0) = 0 is singular (ERRATA 4)
+    # q(0) = 0 is singular (docs/errata.md note 4)
+    assert np.linalg.matrix_rank(np.array(J0)[3:]) == 2
     gains = cl.Gains.create(potential, PAPER_KP, PAPER_KV, PAPER_LAMBDA, cl.Task.ORIENTATION, 3)
     loop = ClosedLoop(model, gains, cl.Task.ORIENTATION, quat.normalized(Q_DESIRED))
     traj = loop.run([0.0, 0.0, 0.0], duration_s)
@@ -26,7 +29,7 @@ def test_wrist_converges_from_singular_start_and_lyapunov_never_increases(potent
     assert traj.error_norm[0] > 0.8
     assert traj.error_norm[-1] < 1e-3
     assert np.abs(traj.qdot_rad_s[-1]).max() < 1e-2
-    # The corrected goal of ERRATA.md is reached at q_d (rounded there to 1e-4 rad).
+    # The corrected goal of docs/errata.md is reached at q_d (rounded there to 1e-4 rad).
     np.testing.assert_allclose(traj.q_rad[-1], Q_JOINT_DESIRED, atol=2e-3)
     # Eq. (28) / (35): dV/dt = -qdot^T K_v qdot <= 0; RK4 error allowance 1e-9 of V(0).
     dV = np.diff(traj.lyapunov)

@@ -7,9 +7,12 @@ import numpy as np
 import pytest
 
 from quat_jt_controller import control_law as cl
+from quat_jt_controller import paper
 from quat_jt_controller import quaternion as quat
 from robots import PAPER_KP, PAPER_KV, PAPER_LAMBDA, Q_DESIRED, random_q, wrist_model, \
     xarm6_model
+
+pytestmark = pytest.mark.unit
 
 ORI, POSE = cl.Task.ORIENTATION, cl.Task.POSE
 H = 1e-6
@@ -105,7 +108,7 @@ unit_q = st.tuples(*[st.floats(-1, 1)] * 4).filter(
 @settings(max_examples=200, deadline=None)
 @given(unit_q, unit_q, st.sampled_from(['quadratic', 'tanh']))
 def test_torque_unchanged_when_measured_or_desired_quaternion_flips_sign(q, q_d, potential):
-    """ERRATA note 6: e and Q flip together and grad U_a is odd, so tau is unchanged."""
+    """docs/errata.md note 6: e and Q flip together and grad U_a is odd, so tau is unchanged."""
     g = gains(potential, ORI, 3)
     J = [[0.3, -0.2, 0.5], [0.1, 0.9, -0.4], [1.0, 0.0, 0.2]]
     qdot = [0.1, -0.2, 0.3]
@@ -165,6 +168,6 @@ def test_saturate_clamps_in_place_and_reports():
 
 def test_goal_error_is_zero_at_q_desired():
     model = wrist_model()
-    p, R = model.forward_kinematics((0.9095, 0.8727, 0.9095))
+    p, R = model.forward_kinematics(paper.Q_JOINT_DESIRED_RAD)
     y, eta_e = cl.output_error(p, R, None, quat.normalized(Q_DESIRED), ORI)
     assert np.linalg.norm(y) < 1e-4 and abs(eta_e) > 0.9999

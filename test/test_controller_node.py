@@ -7,7 +7,8 @@ Two plants drive it:
   commands. In lockstep mode it integrates the wrist dynamics (the core's Pinocchio model, 1 ms
   semi-implicit Euler) one step per command, so closed-loop runs are deterministic and the
   controller is checked without the simulator. Each command is also checked against the core
-  law computed here from the same state (Eq. 38 / 37 + g(q), clamped).
+  tick computed here from the same state (``Regulator.update``: Eq. 38 / 37 + g(q), clamped;
+  test_regulator.py checks that tick against the law written out by hand).
 * ``wrist_sim_node`` (the PyBullet simulator) for the real-time closed loop, skipped while it is
   still a stub.
 
@@ -25,10 +26,11 @@ from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped
 from process_harness import ProcessHarnessMixin
 import pytest
+from quat_jt_controller import paper
 from quat_jt_controller import quaternion as quat
-from quat_jt_controller.control_law import control_torque, Gains, output_error, saturate
-from quat_jt_controller.control_law import Task
+from quat_jt_controller.control_law import Gains, Task
 from quat_jt_controller.model import RobotModel
+from quat_jt_controller.regulator import Goal, Regulator
 from quat_jt_controller.resources import default_urdf_xml
 from quat_jt_controller.tools import local_ros
 from rcl_interfaces.msg import Log
@@ -39,11 +41,13 @@ from rclpy.parameter_client import AsyncParameterClient
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 
+pytestmark = pytest.mark.dds
+
 JOINTS = ('joint1', 'joint2', 'joint3')
-# The corrected goal of the paper (ERRATA note 2), ROS order x, y, z, w.
-GOAL_XYZW = (0.0, 0.4226, 0.7152, 0.5566)
-Q_GOAL = (0.9095, 0.8727, 0.9095)
-PAPER = {'kp': [4.5, 20.5, 17.5], 'kv': [1.0, 1.0, 1.0], 'lambda': [30.0, 30.0, 30.0]}
+# The corrected goal of the paper (docs/errata.md note 2), ROS order x, y, z, w.
+GOAL_XYZW = quat.to_xyzw(paper.Q_DESIRED)
+Q_GOAL = paper.Q_JOINT_DESIRED_RAD
+PAPER = {'kp': list(paper.KP), 'kv': list(paper.KV), 'lambda': list(paper.LAMBDA)}
 STATE_TIMEOUT_S = 0.3
 CONTROLLER = 'quat_jt_controller'
 DT = 1e-3
@@ -165,13 +169,9 @@ class FakePlant:
 
 
 def expected_torque(model: RobotModel, gains: Gains, q, v, goal_xyzw) -> list[float]:
-    """Compute the core law (Eq. 37/38 + g(q)), clamped: what the node must publish."""
-    p, R, J = model.kinematics(list(q))
-    q_d = quat.validate_unit(quat.from_xyzw(*goal_xyzw))
-    y, eta_e = output_error(p, R, (0.0, 0.0, 0.0), q_d, Task.ORIENTATION)
-    tau = control_torque(J[3:], y, eta_e, list(v), model.gravity(list(q)), gains)
-    saturate(tau, model.effort_limits)
-    return tau
+    """Return what the node must publish: Regulator.update (Eq. 37/38 + g(q), clamped)."""
+    regulator = Regulator(model, Task.ORIENTATION, gains, goal=Goal.from_xyzw(*goal_xyzw))
+    return regulator.update(list(q), list(v)).tau_nm
 
 
 def expected(model: RobotModel, q, g: Optional[Gains] = None, xyzw=GOAL_XYZW) -> list:
@@ -285,7 +285,7 @@ def test_lockstep_converges_to_the_paper_goal(rig, model, potential):
 
 
 def test_negated_goal_gives_the_same_motion(rig, model):
-    """ERRATA note 6: -q_d is the same orientation and the law is the same (bit for bit)."""
+    """docs/errata.md note 6: -q_d is the same orientation and the law is the same, bit for bit."""
     h, plant = rig
     set_potential(h, 'tanh')
     runs = []
@@ -316,8 +316,8 @@ def test_live_kp_and_potential_changes_take_effect(rig, model):
 
 
 @pytest.mark.parametrize('name, value, words', [
-    ('kp', [4.5, 20.5], 'kp must have 3 values'),
-    ('kp', [4.5, 20.5, 17.5, 1.0, 1.0, 1.0], 'kp must have 3 values'),
+    ('kp', list(paper.KP[:2]), 'kp must have 3 values'),
+    ('kp', list(paper.KP) + [1.0] * 3, 'kp must have 3 values'),
     ('kp', [4.5, 0.0, 17.5], 'kp[1] must be finite and > 0'),
     ('kp', [4.5, -1.0, 17.5], 'kp[1] must be finite and > 0'),
     ('kp', [4.5, float('nan'), 17.5], 'kp[1] must be finite'),
@@ -349,7 +349,7 @@ def test_invalid_parameter_sets_are_rejected_with_a_reason(rig, model, name, val
 
 
 @pytest.mark.parametrize('xyzw, frame, words', [
-    ((0.0, 0.4226, 0.7848, 0.5566), 'base_link', 'not unit'),  # the printed Eq. (40)
+    (quat.to_xyzw(paper.Q_DESIRED_AS_PRINTED), 'base_link', 'not unit'),
     ((float('nan'), 0.0, 0.0, 1.0), 'base_link', 'non-finite'),
     ((0.0, 0.0, float('inf'), 1.0), 'base_link', 'non-finite'),
     ((0.0, 0.0, 0.0, 0.0), 'base_link', 'not unit'),
@@ -360,12 +360,23 @@ def test_invalid_goals_are_rejected_and_the_previous_goal_stays(rig, model, xyzw
     h, plant = rig
     set_potential(h, 'tanh')
     send_goal(h, plant, model, GOAL_XYZW, gains())
-    n_logs = len(h.logs)
+    h.spin_until(lambda: rejected_goals(h) >= 0, 5.0, 'a goal status on /diagnostics')
+    before = rejected_goals(h)
     h.goal_pub.publish(goal_msg(xyzw, frame))
-    h.spin_until(lambda: any('target_pose rejected' in m and words in m
-                             for m in h.logs[n_logs:]), 5.0, f'rejection log ({words})')
+    # Counted in /diagnostics every time; logged once per cause and second (a flood of the
+    # same fault gives one line a second), so the wording may come from an earlier case.
+    h.spin_until(lambda: rejected_goals(h) > before, 5.0, 'the rejection counted')
+    h.spin_until(lambda: any('target_pose rejected' in m and words in m for m in h.logs),
+                 5.0, f'rejection log ({words})')
     q = (0.2, 0.3, 0.1)
     assert close(plant.command_for(q), expected(model, q))
+
+
+def rejected_goals(h: Harness) -> int:
+    """Return rejected_goals_total of the latest /diagnostics goal status (-1 before any)."""
+    values = [kv.value for arr in h.diagnostics for s in arr.status for kv in s.values
+              if kv.key == 'rejected_goals_total' and s.name.endswith(f'{CONTROLLER}: goal')]
+    return int(values[-1]) if values else -1
 
 
 def test_nearly_unit_goal_is_normalised_and_empty_frame_is_base(rig, model):

@@ -1,35 +1,116 @@
 """
-The controller node in-process.
+The controller node in-process, through its public interfaces.
 
 Parameter declarations, validation, atomic gain swaps, goal checks, the hold-pose start and the
-diagnostics (issue 4).
-
-The node is constructed in this process and its callbacks are driven directly or through an
-executor; the multi-process behaviour over DDS is in test_controller_node.py.
+diagnostics. The node and a probe node share one context and one executor; the probe publishes
+joint states and goals on the node's topics and listens to its commands, poses, /rosout and
+/diagnostics. The multi-process behaviour over DDS is in test_controller_node.py.
 """
 import math
 from pathlib import Path
 import time
+from typing import Callable
 
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped
 import pytest
+from quat_jt_controller import paper
 from quat_jt_controller import quaternion as quat
 from quat_jt_controller.control_law import GainsError, Potential, Task
-from quat_jt_controller.controller_node import QuatJtController
+from quat_jt_controller.controller_node import NODE_NAME, QuatJtController
 from quat_jt_controller.model import ModelError
 from quat_jt_controller.parameters import GAIN_PARAMETERS
-from rcl_interfaces.msg import ParameterType
+from rcl_interfaces.msg import Log, ParameterType
 import rclpy
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.parameter import Parameter
 from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64MultiArray
+
+pytestmark = pytest.mark.node
 
 CONFIG = Path(__file__).resolve().parent.parent / 'config' / 'wrist_controller.yaml'
-PAPER_KP = [4.5, 20.5, 17.5]
-GOAL_XYZW = (0.0, 0.4226, 0.7152, 0.5566)
+PAPER_KP = list(paper.KP)
+GOAL_XYZW = quat.to_xyzw(paper.Q_DESIRED)
 STRUCTURAL = ('task', 'joints', 'base_link', 'tip_link', 'robot_description',
               'state_timeout', 'publish_rate_divider')
+
+
+def state(q, v=(0.0, 0.0, 0.0), names=('joint1', 'joint2', 'joint3')) -> JointState:
+    msg = JointState()
+    msg.name = list(names)
+    msg.position = [float(x) for x in q]
+    msg.velocity = [float(x) for x in v]
+    return msg
+
+
+def goal(xyzw, frame='base_link', position=(0.0, 0.0, 0.0)) -> PoseStamped:
+    msg = PoseStamped()
+    msg.header.frame_id = frame
+    msg.pose.position.x, msg.pose.position.y, msg.pose.position.z = position
+    o = msg.pose.orientation
+    o.x, o.y, o.z, o.w = (float(c) for c in xyzw)
+    return msg
+
+
+class Probe:
+    """Talks to one controller node through its topics, in the same process and executor."""
+
+    def __init__(self, context, node: QuatJtController) -> None:
+        self.node = node
+        self.probe = rclpy.create_node('controller_probe', context=context)
+        self.executor = SingleThreadedExecutor(context=context)
+        self.executor.add_node(node)
+        self.executor.add_node(self.probe)
+        self.commands: list[list[float]] = []
+        self.poses: list[tuple[float, ...]] = []
+        self.logs: list[str] = []
+        self.diagnostics: list[DiagnosticArray] = []
+        p = self.probe
+        p.create_subscription(Float64MultiArray, 'effort_controller/commands',
+                              lambda m: self.commands.append(list(m.data)), 100)
+        p.create_subscription(
+            PoseStamped, f'{NODE_NAME}/current_pose', lambda m: self.poses.append(
+                (m.pose.orientation.x, m.pose.orientation.y, m.pose.orientation.z,
+                 m.pose.orientation.w)), 100)
+        p.create_subscription(Log, '/rosout', lambda m: self.logs.append(m.msg)
+                              if m.name == NODE_NAME else None, 100)
+        p.create_subscription(DiagnosticArray, '/diagnostics', self.diagnostics.append, 10)
+        self.state_pub = p.create_publisher(JointState, 'joint_states', 100)
+        self.goal_pub = p.create_publisher(PoseStamped, f'{NODE_NAME}/target_pose', 10)
+        self.spin_until(lambda: self.state_pub.get_subscription_count() > 0
+                        and self.goal_pub.get_subscription_count() > 0
+                        and p.count_publishers('effort_controller/commands') > 0, 'discovery')
+
+    def spin_until(self, condition: Callable[[], bool], what: str, timeout: float = 10.0):
+        deadline = time.monotonic() + timeout
+        while not condition():
+            assert time.monotonic() < deadline, f'timed out waiting for {what}'
+            self.executor.spin_once(timeout_sec=0.02)
+
+    def command_for(self, msg: JointState) -> list[float]:
+        """Publish one state and return the command computed from it."""
+        n = len(self.commands)
+        self.state_pub.publish(msg)
+        self.spin_until(lambda: len(self.commands) > n, 'a command')
+        assert len(self.commands) == n + 1
+        return self.commands[-1]
+
+    def send_goal(self, msg: PoseStamped) -> None:
+        """Publish a goal and wait until the node has taken it (or counted its rejection)."""
+        c = self.node.counters
+        seen = c.accepted_goals + c.rejected_goals
+        self.goal_pub.publish(msg)
+        self.spin_until(lambda: c.accepted_goals + c.rejected_goals > seen, 'the goal')
+
+    def wait_log(self, fragment: str) -> str:
+        self.spin_until(lambda: any(fragment in m for m in self.logs), f'log {fragment!r}')
+        return next(m for m in self.logs if fragment in m)
+
+    def close(self) -> None:
+        self.executor.remove_node(self.probe)
+        self.executor.remove_node(self.node)
+        self.probe.destroy_node()
 
 
 @pytest.fixture
@@ -55,21 +136,16 @@ def make_node(context):
         node.destroy_node()
 
 
-def state(q, v=(0.0, 0.0, 0.0), names=('joint1', 'joint2', 'joint3')) -> JointState:
-    msg = JointState()
-    msg.name = list(names)
-    msg.position = [float(x) for x in q]
-    msg.velocity = [float(x) for x in v]
-    return msg
+@pytest.fixture
+def make_probe(context, make_node):
+    probes = []
 
-
-def goal(xyzw, frame='base_link', position=(0.0, 0.0, 0.0)) -> PoseStamped:
-    msg = PoseStamped()
-    msg.header.frame_id = frame
-    msg.pose.position.x, msg.pose.position.y, msg.pose.position.z = position
-    o = msg.pose.orientation
-    o.x, o.y, o.z, o.w = xyzw
-    return msg
+    def make(overrides=None) -> Probe:
+        probes.append(Probe(context, make_node(overrides)))
+        return probes[-1]
+    yield make
+    for probe in probes:
+        probe.close()
 
 
 def test_parameters_are_declared_with_descriptors(make_node):
@@ -86,10 +162,10 @@ def test_parameters_are_declared_with_descriptors(make_node):
 
 def test_defaults_and_config_file_are_the_paper_experiment(make_node):
     for node in (make_node(), make_node(cli_args=['--ros-args', '--params-file', str(CONFIG)])):
-        g = node._gains
+        g = node.gains
         assert node.get_parameter('task').value == 'orientation'
-        assert g.kp == tuple(PAPER_KP) and g.kv == (1.0, 1.0, 1.0)
-        assert g.lam == (30.0, 30.0, 30.0) and g.gravity_compensation
+        assert g.kp == paper.KP and g.kv == paper.KV
+        assert g.lam == paper.LAMBDA and g.gravity_compensation
         assert g.potential is Potential.TANH
         assert list(node.get_parameter('joints').value) == ['joint1', 'joint2', 'joint3']
         assert node.get_parameter('tip_link').value == 'tool0'
@@ -106,13 +182,13 @@ def test_defaults_and_config_file_are_the_paper_experiment(make_node):
 ])
 def test_invalid_sets_are_rejected_and_nothing_changes(make_node, changes, words):
     node = make_node()
-    before = node._gains
+    before = node.gains
     values_before = {k: node.get_parameter(k).value for k in GAIN_PARAMETERS}
     result = node.set_parameters_atomically(
         [Parameter(k, value=v) for k, v in changes.items()])
     assert not result.successful
     assert words in result.reason, result.reason
-    assert node._gains is before
+    assert node.gains is before
     for k in GAIN_PARAMETERS:
         assert node.get_parameter(k).value == values_before[k]
 
@@ -127,24 +203,24 @@ def test_read_only_parameters_cannot_be_set(make_node):
 
 def test_valid_set_swaps_one_new_gains_object(make_node):
     node = make_node()
-    before = node._gains
+    before = node.gains
     result = node.set_parameters_atomically([
         Parameter('kp', value=[1.0, 2.0, 3.0]), Parameter('potential', value='quadratic'),
         Parameter('gravity_compensation', value=False)])
     assert result.successful, result.reason
-    g = node._gains
+    g = node.gains
     assert g is not before
     assert (g.kp, g.potential, g.gravity_compensation) == ((1.0, 2.0, 3.0),
                                                            Potential.QUADRATIC, False)
     assert g.kv == before.kv and g.lam == before.lam
     # A later single change builds on the stored values.
     assert node.set_parameters([Parameter('kv', value=[2.0, 2.0, 2.0])])[0].successful
-    assert node._gains.kp == (1.0, 2.0, 3.0) and node._gains.kv == (2.0, 2.0, 2.0)
+    assert node.gains.kp == (1.0, 2.0, 3.0) and node.gains.kv == (2.0, 2.0, 2.0)
 
 
 def test_pose_task_has_six_gains_and_a_position_error_topic(make_node):
     node = make_node({'task': 'pose'})
-    assert len(node._gains.kp) == 6 and len(node._gains.lam) == 6
+    assert len(node.gains.kp) == 6 and len(node.gains.lam) == 6
     assert len(node.get_publishers_info_by_topic('/quat_jt_controller/position_error')) == 1
     assert not node.set_parameters([Parameter('kp', value=PAPER_KP)])[0].successful
     ok = node.set_parameters([Parameter('kp', value=[100.0] * 3 + PAPER_KP)])[0]
@@ -162,105 +238,90 @@ def test_bad_start_up_configuration_raises_a_clear_error(make_node, overrides, e
         make_node(overrides)
 
 
-def test_tick_reads_no_parameters_and_holds_the_first_pose(make_node, monkeypatch):
-    node = make_node()
+def test_tick_reads_no_parameters_and_holds_the_first_pose(make_probe, monkeypatch):
+    probe = make_probe()
+    node = probe.node
 
     def forbidden(*args, **kwargs):
         raise AssertionError('parameter read in the tick')
     monkeypatch.setattr(node, 'get_parameter', forbidden)
     monkeypatch.setattr(node, 'get_parameters', forbidden)
-    sent = []
-    monkeypatch.setattr(node._cmd_pub, 'publish', lambda m: sent.append(list(m.data)))
     q = (0.3, 0.7, -0.2)
-    node._on_joint_state(state(q))
-    assert node._goal_source == 'hold'
+    first = probe.command_for(state(q))
+    assert node.regulator.goal is not None
+    probe.wait_log('holding the measured pose')
     # Holding the measured pose at rest: e = 0, so the command is g(q) alone.
-    g = node._model.gravity(list(q))
-    assert all(abs(a - b) < 1e-12 for a, b in zip(sent[-1], g)), (sent[-1], g)
-    node._on_joint_state(state((0.5, 0.2, 0.1)))  # pulled back towards the held pose
-    assert len(sent) == 2 and sent[-1] != sent[0]
+    g = node.regulator.model.gravity(list(q))
+    assert all(abs(a - b) < 1e-12 for a, b in zip(first, g)), (first, g)
+    second = probe.command_for(state((0.5, 0.2, 0.1)))  # pulled back towards the held pose
+    assert second != first
 
 
-def test_shuffled_and_extra_names_give_the_same_command(make_node, monkeypatch):
-    node = make_node()
-    sent = []
-    monkeypatch.setattr(node._cmd_pub, 'publish', lambda m: sent.append(list(m.data)))
-    node._on_target_pose(goal(GOAL_XYZW))
+def test_shuffled_and_extra_names_give_the_same_command(make_probe):
+    probe = make_probe()
+    probe.send_goal(goal(GOAL_XYZW))
     q, v = (0.1, 0.2, 0.3), (0.3, -0.1, 0.2)
-    node._on_joint_state(state(q, v))
-    msg = state((0.3, 9.0, 0.1, 0.2), (0.2, 9.0, 0.3, -0.1),
-                names=('joint3', 'gripper', 'joint1', 'joint2'))
-    node._on_joint_state(msg)
-    node._on_joint_state(state(q, v))  # back to the first layout (cached)
-    assert sent[0] == sent[1] == sent[2]
+    first = probe.command_for(state(q, v))
+    shuffled = probe.command_for(state((0.3, 9.0, 0.1, 0.2), (0.2, 9.0, 0.3, -0.1),
+                                       names=('joint3', 'gripper', 'joint1', 'joint2')))
+    again = probe.command_for(state(q, v))  # back to the first layout (cached)
+    assert first == shuffled == again
 
 
-def test_goals_breaking_a1_or_a2_are_accepted_with_a_warning(make_node):
-    node = make_node()
-    node._on_target_pose(goal(GOAL_XYZW))
-    assert node._goal_source == 'target_pose' and node._goal_warning == ''
+def test_goals_breaking_a1_or_a2_are_accepted_with_a_warning(make_probe):
+    probe = make_probe()
+    probe.send_goal(goal(GOAL_XYZW))
+    assert probe.node.regulator.goal.xyzw() == pytest.approx(GOAL_XYZW, abs=1e-4)
     singular_xyzw = (0.0, 0.0, math.sin(0.4), math.cos(0.4))  # only reached with q2 = 0
-    node._on_target_pose(goal(singular_xyzw))
-    assert node._goal[0] == pytest.approx(quat.from_xyzw(*singular_xyzw))  # accepted
-    assert 'singular' in node._goal_warning
-    pose = make_node({'task': 'pose'})
-    far = goal(GOAL_XYZW)
-    far.pose.position.x = 1.0  # the wrist centre cannot move
-    pose._on_target_pose(far)
-    assert pose._goal[1] == (1.0, 0.0, 0.0) and 'A1' in pose._goal_warning
+    probe.send_goal(goal(singular_xyzw))
+    assert probe.node.regulator.goal.xyzw() == pytest.approx(singular_xyzw)  # in force
+    assert 'singular' in probe.wait_log('accepted with a warning')
+    pose = make_probe({'task': 'pose'})
+    pose.send_goal(goal(GOAL_XYZW, position=(1.0, 0.0, 0.0)))  # the wrist centre cannot move
+    assert pose.node.regulator.goal.p_desired_base == (1.0, 0.0, 0.0)
+    pose.spin_until(lambda: any('accepted with a warning' in m and 'A1' in m for m in pose.logs),
+                    'the A1 warning')
 
 
-def test_rejected_goal_keeps_the_previous_one(make_node):
-    node = make_node()
-    node._on_target_pose(goal(GOAL_XYZW))
-    kept = node._goal
-    for bad in (goal((0.0, 0.4226, 0.7848, 0.5566)), goal((math.nan, 0.0, 0.0, 1.0)),
+def test_rejected_goal_keeps_the_previous_one(make_probe):
+    probe = make_probe()
+    probe.send_goal(goal(GOAL_XYZW))
+    kept = probe.node.regulator.goal
+    for bad in (goal(quat.to_xyzw(paper.Q_DESIRED_AS_PRINTED)), goal((math.nan, 0.0, 0.0, 1.0)),
                 goal((0.0, 0.0, 0.0, 1.0), frame='tool0')):
-        node._on_target_pose(bad)
-        assert node._goal is kept
-    assert node._n_rejected_goals == 3
-    node._on_target_pose(goal(tuple(-c for c in GOAL_XYZW), frame='/base_link'))
-    assert node._goal is not kept
+        probe.send_goal(bad)
+        assert probe.node.regulator.goal is kept
+    assert probe.node.counters.rejected_goals == 3
+    probe.send_goal(goal(tuple(-c for c in GOAL_XYZW), frame='/base_link'))
+    assert probe.node.regulator.goal is not kept
 
 
-def test_diagnostics_warn_near_180_degrees(make_node, context):
-    node = make_node()
-    listener = rclpy.create_node('diag_listener', context=context)
-    got = []
-    listener.create_subscription(DiagnosticArray, '/diagnostics', got.append, 10)
-    executor = SingleThreadedExecutor(context=context)
-    executor.add_node(node)
-    executor.add_node(listener)
-    node._on_joint_state(state((0.0, 0.0, 0.0)))
-    node._on_target_pose(goal((1.0, 0.0, 0.0, 0.0)))  # 180 degrees about x from q = 0
-    node._on_joint_state(state((0.0, 0.0, 0.0)))
-    deadline = time.monotonic() + 10.0
-    while not got and time.monotonic() < deadline:
-        node._on_diagnostics()
-        executor.spin_once(timeout_sec=0.1)
-    executor.remove_node(listener)
-    listener.destroy_node()
-    assert got, 'no /diagnostics received'
-    status = {s.name.split(': ')[-1]: s for s in got[-1].status}
-    assert status['goal'].level == bytes([1])
+def test_diagnostics_warn_near_180_degrees(make_probe):
+    probe = make_probe()
+    probe.command_for(state((0.0, 0.0, 0.0)))
+    probe.send_goal(goal((1.0, 0.0, 0.0, 0.0)))  # 180 degrees about x from q = 0
+    probe.command_for(state((0.0, 0.0, 0.0)))
+
+    def statuses() -> dict:
+        return {s.name.split(': ')[-1]: s for s in probe.diagnostics[-1].status}
+    probe.spin_until(lambda: probe.diagnostics and statuses()['goal'].level == bytes([1]),
+                     'a goal warning on /diagnostics')
+    status = statuses()
     assert '180 degrees' in status['goal'].message
     values = {kv.key: kv.value for kv in status['control loop'].values}
     for key in ('control_rate_hz', 'period_jitter_std_us', 'compute_us_p50', 'compute_us_p99',
                 'state_age_us_p50', 'saturated_ticks'):
         assert key in values
-    assert node._task is Task.ORIENTATION
+    assert probe.node.config.task is Task.ORIENTATION
 
 
-def test_current_pose_quaternion_keeps_its_hemisphere(make_node, monkeypatch):
+def test_current_pose_quaternion_keeps_its_hemisphere(make_probe):
     """Through eta = 0 the canonical (eta >= 0) quaternion flips; ~/current_pose must not."""
-    node = make_node({'publish_rate_divider': 1})
-    published = []
-    monkeypatch.setattr(node._pose_pub, 'publish', lambda m: published.append(
-        (m.pose.orientation.x, m.pose.orientation.y, m.pose.orientation.z,
-         m.pose.orientation.w)))
+    probe = make_probe({'publish_rate_divider': 1})
     for q1 in (3.0, 3.1, 3.2, 3.3):  # joint 1 through 180 degrees about z: eta crosses 0
-        node._on_joint_state(state((q1, 0.0, 0.0)))
-    assert len(published) == 4
+        probe.command_for(state((q1, 0.0, 0.0)))
+    probe.spin_until(lambda: len(probe.poses) == 4, 'four poses')
+    published = probe.poses
     for a, b in zip(published, published[1:]):
         assert sum(x * y for x, y in zip(a, b)) > 0.9, published
     assert published[0][3] > 0.0 > published[-1][3]  # it did go past eta = 0

@@ -1,10 +1,13 @@
 """The A1 / A2 goal check (quat_jt_controller.goal_check) on the wrist and the xArm6."""
 import math
 
+import pytest
 from quat_jt_controller import quaternion as quat
 from quat_jt_controller.control_law import Task
 from quat_jt_controller.goal_check import check_goal, solve_ik
 from robots import Q_DESIRED, wrist_model, xarm6_model
+
+pytestmark = pytest.mark.unit
 
 ORI, POSE = Task.ORIENTATION, Task.POSE
 

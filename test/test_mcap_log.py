@@ -1,10 +1,13 @@
 """MCAP files written from raw CDR decode with the standard ROS 2 MCAP reader."""
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
+import pytest
 from quat_jt_controller.tools.mcap_log import McapLog, message_definition
 from rclpy.serialization import serialize_message
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
+
+pytestmark = pytest.mark.unit
 
 
 def test_definition_carries_dependencies_in_rosbag2_form():

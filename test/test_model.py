@@ -9,6 +9,8 @@ from quat_jt_controller.resources import default_urdf_xml
 from robots import (Q_DESIRED, Q_JOINT_DESIRED, random_q, wrist_model, xarm6_model,
                     XARM6_URDF)
 
+pytestmark = pytest.mark.unit
+
 
 def rz(a):
     c, s = np.cos(a), np.sin(a)
@@ -35,7 +37,7 @@ def test_wrist_angular_jacobian_equals_eq39_at_random_q():
         q = rng.uniform(-np.pi, np.pi, 3)
         _, R, J = model.kinematics(q)
         np.testing.assert_allclose(np.array(J)[3:], jacobian_eq39(q), atol=1e-12)
-        # ERRATA note 4: R(q) = Rz(q1) Ry(q2) Rz(q3).
+        # docs/errata.md note 4: R(q) = Rz(q1) Ry(q2) Rz(q3).
         np.testing.assert_allclose(R, rz(q[0]) @ ry(q[1]) @ rz(q[2]), atol=1e-12)
 
 

@@ -7,6 +7,8 @@ import sys
 
 import pytest
 
+pytestmark = pytest.mark.packaging
+
 REPO = Path(__file__).resolve().parent.parent
 COLCON = Path(sys.executable).parent / 'colcon'
 IGNORE = shutil.ignore_patterns('.venv', '.git', 'build', 'install', 'log', '*.egg-info',

@@ -23,6 +23,8 @@ from sampled_loop import goal_of, linearized_spectral_radius, load_params
 from sampled_loop import time_constant_s, xarm6_gains
 from wrist_sim.simulator import WristSimulator
 
+pytestmark = pytest.mark.unit
+
 REPO = Path(__file__).resolve().parent.parent
 POTENTIALS = ('quadratic', 'tanh')
 POSITION_TOL_M = 1e-3  # the hold tolerances

@@ -21,6 +21,7 @@ import time
 from geometry_msgs.msg import PoseStamped, Vector3Stamped
 from process_harness import ProcessHarnessMixin
 import pytest
+from quat_jt_controller import paper
 from quat_jt_controller import quaternion as quat
 from quat_jt_controller.model import RobotModel
 from quat_jt_controller.tools import local_ros
@@ -33,6 +34,8 @@ from robots import XARM6_URDF
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 from std_srvs.srv import Trigger
+
+pytestmark = pytest.mark.dds
 
 REPO = Path(__file__).resolve().parent.parent
 CONFIG = REPO / 'config'
@@ -280,7 +283,7 @@ def test_pose_task_rejects_three_element_gain_vectors(make_rig):
     rig.wait_ready()
     before = rig.params.get_parameters(['kp', 'lambda'])
     rig.spin_until(before.done, 10.0, 'get_parameters')
-    for name, value in (('kp', [4.5, 20.5, 17.5]), ('lambda', [30.0, 30.0, 30.0])):
+    for name, value in (('kp', list(paper.KP)), ('lambda', list(paper.LAMBDA))):
         future = rig.params.set_parameters([Parameter(name, value=value)])
         rig.spin_until(future.done, 10.0, f'set_parameters {name}')
         result = future.result().results[0]

@@ -44,6 +44,7 @@ def _make_node(context, **overrides):
         Parameter(k, value=v) for k, v in overrides.items()])
 
 
+@pytest.mark.node
 def test_parameters_default_from_the_urdf(context):
     node = _make_node(context)
     try:
@@ -56,6 +57,7 @@ def test_parameters_default_from_the_urdf(context):
         node.destroy_node()
 
 
+@pytest.mark.node
 def test_friction_parameters_are_validated_and_applied(context):
     node = _make_node(context, coulomb_friction=[0.5, 0.5, 0.5])
     try:
@@ -78,6 +80,7 @@ def test_friction_parameters_are_validated_and_applied(context):
         node.destroy_node()
 
 
+@pytest.mark.node
 def test_bad_startup_parameters_are_refused(context):
     with pytest.raises(SimulatorError):
         _make_node(context, viscous_friction=[0.1, 0.2])
@@ -184,6 +187,7 @@ def probe(sim):
     p.destroy()
 
 
+@pytest.mark.dds
 def test_joint_states_arrive_at_about_1khz_with_monotonic_stamps(sim, probe):
     start = len(probe.msgs)
     t0 = time.perf_counter()
@@ -208,6 +212,7 @@ def _stream(probe: Probe, cmd, duration_s: float) -> None:
         probe.respond = None
 
 
+@pytest.mark.dds
 def test_effort_command_moves_the_joint_the_right_way(sim, probe):
     q_before = np.array(probe.latest()[2])
     _stream(probe, [2.0, 0.0, -1.5], 0.15)
@@ -221,6 +226,7 @@ def test_effort_command_moves_the_joint_the_right_way(sim, probe):
     np.testing.assert_allclose(probe.latest()[4], [50.0, 0.0, -20.0])
 
 
+@pytest.mark.dds
 def test_bad_commands_are_rejected_and_the_node_keeps_publishing(sim, probe):
     _stream(probe, [2.0, 0.0, 0.0], 0.1)
     n0 = len(probe.msgs)
@@ -242,6 +248,7 @@ def test_bad_commands_are_rejected_and_the_node_keeps_publishing(sim, probe):
     assert log.count('rejected command') < 10, log
 
 
+@pytest.mark.dds
 def test_watchdog_zeroes_torque_and_recovers(sim, probe):
     _stream(probe, [0.0, 0.0, 2.5], 0.1)
     assert probe.latest()[4] == [0.0, 0.0, 2.5]
@@ -254,6 +261,7 @@ def test_watchdog_zeroes_torque_and_recovers(sim, probe):
     assert 'commands are back' in sim.log()
 
 
+@pytest.mark.dds
 def test_reset_returns_to_initial_positions_at_rest(sim, probe):
     _stream(probe, [5.0, 0.0, 5.0], 0.2)
     assert np.abs(np.array(probe.latest()[2]) - INITIAL).max() > 0.01
@@ -269,6 +277,7 @@ def test_reset_returns_to_initial_positions_at_rest(sim, probe):
     assert effort == [0.0, 0.0, 0.0]
 
 
+@pytest.mark.dds
 def test_shutdown_on_sigint_writes_stats(sim, probe):
     # Last test of the module: a controller stand-in for 1 s, then SIGINT.
     _stream(probe, [0.0, 0.0, 0.0], 1.0)
@@ -284,6 +293,7 @@ def test_shutdown_on_sigint_writes_stats(sim, probe):
 
 # -- lockstep with /clock --------------------------------------------------------------------
 
+@pytest.mark.dds
 def test_lockstep_clock_steps_once_per_command(tmp_path):
     s = SimProcess(tmp_path, {'publish_clock': True, 'lockstep_timeout': 0.5})
     p = Probe(s.context)
@@ -312,6 +322,7 @@ def test_lockstep_clock_steps_once_per_command(tmp_path):
         assert s.close() == 0, s.log()
 
 
+@pytest.mark.dds
 def test_joints_are_held_until_the_first_command(tmp_path):
     """hold_until_first_command: no fall under gravity while no controller has answered."""
     q0 = [0.0, 0.6, 0.0]  # joint 2 off vertical: gravity pulls it (~0.8 N m), no friction

@@ -6,8 +6,9 @@ import pybullet_data
 import pytest
 from quat_jt_controller.model import RobotModel
 from quat_jt_controller.resources import default_urdf_xml
-from wrist_sim.simulator import (LoopStats, resolve_package_uris, SimulatorError,
-                                 WristSimulator)
+from wrist_sim.simulator import resolve_package_uris, SimulatorError, WristSimulator
+
+pytestmark = pytest.mark.unit
 
 DT_S = 1e-3
 XARM = Path(pybullet_data.getDataPath()) / 'xarm' / 'xarm6_robot.urdf'
@@ -230,21 +231,6 @@ def test_loads_the_xarm6_with_package_meshes():
         assert s.n == 6
         s.step(np.zeros(6))
         assert np.all(np.isfinite(s.q_rad))
-
-
-def test_loop_stats_summary():
-    stats = LoopStats(capacity=100)
-    for k in range(250):
-        stats.record_step(k * 1e-3, 50e-6, 1e-6, fresh=k % 2 == 0)
-        stats.record_latency(300e-6)
-    stats.missed_deadlines = 2
-    out = stats.summary()
-    assert out['steps'] == 250 and out['fresh_steps'] == 125
-    assert out['window_rate_hz'] == pytest.approx(1000.0)
-    assert out['step_compute_us_p50'] == pytest.approx(50.0)
-    assert out['cmd_latency_us_p99'] == pytest.approx(300.0)
-    assert out['window_fresh_fraction'] == pytest.approx(0.5)
-    assert out['missed_deadlines'] == 2
 
 
 def test_hold_passes_time_with_the_joints_at_rest(urdf):

@@ -7,6 +7,9 @@ import sys
 
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
+import pytest
+
+pytestmark = pytest.mark.e2e
 
 
 def run_tool(module, *args, timeout=240):
@@ -37,7 +40,7 @@ def test_paper_experiment_reproduces_the_qualitative_result(tmp_path):
                       .iter_decoded_messages()}
         assert {'/joint_states', '/effort_controller/commands',
                 '/quat_jt_controller/orientation_error'} <= topics
-    # Section 5 (ERRATA note 5): Coulomb friction holds the quadratic law back near 0.2,
+    # Section 5 (docs/errata.md note 5): Coulomb friction holds the quadratic law back near 0.2,
     # the tanh law gets within a few 1e-3.
     assert 0.1 < final['quadratic'] < 0.4, final
     assert final['tanh'] < 0.02, final

@@ -27,30 +27,27 @@ missed deadlines, step compute time, command freshness and latency) are kept in 
 (:class:`wrist_sim.simulator.LoopStats`), logged at shutdown and written as JSON to
 ``stats_file`` if set.
 """
-import gc
 import json
 import math
 from pathlib import Path
-import sys
 import time
-from typing import Any, Optional
-from xml.etree import ElementTree
+from typing import Any, Callable, Optional
 
 import numpy as np
+from quat_jt_controller import lifecycle
+from quat_jt_controller.joints import movable_joints
+from quat_jt_controller.loop_stats import LoopStats
+from quat_jt_controller.parameters import LiveParameters
 from quat_jt_controller.resources import default_urdf_xml
-from rcl_interfaces.msg import (FloatingPointRange, IntegerRange, ParameterDescriptor,
-                                SetParametersResult)
-import rclpy
-from rclpy.executors import ExternalShutdownException
-from rclpy.experimental import EventsExecutor
+from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 from rclpy.node import Node
-from rclpy.parameter import Parameter
 from rclpy.qos import QoSProfile
 from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 from std_srvs.srv import Trigger
-from wrist_sim.simulator import LoopStats, SimulatorError, WristSimulator
+from wrist_sim.config import LIVE_PARAMETERS, SimConfig
+from wrist_sim.simulator import SimulatorError, WristSimulator
 
 NODE_NAME = 'wrist_sim'
 BUSY_WAIT_S = 2.5e-4  # spin the executor until this long before a tick, then busy-wait
@@ -61,18 +58,6 @@ STEP_LEAD_S = 1.0e-4
 LOG_PERIOD_S = 1.0
 THROTTLE_S = 1.0
 STATS_WINDOW_STEPS = 30000  # timing percentiles cover the last 30 s at 1 kHz
-# Live (not read-only) parameters and how they are checked.
-_FRICTION_PARAMS = ('viscous_friction', 'coulomb_friction')
-
-
-def movable_joints_of(urdf_xml: str) -> list[str]:
-    """Names of the revolute/prismatic/continuous joints of a URDF, in document order."""
-    try:
-        root = ElementTree.fromstring(urdf_xml)
-    except ElementTree.ParseError as exc:
-        raise SimulatorError(f'robot_description is not valid XML: {exc}') from exc
-    return [j.get('name') for j in root.iter('joint')
-            if j.get('type') in ('revolute', 'continuous', 'prismatic')]
 
 
 def _float_range(lo: float, hi: float) -> list[FloatingPointRange]:
@@ -85,13 +70,13 @@ class WristSimNode(Node):
     def __init__(self, **kwargs: Any) -> None:
         super().__init__(NODE_NAME, **kwargs)
         self._declare_parameters()
-        p = self._params
+        p, c = self.structural, self.live.current
         self.rate_hz = int(p['rate_hz'])
         self.dt_ns = int(round(1e9 / self.rate_hz))
         self.sim = WristSimulator(
             self._urdf_xml, p['joints'], dt_s=self.dt_ns * 1e-9, use_gui=p['use_gui'],
-            viscous_nm_s_per_rad=p['viscous_friction'], coulomb_nm=p['coulomb_friction'],
-            initial_positions_rad=p['initial_positions'])
+            viscous_nm_s_per_rad=c.viscous_nm_s_per_rad, coulomb_nm=c.coulomb_nm,
+            initial_positions_rad=c.initial_positions_rad)
         self.n = self.sim.n
         self.publish_clock = bool(p['publish_clock'])
         self.stats = LoopStats(capacity=STATS_WINDOW_STEPS)
@@ -119,8 +104,6 @@ class WristSimNode(Node):
         self.cmd_sub = self.create_subscription(
             Float64MultiArray, 'effort_controller/commands', self._on_command, 10)
         self.reset_srv = self.create_service(Trigger, '~/reset', self._on_reset)
-        self.add_on_set_parameters_callback(self._validate_parameters)
-        self.add_post_set_parameters_callback(self._apply_parameters)
         self.get_logger().info(
             f'simulating joints {list(self.sim.joint_names)} at {self.rate_hz} Hz, '
             f'effort limits {self.sim.effort_limits_nm.tolist()} N m, '
@@ -142,7 +125,10 @@ class WristSimNode(Node):
             'URDF as an XML string; empty = the bundled spherical wrist', read_only=True))
         urdf = self.get_parameter('robot_description').value or default_urdf_xml()
         self._urdf_xml = urdf
-        movable = movable_joints_of(urdf)
+        try:
+            movable = movable_joints(urdf)
+        except ValueError as exc:
+            raise SimulatorError(f'robot_description: {exc}') from None
         if not movable:
             raise SimulatorError('the URDF has no movable joints')
         self.declare_parameter('joints', movable, desc(
@@ -179,47 +165,20 @@ class WristSimNode(Node):
             read_only=True))
         self.declare_parameter('stats_file', '', desc(
             'if set, timing statistics are written there as JSON at shutdown', read_only=True))
-        names = ('joints', 'initial_positions', 'rate_hz', 'use_gui', 'publish_clock',
-                 'lockstep_timeout', 'max_real_time_factor', 'viscous_friction',
-                 'coulomb_friction', 'command_timeout', 'hold_until_first_command',
-                 'stats_file')
-        self._params: dict[str, Any] = {k: self.get_parameter(k).value for k in names}
-        for k in ('initial_positions', 'viscous_friction', 'coulomb_friction'):
-            self._params[k] = list(self._params[k])
-            problem = self._check_vector(k, self._params[k], n)
-            if problem:
-                raise SimulatorError(problem)
+        self.structural = {k: self.get_parameter(k).value for k in (
+            'joints', 'rate_hz', 'use_gui', 'publish_clock', 'hold_until_first_command',
+            'stats_file')}
+        self.live = LiveParameters(self, LIVE_PARAMETERS,
+                                   lambda values: SimConfig.create(values, n),
+                                   on_apply=self._apply_config)
 
-    @staticmethod
-    def _check_vector(name: str, values: Any, n: int) -> Optional[str]:
-        values = list(values)
-        if len(values) != n:
-            return f'{name}: expected {n} values (one per joint), got {len(values)}'
-        if not all(math.isfinite(v) for v in values):
-            return f'{name}: values must be finite, got {values}'
-        if name in _FRICTION_PARAMS and any(v < 0.0 for v in values):
-            return f'{name}: values must be >= 0, got {values}'
-        return None
-
-    def _validate_parameters(self, params: list[Parameter]) -> SetParametersResult:
-        for prm in params:
-            if prm.name in _FRICTION_PARAMS + ('initial_positions',):
-                problem = self._check_vector(prm.name, prm.value, self.n)
-                if problem:
-                    return SetParametersResult(successful=False, reason=problem)
-        return SetParametersResult(successful=True)
-
-    def _apply_parameters(self, params: list[Parameter]) -> None:
-        """Apply accepted changes; both friction arrays go to the simulator together."""
-        for prm in params:
-            self._params[prm.name] = prm.value
-        names = {prm.name for prm in params}
-        if names & set(_FRICTION_PARAMS):
-            self.sim.set_friction(list(self._params['viscous_friction']),
-                                  list(self._params['coulomb_friction']))
-            self.get_logger().info(
-                f'friction: viscous {list(self._params["viscous_friction"])} N m s/rad, '
-                f'Coulomb {list(self._params["coulomb_friction"])} N m')
+    def _apply_config(self, config: SimConfig) -> None:
+        """Take a new live config: push its friction to the simulator."""
+        friction = (list(config.viscous_nm_s_per_rad), list(config.coulomb_nm))
+        if friction != [a.tolist() for a in self.sim.friction]:
+            self.sim.set_friction(*friction)
+            self.get_logger().info(f'friction: viscous {friction[0]} N m s/rad, Coulomb '
+                                   f'{friction[1]} N m')
 
     # -- callbacks -----------------------------------------------------------------------
 
@@ -246,7 +205,7 @@ class WristSimNode(Node):
     def _on_reset(self, request: Trigger.Request, response: Trigger.Response
                   ) -> Trigger.Response:
         try:
-            self.sim.reset(self._params['initial_positions'])
+            self.sim.reset(self.live.current.initial_positions_rad)
         except SimulatorError as exc:
             response.success = False
             response.message = str(exc)
@@ -255,7 +214,7 @@ class WristSimNode(Node):
         self._have_cmd = False
         self._watchdog_tripped = False
         response.success = True
-        response.message = f'reset to {list(self._params["initial_positions"])} at rest'
+        response.message = f'reset to {list(self.live.current.initial_positions_rad)} at rest'
         self.get_logger().info(response.message)
         return response
 
@@ -269,13 +228,13 @@ class WristSimNode(Node):
         ``hold_until_first_command``) the joints are held at rest, like a drive whose brakes
         release when its controller connects; only time advances.
         """
-        if self._have_cmd or not self._params['hold_until_first_command']:
+        if self._have_cmd or not self.structural['hold_until_first_command']:
             self.sim.step(self._torque_to_apply())
         else:
             self.sim.hold()
 
     def _torque_to_apply(self) -> np.ndarray:
-        timeout_ns = int(self._params['command_timeout'] * 1e9)
+        timeout_ns = self.live.current.command_timeout_ns
         age_ns = self.sim.step_count * self.dt_ns - self._cmd_sim_ns
         if self._have_cmd and (timeout_ns <= 0 or age_ns <= timeout_ns):
             if self._watchdog_tripped:
@@ -287,7 +246,7 @@ class WristSimNode(Node):
             self.stats.watchdog_trips += 1
             self.get_logger().warning(
                 f'no command for {age_ns * 1e-9:.3f} s (> command_timeout '
-                f'{self._params["command_timeout"]} s): torque set to zero')
+                f'{self.live.current.command_timeout_s} s): torque set to zero')
         return self._zero
 
     def tick(self, late_s: float = 0.0) -> None:
@@ -324,8 +283,10 @@ class WristSimNode(Node):
 
     # -- loops ---------------------------------------------------------------------------
 
-    def run(self, executor: Any) -> None:
-        """Step until the context shuts down (SIGINT), spinning ``executor`` in between."""
+    def run(self, executor: Any, keep_running: Callable[[], bool] = lambda: True) -> None:
+        """Step until ``keep_running()`` is false or the context shuts down."""
+        context_ok = self.context.ok
+        self._ok = lambda: keep_running() and context_ok()
         self.publish_state()  # the initial state, so a controller can answer it
         self.stats.start_s = time.perf_counter()
         if self.publish_clock:
@@ -358,7 +319,7 @@ class WristSimNode(Node):
         clock = time.perf_counter
         next_t = clock() + period
         last_log = [clock(), 0]
-        ok = self.context.ok
+        ok = self._ok
         while ok():
             step_at = next_t - STEP_LEAD_S
             while self._cmd_seq == self._seq_at_publish:  # wait for the answer
@@ -396,9 +357,10 @@ class WristSimNode(Node):
         clock = time.perf_counter
         last_step = clock()
         last_log = [last_step, 0]
-        ok = self.context.ok
+        ok = self._ok
         while ok():
-            deadline = last_step + self._params['lockstep_timeout']
+            config = self.live.current
+            deadline = last_step + config.lockstep_timeout_s
             while self._cmd_seq == self._seq_at_publish:
                 remaining = deadline - clock()
                 if remaining <= 0.0:
@@ -407,7 +369,7 @@ class WristSimNode(Node):
                 executor.spin_once(timeout_sec=remaining)
                 if not ok():
                     return
-            rtf = self._params['max_real_time_factor']
+            rtf = config.max_real_time_factor
             if rtf > 0.0:
                 earliest = last_step + self.dt_ns * 1e-9 / rtf
                 while (remaining := earliest - clock()) > 0.0 and ok():
@@ -422,7 +384,7 @@ class WristSimNode(Node):
         """Log (and write) the timing statistics, close the simulator, destroy the node."""
         summary = self.stats.summary()
         self.get_logger().info('stats ' + json.dumps(summary, sort_keys=True))
-        path = self._params.get('stats_file') if hasattr(self, '_params') else ''
+        path = self.structural['stats_file']
         if path:
             try:
                 Path(path).write_text(json.dumps(summary, indent=1, sort_keys=True))
@@ -434,27 +396,9 @@ class WristSimNode(Node):
 
 def main(args: Optional[list[str]] = None) -> None:
     """Entry point of ``wrist_sim_node``."""
-    rclpy.init(args=args)
-    node = None
-    try:
-        try:
-            node = WristSimNode()
-        except (SimulatorError, FileNotFoundError) as exc:
-            rclpy.logging.get_logger(NODE_NAME).fatal(str(exc))
-            sys.exit(1)
-        executor = EventsExecutor(context=node.context)
-        executor.add_node(node)
-        # The objects built so far (rclpy, PyBullet, the node) live as long as the node: keep
-        # the cyclic garbage collector from rescanning them during the 1 kHz loop.
-        gc.collect()
-        gc.freeze()
-        node.run(executor)
-    except (KeyboardInterrupt, ExternalShutdownException):
-        pass
-    finally:
-        if node is not None:
-            node.destroy_node()
-        rclpy.try_shutdown()
+    lifecycle.run_node(WristSimNode, NODE_NAME, (SimulatorError, FileNotFoundError),
+                       lambda node, executor, keep_running: node.run(executor, keep_running),
+                       args)
 
 
 if __name__ == '__main__':

@@ -29,8 +29,7 @@ The commanded torque is clamped to the URDF effort limits; that clamped torque i
 "applied" torque reported by :meth:`WristSimulator.step` and :meth:`WristSimulator.state`
 (friction is not included in it: it is the motor torque, as a drive would report it).
 
-This module never imports rclpy; :class:`LoopStats` is the node's timing bookkeeping, kept here
-so it can be tested without ROS.
+This module never imports rclpy.
 """
 from dataclasses import dataclass
 import math
@@ -38,17 +37,15 @@ import os
 from pathlib import Path
 import re
 import tempfile
-import time
 from typing import Optional, Sequence, Union
 
 import numpy as np
 import pybullet
 import pybullet_data
 from pybullet_utils.bullet_client import BulletClient
-from quat_jt_controller.joints import select_joints
+from quat_jt_controller.joints import movable_joints, select_joints
 
 GRAVITY_MPS2 = 9.81
-_MOVABLE = (pybullet.JOINT_REVOLUTE, pybullet.JOINT_PRISMATIC)
 _PACKAGE_URI = re.compile(r'package://([^/"\'\s]+)/([^"\'\s<>]*)')
 
 PathLike = Union[str, os.PathLike]
@@ -182,19 +179,19 @@ class WristSimulator:
             os.unlink(path)
 
         by_name: dict[str, int] = {}
-        movable: list[str] = []
         info_by_index = {}
         for j in range(c.getNumJoints(self._body)):
             info = c.getJointInfo(self._body, j)
-            name = info[1].decode()
-            by_name[name] = j
+            by_name[info[1].decode()] = j
             info_by_index[j] = info
-            if info[2] in _MOVABLE:
-                movable.append(name)
             # Zero PyBullet's default damping (0.04 on every link) and joint damping.
             c.changeDynamics(self._body, j, linearDamping=0.0, angularDamping=0.0,
                              jointDamping=0.0)
         c.changeDynamics(self._body, -1, linearDamping=0.0, angularDamping=0.0)
+        try:
+            movable = [n for n in movable_joints(xml) if n in by_name]
+        except ValueError as exc:
+            raise SimulatorError(str(exc)) from exc
         names = select_joints(joint_names, movable, SimulatorError)
         self.joint_names: tuple[str, ...] = tuple(names)
         self.n = len(names)
@@ -360,90 +357,3 @@ class WristSimulator:
 
     def __exit__(self, *exc) -> None:
         self.close()
-
-
-class LoopStats:
-    """
-    Cheap timing bookkeeping of a stepping loop: counters plus preallocated ring buffers.
-
-    Per step: wall time, compute time, lateness past the deadline, whether the command applied
-    was fresh (arrived after the previous state was published). Per fresh command: latency from
-    the state publish to its arrival. All times in seconds (``time.perf_counter``).
-    """
-
-    def __init__(self, capacity: int = 10000) -> None:
-        self.capacity = int(capacity)
-        self._t = np.zeros(self.capacity)
-        self._compute = np.zeros(self.capacity)
-        self._late = np.zeros(self.capacity)
-        self._fresh = np.zeros(self.capacity, dtype=bool)
-        self._lat = np.zeros(self.capacity)
-        self.steps = 0
-        self.fresh_steps = 0
-        self.latencies = 0
-        self.missed_deadlines = 0
-        self.rejected_commands = 0
-        self.watchdog_trips = 0
-        self.lockstep_timeouts = 0
-        self.start_s = time.perf_counter()
-
-    def record_step(self, t_s: float, compute_s: float, late_s: float, fresh: bool) -> None:
-        """One step: its wall time, compute time, lateness and freshness of its command."""
-        k = self.steps % self.capacity
-        self._t[k] = t_s
-        self._compute[k] = compute_s
-        self._late[k] = late_s
-        self._fresh[k] = fresh
-        self.steps += 1
-        if fresh:
-            self.fresh_steps += 1
-
-    def record_latency(self, latency_s: float) -> None:
-        """Wall time from a state publish to the arrival of the first command after it."""
-        self._lat[self.latencies % self.capacity] = latency_s
-        self.latencies += 1
-
-    def _window(self, buf: np.ndarray, count: int) -> np.ndarray:
-        return buf[:min(count, self.capacity)]
-
-    def summary(self) -> dict:
-        """Figures over the run and over the last ``capacity`` steps (the window)."""
-        n = min(self.steps, self.capacity)
-        out: dict = {
-            'steps': self.steps,
-            'elapsed_s': time.perf_counter() - self.start_s,
-            'missed_deadlines': self.missed_deadlines,
-            'fresh_steps': self.fresh_steps,
-            'rejected_commands': self.rejected_commands,
-            'watchdog_trips': self.watchdog_trips,
-            'lockstep_timeouts': self.lockstep_timeouts,
-        }
-        if n >= 2:
-            t = self._window(self._t, self.steps)
-            out['window_rate_hz'] = (n - 1) / max(float(t.max() - t.min()), 1e-12)
-            c = self._window(self._compute, self.steps) * 1e6
-            late = self._window(self._late, self.steps) * 1e6
-            period = np.diff(np.sort(t)) * 1e6  # the ring is not in order once it wraps
-            jitter = np.abs(period - np.median(period))
-            fresh = self._window(self._fresh, self.steps)
-            out.update({
-                'window_steps': n,
-                'window_stale_steps': int(n - np.count_nonzero(fresh)),
-                'period_us_p50': float(np.percentile(period, 50)),
-                'period_us_max': float(period.max()),
-                'jitter_us_p50': float(np.percentile(jitter, 50)),
-                'jitter_us_p99': float(np.percentile(jitter, 99)),
-                'jitter_us_max': float(jitter.max()),
-                'step_compute_us_p50': float(np.percentile(c, 50)),
-                'step_compute_us_p99': float(np.percentile(c, 99)),
-                'step_compute_us_max': float(c.max()),
-                'lateness_us_p50': float(np.percentile(late, 50)),
-                'lateness_us_p99': float(np.percentile(late, 99)),
-                'window_fresh_fraction': float(self._window(self._fresh, self.steps).mean()),
-            })
-        if self.latencies:
-            lat = self._window(self._lat, self.latencies) * 1e6
-            out['cmd_latency_us_p50'] = float(np.percentile(lat, 50))
-            out['cmd_latency_us_p99'] = float(np.percentile(lat, 99))
-            out['cmd_latency_us_max'] = float(lat.max())
-        return out

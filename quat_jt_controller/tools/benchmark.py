@@ -21,7 +21,8 @@ Baseline: the same loop figures for a minimal rclpy pair with nothing to compute
 (``tools/minimal_pair.py``), run just before, for the same duration: the floor this machine
 sets at that moment. What the real nodes show beyond it is theirs.
 
-Core: control-law ticks per second (forward kinematics, Jacobian, g(q), error, law, clamp) for
+Core: ticks per second of the node's own tick, ``Regulator.update`` (kinematics, Jacobian, g(q),
+error, law, finite check, clamp), for
 the wrist (3-DOF, orientation task) and the xArm6 (6-DOF, pose task), in one process.
 
     python -m quat_jt_controller.tools.benchmark [--duration 30] [--out results/bench]
@@ -40,6 +41,7 @@ from quat_jt_controller import control_law as cl
 from quat_jt_controller import paper
 from quat_jt_controller import quaternion as quat
 from quat_jt_controller.model import RobotModel
+from quat_jt_controller.regulator import Goal, Regulator
 from quat_jt_controller.resources import default_urdf_xml
 from quat_jt_controller.tools import local_ros
 
@@ -53,20 +55,13 @@ def xarm6_urdf_xml() -> str:
     return (Path(pybullet_data.getDataPath()) / 'xarm' / 'xarm6_robot.urdf').read_text()
 
 
-def core_ticks(model: RobotModel, task: cl.Task, gains: cl.Gains, q, qdot, goal,
-               n: int = 20000) -> dict:
-    """Time the whole control tick of the node's hot path, in one process."""
-    q_desired, p_desired = goal
-    rows = slice(3, 6) if task is cl.Task.ORIENTATION else slice(0, 6)
-    limits = model.effort_limits
+def core_ticks(regulator: Regulator, q, qdot, n: int = 20000) -> dict:
+    """Time the node's tick (``Regulator.update``) in one process: best of 5 batches."""
     times = []
     for _ in range(5):
         t0 = time.perf_counter()
         for _ in range(n // 5):
-            p, R, J = model.kinematics(q)
-            y, eta_e = cl.output_error(p, R, p_desired, q_desired, task)
-            tau = cl.control_torque(J[rows], y, eta_e, qdot, model.gravity(q), gains)
-            cl.saturate(tau, limits)
+            regulator.update(q, qdot)
         times.append((time.perf_counter() - t0) / (n // 5))
     best = min(times)
     return {'us_per_tick': best * 1e6, 'ticks_per_s': 1.0 / best}
@@ -78,13 +73,13 @@ def core_benchmark() -> dict:
     xarm = RobotModel(xarm6_urdf_xml(), 'link_base', 'link6')
     g6 = cl.Gains.create('tanh', (300.0,) * 3 + paper.KP, (2.0,) * 6, (20.0,) * 3 + paper.LAMBDA,
                          cl.Task.POSE, 6)
-    q6 = [0.1, -0.3, -0.8, 0.2, 0.9, -0.1]
-    p6, R6 = xarm.forward_kinematics([0.3, -0.2, -0.6, 0.1, 0.7, 0.2])
+    goal6 = Regulator(xarm, cl.Task.POSE, g6).pose([0.3, -0.2, -0.6, 0.1, 0.7, 0.2])
     return {
-        'wrist 3-DOF orientation': core_ticks(wrist, cl.Task.ORIENTATION, g3, [0.3, 0.5, -0.2],
-                                              [0.1, 0.1, 0.1], (paper.Q_DESIRED, None)),
-        'xArm6 6-DOF pose': core_ticks(xarm, cl.Task.POSE, g6, q6, [0.1] * 6,
-                                       (quat.from_rotation_matrix(R6), p6)),
+        'wrist 3-DOF orientation': core_ticks(
+            Regulator(wrist, cl.Task.ORIENTATION, g3, goal=Goal(paper.Q_DESIRED)),
+            [0.3, 0.5, -0.2], [0.1, 0.1, 0.1]),
+        'xArm6 6-DOF pose': core_ticks(Regulator(xarm, cl.Task.POSE, g6, goal=goal6),
+                                       [0.1, -0.3, -0.8, 0.2, 0.9, -0.1], [0.1] * 6),
     }
 
 

@@ -17,13 +17,12 @@ import json
 from pathlib import Path
 import time
 
+from quat_jt_controller.loop_stats import LoopStats
 import rclpy
 from rclpy.executors import ExternalShutdownException
 from rclpy.experimental import EventsExecutor
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
-
-from wrist_sim.simulator import LoopStats
 
 BUSY_WAIT_S = 2.5e-4  # as wrist_sim_node
 

@@ -4,7 +4,7 @@ The paper's experiment (Section 5) end to end: the real nodes over DDS, as a use
 For each controller, quadratic (Eq. 37) and tanh (Eq. 38): start ``wrist_sim_node`` and
 ``controller_node`` as separate processes on a private loopback ROS graph with the package's
 config files (gains Eq. 43-45, q(0) = 0, the simulated Coulomb friction), publish the corrected
-goal of ERRATA.md (Eq. 40) on ``/quat_jt_controller/target_pose``, and record joint states,
+goal of docs/errata.md (Eq. 40) on ``/quat_jt_controller/target_pose``, and record joint states,
 commands and the controller's error to MCAP. Then write a CSV, a figure like the paper's Fig. 2
 (||e|| against time, linear and log) and print the comparison table.
 

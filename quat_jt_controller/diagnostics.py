@@ -1,0 +1,87 @@
+"""
+What the controller reports on /diagnostics, computed without ROS.
+
+Each function returns ``(level, message, [(key, value)])`` with levels OK, WARN, ERROR (the
+values of diagnostic_msgs/DiagnosticStatus); the node only wraps them into messages.
+"""
+from dataclasses import dataclass
+from math import nan
+from typing import Optional, Sequence
+
+from quat_jt_controller.regulator import Goal, TickOutput
+
+OK, WARN, ERROR = 0, 1, 2
+# |eta_e| below this means the error is within ~11.5 degrees of 180 degrees, where
+# Q(eta_e, e)^T K_p e can vanish (docs/errata.md, note 6): reported as a warning.
+NEAR_180_ETA_E = 0.1
+# Saturated ticks above this fraction of a diagnostics window give a warning.
+SATURATION_WARN_FRACTION = 0.05
+
+Status = tuple[int, str, list[tuple[str, str]]]
+
+
+@dataclass
+class Counters:
+    """Events counted over the node's life, reported with every status."""
+
+    rejected_states: int = 0
+    rejected_goals: int = 0
+    accepted_goals: int = 0
+    nonfinite_torques: int = 0
+
+
+def loop_status(figures: dict, waiting: bool, stopped: bool, counters: Counters) -> Status:
+    """Report the control loop: rate, timing, saturation, timeouts (TickStats.window figures)."""
+    messages = []
+    level = OK
+    if waiting:
+        level, messages = WARN, ['waiting for joint_states']
+    elif stopped:
+        level = ERROR
+        messages.append('joint_states timed out: commanding zero torque')
+    n, saturated = figures['ticks_in_window'], figures['saturated_ticks']
+    if n and saturated > SATURATION_WARN_FRACTION * n:
+        level = max(level, WARN)
+        messages.append(f'torque saturated in {saturated}/{n} ticks')
+    if counters.nonfinite_torques:
+        level = max(level, WARN)
+        messages.append(f'{counters.nonfinite_torques} non-finite torques replaced by zero')
+    message = '; '.join(messages) or f'running at {figures["control_rate_hz"]:.0f} Hz'
+    values = [(k, f'{v:.1f}' if isinstance(v, float) else str(v)) for k, v in figures.items()]
+    values += [('rejected_states_total', str(counters.rejected_states)),
+               ('nonfinite_torques_total', str(counters.nonfinite_torques)),
+               ('state_timeout', str(stopped))]
+    return level, message, values
+
+
+def goal_status(source: str, goal: Optional[Goal], warning: str, last: Optional[TickOutput],
+                qdot: Optional[Sequence[float]], pose_task: bool, counters: Counters) -> Status:
+    """Report the goal: its source, the A1/A2 advice, the errors, a near-180-degree warning."""
+    level = OK
+    messages = [{'none': 'no goal (no joint state yet)',
+                 'hold': 'holding the initial pose (no goal received)',
+                 'target_pose': 'regulating to target_pose'}[source]]
+    if warning:
+        level = WARN
+        messages.append(warning)
+    eta_e = last.eta_e if last is not None else nan
+    if abs(eta_e) < NEAR_180_ETA_E:
+        level = WARN
+        messages.append(f'orientation error near 180 degrees (eta_e = {eta_e:.3f}): the '
+                        'orientation torque can vanish there; give an intermediate goal')
+    values = [
+        ('error_norm', f'{last.orientation_error_norm:.6g}' if last else 'nan'),
+        ('eta_e', f'{eta_e:.6g}'),
+        ('max_joint_speed_rad_s', f'{max(abs(x) for x in qdot):.4g}' if qdot else 'nan'),
+        ('goal_source', source),
+        ('goal_xyzw', str([round(c, 6) for c in goal.xyzw()]) if goal else ''),
+    ]
+    if pose_task:
+        values += [
+            ('position_error_m', f'{last.position_error_norm_m:.6g}' if last else 'nan'),
+            ('goal_position_m',
+             str([round(c, 6) for c in goal.p_desired_base]) if goal else ''),
+        ]
+    values += [('accepted_goals_total', str(counters.accepted_goals)),
+               ('rejected_goals_total', str(counters.rejected_goals))]
+    return level, '; '.join(messages), values

@@ -1,0 +1,214 @@
+"""
+The control tick, written once: joint state in, clamped joint torque out (Eq. 22).
+
+    tau = J^T Q(eta_e, e)^T grad U_a(y_tilde) - K_v qdot + g(q),  clamped to the effort limits
+
+:class:`Regulator` owns the robot model, the task, the effort limits and immutable snapshots of
+the gains (:class:`~quat_jt_controller.control_law.Gains`) and of the goal (:class:`Goal`).
+:meth:`Regulator.update` is the tick: kinematics, output error (Eqs. 8-10), the law of the
+chosen potential (Eq. 24/32, orientation task Eq. 37/38), gravity, the finite check and the
+clamp. The controller node, the reference and sampled loops, the benchmark and the tests all
+call it, so what is simulated and timed is what ships. ROS-free (numpy-free in the tick too).
+
+A parameter or goal change builds a new immutable object and swaps one reference; a tick reads
+each reference once, so it never sees half an update.
+"""
+from dataclasses import dataclass
+from math import isfinite, sqrt
+from typing import NamedTuple, Optional, Sequence
+
+from quat_jt_controller import control_law as cl
+from quat_jt_controller import quaternion as quat
+from quat_jt_controller.model import RobotModel
+
+Vector3 = tuple[float, float, float]
+
+
+@dataclass(frozen=True)
+class Goal:
+    """
+    A constant desired pose (p_d, R_d) in the base frame, Eq. (2)-(3).
+
+    ``q_desired_base`` is the unit quaternion (eta_d, eps_d) of R_d, scalar first (Eq. 6);
+    ``p_desired_base`` the tip position in m (Eq. 9), ignored by the orientation task.
+    """
+
+    q_desired_base: quat.Quaternion
+    p_desired_base: Vector3 = (0.0, 0.0, 0.0)
+
+    @classmethod
+    def from_xyzw(cls, x: float, y: float, z: float, w: float,
+                  p_desired_base: Sequence[float] = (0.0, 0.0, 0.0)) -> 'Goal':
+        """
+        Validate a goal given in ROS order; raise ValueError saying what is wrong.
+
+        The quaternion is checked as tf2 does (finite, |norm^2 - 1| <= 0.01) and normalised;
+        the position must be finite.
+        """
+        xyzw = (x, y, z, w)
+        if not all(isfinite(c) for c in xyzw):
+            raise ValueError(f'quaternion (x, y, z, w) = {xyzw} has a non-finite component')
+        try:
+            q = quat.validate_unit(quat.from_xyzw(x, y, z, w))
+        except ValueError as exc:
+            raise ValueError(f'{exc}: (x, y, z, w) = {xyzw}') from None
+        p = (float(p_desired_base[0]), float(p_desired_base[1]), float(p_desired_base[2]))
+        if not all(isfinite(c) for c in p):
+            raise ValueError(f'non-finite position {p}')
+        return cls(q, p)
+
+    @classmethod
+    def from_request(cls, frame_id: str, base_link: str, xyzw: Sequence[float],
+                     p_desired_base: Sequence[float], task: cl.Task) -> 'Goal':
+        """
+        Validate a goal request (a PoseStamped's fields); raise ValueError saying why not.
+
+        The frame must be ``base_link`` or empty (meaning ``base_link``). The orientation task
+        ignores the position.
+        """
+        frame = frame_id.lstrip('/')
+        if frame not in ('', base_link):
+            raise ValueError(f"header.frame_id is '{frame_id}', expected '{base_link}' "
+                             '(or empty)')
+        return cls.from_xyzw(*xyzw, p_desired_base if cl.Task(task) is cl.Task.POSE
+                             else (0.0, 0.0, 0.0))
+
+    def xyzw(self) -> tuple[float, float, float, float]:
+        """Return the quaternion in ROS order (x, y, z, w)."""
+        return quat.to_xyzw(self.q_desired_base)
+
+
+class TickOutput(NamedTuple):
+    """What one tick gives: the command and what feedback and diagnostics need."""
+
+    tau_nm: list[float]  # clamped to the effort limits; zeros if the law was not finite
+    y_tilde: tuple[float, ...]  # e (3) or [p_d - p; e] (6), Eq. (8)
+    eta_e: float  # scalar part of q_d * conj(q), after Eq. (13)
+    p_tip_base: list[float]  # measured tip position, m
+    R_tip_base: list[list[float]]  # measured tip rotation
+    saturated: bool  # an entry was clamped
+    finite: bool  # False: the law gave NaN/Inf (e.g. from extreme gains); tau_nm is zero
+
+    @property
+    def orientation_error_norm(self) -> float:
+        """||e|| of Eq. (10)."""
+        e = self.y_tilde[-3:]
+        return sqrt(e[0] * e[0] + e[1] * e[1] + e[2] * e[2])
+
+    @property
+    def position_error_norm_m(self) -> float:
+        """||p_d - p|| of Eq. (9); 0 for the orientation task."""
+        if len(self.y_tilde) == 3:
+            return 0.0
+        p = self.y_tilde
+        return sqrt(p[0] * p[0] + p[1] * p[1] + p[2] * p[2])
+
+
+def _limits(model: RobotModel, effort_limits_nm: Optional[Sequence[float]]) -> list[float]:
+    """Per-joint clamp; a missing, zero or non-finite URDF limit means no clamp."""
+    values = model.effort_limits if effort_limits_nm is None else effort_limits_nm
+    if len(values) != model.n:
+        raise ValueError(f'expected {model.n} effort limits, got {len(values)}')
+    return [float(v) if isfinite(v) and v > 0.0 else float('inf') for v in values]
+
+
+class Regulator:
+    """
+    The transpose-Jacobian unit-quaternion regulator of Eq. (22) for one robot and task.
+
+    :param model: the robot (URDF), joints in the order of q, qdot and tau.
+    :param task: ``orientation`` (y = e, J = J_o) or ``pose`` (y = [p_d - p; e], J = J_G).
+    :param gains: the initial gains; sizes must fit the task and the joints.
+    :param effort_limits_nm: clamp per joint; default the URDF's. Pass ``[inf] * n`` for the
+        ideal loop of the paper's analysis (no saturation).
+    :param goal: the initial goal; None until :meth:`set_goal` or :meth:`hold`.
+    """
+
+    def __init__(self, model: RobotModel, task: cl.Task, gains: cl.Gains,
+                 effort_limits_nm: Optional[Sequence[float]] = None,
+                 goal: Optional[Goal] = None) -> None:
+        self.model = model
+        self.task = cl.Task(task)
+        self.n = model.n
+        self.effort_limits_nm = _limits(model, effort_limits_nm)
+        self._zero = [0.0] * self.n
+        self._orientation_only = self.task is cl.Task.ORIENTATION
+        self._gains = gains
+        self.set_gains(gains)
+        self._goal = goal
+
+    # -- snapshots ------------------------------------------------------------------------
+    @property
+    def gains(self) -> cl.Gains:
+        """Return the gains in force (immutable)."""
+        return self._gains
+
+    def set_gains(self, gains: cl.Gains) -> None:
+        """Swap in new gains, whole; raise GainsError if their sizes do not fit."""
+        if len(gains.kp) != self.task.dim or len(gains.lam) != self.task.dim:
+            raise cl.GainsError(f'kp and lambda must have {self.task.dim} values for the '
+                                f'{self.task.value} task')
+        if len(gains.kv) != self.n:
+            raise cl.GainsError(f'kv must have {self.n} values')
+        self._gains = gains
+
+    @property
+    def goal(self) -> Optional[Goal]:
+        """Return the goal in force (immutable), or None before the first."""
+        return self._goal
+
+    def set_goal(self, goal: Goal) -> None:
+        """Swap in a new goal, whole."""
+        self._goal = goal
+
+    def pose(self, q: Sequence[float]) -> Goal:
+        """Return the measured tip pose at ``q`` as a Goal (scalar-first quaternion, eta >= 0)."""
+        p, R = self.model.forward_kinematics(q)
+        return Goal(quat.from_rotation_matrix(R), (p[0], p[1], p[2]))
+
+    def hold(self, q: Sequence[float]) -> Goal:
+        """Make the pose measured at ``q`` the goal (hold still where the robot is)."""
+        self._goal = self.pose(q)
+        return self._goal
+
+    # -- the law ----------------------------------------------------------------------------
+    def error(self, q: Sequence[float], goal: Optional[Goal] = None):
+        """
+        Return ``(y_tilde, eta_e, rows, p, R)`` at ``q`` towards ``goal`` (default: in force).
+
+        ``rows`` is the Jacobian of the task, J_o (orientation) or J_G (pose), Eq. (12).
+        """
+        goal = self._goal if goal is None else goal
+        p, R, J = self.model.kinematics(q)
+        y, eta_e = cl.output_error(p, R, goal.p_desired_base, goal.q_desired_base, self.task)
+        return y, eta_e, (J[3:] if self._orientation_only else J), p, R
+
+    def update(self, q: Sequence[float], qdot: Sequence[float]) -> TickOutput:
+        """
+        One control tick at the measured ``(q, qdot)``: Eq. (22) + g(q), checked and clamped.
+
+        Reads the gains and the goal once each. A goal must have been set (or :meth:`hold`).
+        If the law gives a non-finite torque the command is zero and ``finite`` is False.
+        """
+        gains = self._gains
+        y, eta_e, rows, p, R = self.error(q)
+        gravity = self.model.gravity(q) if gains.gravity_compensation else None
+        tau = cl.control_torque(rows, y, eta_e, qdot, gravity, gains)
+        total = 0.0
+        for t in tau:
+            total += t
+        if total - total != 0.0:  # NaN or Inf somewhere (inf - inf is NaN)
+            return TickOutput(list(self._zero), y, eta_e, p, R, False, False)
+        saturated = cl.saturate(tau, self.effort_limits_nm)
+        return TickOutput(tau, y, eta_e, p, R, saturated, True)
+
+    def potential_energy(self, q: Sequence[float]) -> float:
+        """U_a(y_tilde(q)) of Eq. (23) or (31) with the gains in force."""
+        return cl.potential_energy(self.error(q)[0], self._gains)
+
+    def lyapunov(self, q: Sequence[float], qdot: Sequence[float]) -> float:
+        """V = 1/2 qdot^T M(q) qdot + U_a(y_tilde(q)), Eq. (27) / (34)."""
+        M = self.model.mass_matrix(q)
+        kinetic = 0.5 * sum(qdot[i] * M[i, j] * qdot[j]
+                            for i in range(self.n) for j in range(self.n))
+        return float(kinetic) + self.potential_energy(q)

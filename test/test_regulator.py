@@ -1,0 +1,106 @@
+"""The one control tick (quat_jt_controller.regulator) against the law written out by hand."""
+import math
+
+import numpy as np
+import pytest
+from quat_jt_controller import control_law as cl
+from quat_jt_controller import paper
+from quat_jt_controller import quaternion as quat
+from quat_jt_controller.regulator import Goal, Regulator
+from robots import random_q, wrist_model, xarm6_model
+
+pytestmark = pytest.mark.unit
+
+ORI, POSE = cl.Task.ORIENTATION, cl.Task.POSE
+
+
+def paper_gains(potential: str = 'tanh', kp=paper.KP) -> cl.Gains:
+    return cl.Gains.create(potential, kp, paper.KV, paper.LAMBDA, ORI, 3)
+
+
+def eq38_by_hand(model, q, qdot, q_desired, gains):
+    """Eq. (38) + g(q) with numpy: J_o^T Q_o^T K_p tanh(Lambda e) - K_v qdot + g(q)."""
+    _, R, J = model.kinematics(q)
+    eta_e, e = quat.orientation_error(quat.from_rotation_matrix(R), q_desired)
+    Q = np.array(quat.q_matrix(eta_e, e))
+    force = np.array(gains.kp) * np.tanh(np.array(gains.lam) * np.array(e))
+    return (np.array(J)[3:].T @ Q.T @ force - np.array(gains.kv) * np.array(qdot)
+            + np.array(model.gravity(q)))
+
+
+@pytest.mark.parametrize('seed', range(5))
+def test_tick_is_eq38_plus_gravity_clamped(seed):
+    model = wrist_model()
+    rng = np.random.default_rng(seed)
+    q, qdot = random_q(model, rng).tolist(), rng.normal(size=3).tolist()
+    reg = Regulator(model, ORI, paper_gains(), goal=Goal(paper.Q_DESIRED))
+    out = reg.update(q, qdot)
+    want = np.clip(eq38_by_hand(model, q, qdot, paper.Q_DESIRED, reg.gains),
+                   -np.array(model.effort_limits), model.effort_limits)
+    np.testing.assert_allclose(out.tau_nm, want, atol=1e-12)
+    assert out.finite and out.orientation_error_norm == pytest.approx(
+        np.linalg.norm(out.y_tilde))
+    assert out.position_error_norm_m == 0.0
+
+
+def test_saturation_is_reported_and_clamped_to_the_urdf_limits():
+    model = wrist_model()
+    reg = Regulator(model, ORI, paper_gains(kp=(500.0, 500.0, 500.0)), goal=Goal(
+        paper.Q_DESIRED))
+    out = reg.update([0.0, 0.3, 0.0], [0.0, 0.0, 0.0])
+    assert out.saturated
+    assert all(abs(t) <= lim for t, lim in zip(out.tau_nm, model.effort_limits))
+    assert any(abs(t) == lim for t, lim in zip(out.tau_nm, model.effort_limits))
+
+
+def test_non_finite_law_gives_zero_torque_and_says_so():
+    """Gains of 1.7e308 are finite and positive, but the law overflows: zero, never NaN."""
+    reg = Regulator(wrist_model(), ORI, paper_gains(kp=(1.7e308,) * 3),
+                    goal=Goal(paper.Q_DESIRED))
+    out = reg.update([1.0, 1.0, 1.0], [0.0, 0.0, 0.0])  # J^T Q^T K_p tanh(.) overflows here
+    assert not out.finite and out.tau_nm == [0.0, 0.0, 0.0]
+
+
+def test_hold_makes_the_measured_pose_the_goal_and_gives_gravity_alone():
+    model = wrist_model()
+    reg = Regulator(model, ORI, paper_gains())
+    q = [0.3, 0.7, -0.2]
+    goal = reg.hold(q)
+    assert reg.goal is goal and goal.q_desired_base[0] >= 0.0
+    np.testing.assert_allclose(reg.update(q, [0.0] * 3).tau_nm, model.gravity(q), atol=1e-12)
+
+
+def test_gain_and_goal_swaps_are_whole_and_checked():
+    reg = Regulator(wrist_model(), ORI, paper_gains())
+    with pytest.raises(cl.GainsError, match='kp and lambda must have 3'):
+        reg.set_gains(cl.Gains.create('tanh', (1.0,) * 6, paper.KV, (1.0,) * 6, POSE, 3))
+    new = paper_gains('quadratic')
+    reg.set_gains(new)
+    assert reg.gains is new
+
+
+def test_pose_task_on_the_xarm6_reports_the_position_error():
+    model = xarm6_model()
+    gains = cl.Gains.create('tanh', (200.0,) * 3 + paper.KP, (1.0,) * 6,
+                            (2.0,) * 3 + paper.LAMBDA, POSE, 6)
+    reg = Regulator(model, POSE, gains)
+    q_goal = [0.2, -0.4, -1.1, 0.2, 1.4, 0.3]
+    reg.set_goal(reg.pose(q_goal))
+    out = reg.update([0.0, -0.5, -1.0, 0.0, 1.5, 0.0], [0.0] * 6)
+    p_goal, _ = model.forward_kinematics(q_goal)
+    p_now, _ = model.forward_kinematics([0.0, -0.5, -1.0, 0.0, 1.5, 0.0])
+    assert out.position_error_norm_m == pytest.approx(
+        float(np.linalg.norm(np.subtract(p_goal, p_now))), rel=1e-12)
+    assert len(out.tau_nm) == 6 and out.finite
+    assert reg.update(q_goal, [0.0] * 6).position_error_norm_m < 1e-12
+
+
+def test_goal_validation_names_the_problem_in_ros_order():
+    with pytest.raises(ValueError, match=r'\(x, y, z, w\) = \(nan, 0.0, 0.0, 1.0\)'):
+        Goal.from_xyzw(math.nan, 0.0, 0.0, 1.0)
+    with pytest.raises(ValueError, match='not unit'):
+        Goal.from_xyzw(*quat.to_xyzw(paper.Q_DESIRED_AS_PRINTED))
+    with pytest.raises(ValueError, match='non-finite position'):
+        Goal.from_xyzw(0.0, 0.0, 0.0, 1.0, (0.0, math.inf, 0.0))
+    g = Goal.from_xyzw(*(1.004 * c for c in quat.to_xyzw(paper.Q_DESIRED)))
+    assert quat.norm(g.q_desired_base) == pytest.approx(1.0)

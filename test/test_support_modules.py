@@ -1,0 +1,135 @@
+"""
+Small ROS-free pieces the nodes are made of.
+
+Loop statistics, log throttling, joint layout, the simulator's live config and the goal-check
+worker.
+"""
+import math
+
+import pytest
+from quat_jt_controller import paper
+from quat_jt_controller.control_law import Task
+from quat_jt_controller.goal_check import check_goal, GoalCheckWorker, ModelSpec
+from quat_jt_controller.joints import movable_joints, StateLayout
+from quat_jt_controller.loop_stats import LoopStats, TickStats
+from quat_jt_controller.resources import default_urdf_xml
+from quat_jt_controller.throttle import cause, Throttle
+from robots import wrist_model
+from wrist_sim.config import SimConfig
+from wrist_sim.simulator import SimulatorError
+
+pytestmark = pytest.mark.unit
+
+
+def test_loop_stats_summary():
+    stats = LoopStats(capacity=100)
+    for k in range(250):
+        stats.record_step(k * 1e-3, 50e-6, 1e-6, fresh=k % 2 == 0)
+        stats.record_latency(300e-6)
+    stats.missed_deadlines = 2
+    out = stats.summary()
+    assert out['steps'] == 250 and out['fresh_steps'] == 125
+    assert out['window_rate_hz'] == pytest.approx(1000.0)
+    assert out['step_compute_us_p50'] == pytest.approx(50.0)
+    assert out['cmd_latency_us_p99'] == pytest.approx(300.0)
+    assert out['window_fresh_fraction'] == pytest.approx(0.5)
+    assert out['missed_deadlines'] == 2
+
+
+def test_tick_stats_window_then_reset():
+    stats = TickStats(capacity=16)
+    for k in range(40):  # wraps the ring; the window keeps the last 16
+        t0 = 1_000_000 * k
+        stats.record(t0, t0 + 20_000, t0 + 100_000, 250.0, saturated=k < 4)
+    w = stats.window(0.04)
+    assert w['ticks_in_window'] == 40 and w['control_rate_hz'] == pytest.approx(1000.0)
+    assert w['compute_us_p50'] == pytest.approx(20.0)
+    assert w['publish_us_p99'] == pytest.approx(80.0)
+    assert w['period_mean_us'] == pytest.approx(1000.0)
+    assert w['state_age_us_p50'] == 250.0 and w['saturated_ticks'] == 4
+    after = stats.window(1.0)
+    assert after['ticks_in_window'] == 0 and math.isnan(after['compute_us_p50'])
+    assert after['total_ticks'] == 40
+
+
+def test_throttle_passes_once_per_period_and_cause_and_counts_the_rest():
+    now = [0.0]
+    throttle = Throttle(1.0, clock=lambda: now[0])
+    key = cause('quaternion (x, y, z, w) = (nan, 0.0, 0.0, 1.0) has a non-finite component')
+    assert key == cause('quaternion (x, y, z, w) = (0.5, inf, -2e-3, 1.0) has a non-finite '
+                        'component')
+    assert throttle(key) == 0
+    assert [throttle(key) for _ in range(9)] == [None] * 9
+    assert throttle('another cause') == 0
+    now[0] = 1.5
+    assert throttle(key) == 9
+
+
+def test_state_layout_maps_names_and_rejects_bad_states():
+    layout = StateLayout(('joint1', 'joint2', 'joint3'))
+    q, v = layout.extract(['joint3', 'gripper', 'joint1', 'joint2'], [3.0, 9.0, 1.0, 2.0],
+                          [0.3, 9.0, 0.1, 0.2])
+    assert (q, v) == ([1.0, 2.0, 3.0], [0.1, 0.2, 0.3])
+    for names, pos, vel, words in (
+            (['joint1', 'joint1', 'joint2', 'joint3'], [0.0] * 4, [0.0] * 4, 'repeat'),
+            (['joint1', 'joint3'], [0.0] * 2, [0.0] * 2, "missing controlled joint(s) ['joint2']"),
+            (['joint1', 'joint2', 'joint3'], [0.0] * 3, [], '3 names but 3 positions and 0'),
+            (['joint1', 'joint2', 'joint3'], [0.0, math.nan, 0.0], [0.0] * 3, 'non-finite')):
+        with pytest.raises(ValueError) as exc:
+            layout.extract(names, pos, vel)
+        assert words in str(exc.value)
+
+
+def test_movable_joints_one_definition():
+    assert movable_joints(default_urdf_xml()) == ['joint1', 'joint2', 'joint3']
+    assert list(wrist_model().joint_names) == movable_joints(default_urdf_xml())
+    with pytest.raises(ValueError, match='not valid XML'):
+        movable_joints('<robot')
+
+
+def test_sim_config_validates_and_is_immutable():
+    values = {'initial_positions': [0.0, 0.3, 0.0], 'viscous_friction': [0.0] * 3,
+              'coulomb_friction': [2.0, 0.8, 0.5], 'command_timeout': 0.1,
+              'lockstep_timeout': 0.05, 'max_real_time_factor': 0.0}
+    config = SimConfig.create(values, 3)
+    assert config.command_timeout_ns == 100_000_000 and config.coulomb_nm == (2.0, 0.8, 0.5)
+    with pytest.raises(AttributeError):
+        config.coulomb_nm = (0.0, 0.0, 0.0)
+    for name, bad, words in (('coulomb_friction', [1.0, -1.0, 0.0], 'must be >= 0'),
+                             ('initial_positions', [0.0, 0.0], 'expected 3 values'),
+                             ('viscous_friction', [0.0, math.inf, 0.0], 'finite'),
+                             ('command_timeout', math.nan, 'command_timeout_s')):
+        with pytest.raises(SimulatorError, match=words):
+            SimConfig.create({**values, name: bad}, 3)
+
+
+def test_goal_check_is_deterministic_and_bounded_by_starts():
+    """The paper's goal from a far start: the same verdict every time (no wall-time budget)."""
+    model = wrist_model()
+    far = [3.1252, -0.4917, -1.1201]
+    verdicts = {check_goal(model, far, paper.Q_DESIRED, (0, 0, 0), Task.ORIENTATION)
+                for _ in range(3)}
+    assert verdicts == {''}
+
+
+def test_goal_check_worker_checks_the_newest_goal_of_a_flood():
+    model = wrist_model()
+    worker = GoalCheckWorker(ModelSpec(default_urdf_xml(), 'base_link', 'tool0',
+                                       model.joint_names, Task.ORIENTATION))
+    try:
+        singular = (math.cos(0.4), 0.0, 0.0, math.sin(0.4))  # Rz(0.8): only q2 = 0 reaches it
+        worker.submit('paper', [0.0, 0.0, 0.0], paper.Q_DESIRED, (0, 0, 0))
+        for k in range(200):
+            worker.submit(k, [0.5, 0.5, 0.5], singular, (0, 0, 0))
+        verdicts = []
+        import time
+        deadline = time.monotonic() + 30.0
+        while worker.busy and time.monotonic() < deadline:
+            verdicts += worker.poll()
+            time.sleep(0.01)
+        assert not worker.busy
+        keys = [k for k, _ in verdicts]
+        assert keys[0] == 'paper' and keys[-1] == 199 and len(keys) <= 3, keys
+        assert verdicts[0][1] == '' and 'singular' in verdicts[-1][1]
+    finally:
+        worker.close()
