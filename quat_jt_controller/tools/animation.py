@@ -168,7 +168,8 @@ class RobotRenderer:
         Aim a camera at the robot over the poses of ``q_samples_rad`` and at extra points.
 
         Every link origin at every pose, and every extra point, padded by ``pad_m`` (the links'
-        own size and the axes drawn), lies within the vertical and the horizontal field of view.
+        own size and the axes drawn), lies within the vertical and the horizontal field of view,
+        with a 10 % margin.
         """
         pts = [np.asarray(points_world_m, dtype=float).reshape(-1, 3)]
         for q in q_samples_rad:
@@ -178,8 +179,8 @@ class RobotRenderer:
         centre = 0.5 * (pts.min(axis=0) + pts.max(axis=0))
         radius = float(np.linalg.norm(pts - centre, axis=1).max()) + pad_m
         half_fov = 0.5 * math.radians(fov_deg) * min(1.0, self.width_px / self.height_px)
-        camera = Camera(tuple(float(v) for v in centre), radius / math.sin(half_fov), yaw_deg,
-                        pitch_deg, fov_deg)
+        camera = Camera(tuple(float(v) for v in centre), 1.1 * radius / math.sin(half_fov),
+                        yaw_deg, pitch_deg, fov_deg)
         self.set_camera(camera)
         return camera
 
