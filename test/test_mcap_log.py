@@ -38,3 +38,26 @@ def test_raw_messages_round_trip(tmp_path):
     assert [s.position[0] for s in states] == [0.1 * k for k in range(5)]
     assert states[3].name == ['joint1', 'joint2'] and states[3].header.stamp.nanosec == 3000
     assert [c.data[0] for c in commands] == [0.0, 1.0, 2.0, 3.0, 4.0]
+
+
+def test_own_cdr_matches_rclpy():
+    """
+    The messages the tools serialise without rclpy match rclpy's serialisation.
+
+    Byte for byte where CDR has no padding (String); elsewhere rclpy reads ours back to the same
+    message (rclpy leaves its padding bytes uninitialised and pads the end to 8 bytes).
+    """
+    from quat_jt_controller.tools.mcap_log import cdr_joint_state, cdr_string
+    from rclpy.serialization import deserialize_message
+    from std_msgs.msg import String
+    for text in ('', 'a', '<robot name="x"/>\n' * 3):
+        assert cdr_string(text) == serialize_message(String(data=text))
+    for names, position, velocity, effort in (
+            (['joint1', 'j2', 'joint_three'], [0.1, -2.0, 3.5], [1.0, 2.0, 3.0], []),
+            ([], [], [], []), (['a'], [1e-300], [], [7.0])):
+        js = JointState(name=names, position=position, velocity=velocity, effort=effort)
+        js.header.stamp.sec, js.header.stamp.nanosec = 1_700_000_001, 999_999_999
+        js.header.frame_id = 'base'
+        ours = cdr_joint_state(1_700_000_001_999_999_999, names, position, velocity, effort,
+                               frame_id='base')
+        assert deserialize_message(ours, JointState) == js, names

@@ -19,7 +19,7 @@ import subprocess
 import time
 
 from geometry_msgs.msg import PoseStamped, Vector3Stamped
-from process_harness import ProcessHarnessMixin
+from process_harness import call_service, ProcessHarnessMixin
 import pytest
 from quat_jt_controller import paper
 from quat_jt_controller import quaternion as quat
@@ -155,9 +155,8 @@ class Rig(ProcessHarnessMixin):
         sent = self.send_goal(p0, quat.to_xyzw(quat.from_rotation_matrix(R0)))
         self.spin_until(lambda: any('new goal' in line for line in self.logs), 10.0,
                         'the start pose as the goal')
-        future = self.reset_client.call_async(Trigger.Request())
-        self.spin_until(future.done, 10.0, 'the simulator reset')
-        assert future.result().success, future.result().message
+        result = call_service(self.executor, self.reset_client, Trigger.Request())
+        assert result.success, result.message
         self.spin_until(lambda: self.held_within(sent, POSITION_TOL_M, ORIENTATION_TOL, 0.5),
                         REACH_DEADLINE_S, 'the arm to rest at its start pose')
 

@@ -12,6 +12,7 @@ import random
 import time
 
 import numpy as np
+from process_harness import call_service
 import pytest
 from quat_jt_controller.tools import local_ros
 import rclpy
@@ -266,9 +267,8 @@ def test_reset_returns_to_initial_positions_at_rest(sim, probe):
     _stream(probe, [5.0, 0.0, 5.0], 0.2)
     assert np.abs(np.array(probe.latest()[2]) - INITIAL).max() > 0.01
     assert probe.reset.wait_for_service(timeout_sec=5.0), sim.log()
-    future = probe.reset.call_async(Trigger.Request())
-    assert probe.spin_until(future.done, 5.0), sim.log()
-    assert future.result().success, future.result().message
+    result = call_service(probe.executor, probe.reset, Trigger.Request())
+    assert result.success, result.message
     n = len(probe.msgs)
     assert probe.spin_until(lambda: len(probe.msgs) > n + 20, 5.0)
     _, _, q, qdot, effort = probe.latest()

@@ -7,6 +7,7 @@ import sys
 
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
+from PIL import Image
 import pytest
 
 pytestmark = pytest.mark.e2e
@@ -39,13 +40,19 @@ def test_paper_experiment_reproduces_the_qualitative_result(tmp_path):
                       make_reader(f, decoder_factories=[DecoderFactory()])
                       .iter_decoded_messages()}
         assert {'/joint_states', '/effort_controller/commands',
-                '/quat_jt_controller/orientation_error'} <= topics
+                '/quat_jt_controller/orientation_error', '/robot_description', '/tf_static',
+                '/tf'} <= topics
+        # The animation, rendered after the run: 25 fps of the recorded time, and a still.
+        with Image.open(tmp_path / potential / f'{potential}.gif') as gif:
+            assert gif.n_frames >= 25 and gif.size == (320, 240)
+        assert (tmp_path / potential / f'{potential}_frame.png').stat().st_size > 1000
     # Section 5 (docs/errata.md note 5): Coulomb friction holds the quadratic law back near 0.2,
     # the tanh law gets within a few 1e-3.
     assert 0.1 < final['quadratic'] < 0.4, final
     assert final['tanh'] < 0.02, final
     assert (tmp_path / 'fig2_error_norm.png').stat().st_size > 10_000
     assert '| quadratic (Eq. 37) |' in stdout and '| tanh (Eq. 38) |' in stdout
+    assert stdout.count('Animation ') == 2 and 'rendered in' in stdout
 
 
 def test_benchmark_reports_every_figure(tmp_path):

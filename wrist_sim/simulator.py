@@ -114,7 +114,9 @@ class WristSimulator:
     :param joint_names: the joints to drive, in the order of every vector of this class; by
         default the URDF's revolute/prismatic joints in tree order. Others stay at zero.
     :param dt_s: the fixed time step (s).
-    :param use_gui: open the PyBullet window instead of a DIRECT (headless) client.
+    :param use_gui: open the PyBullet window instead of a DIRECT (headless) client; its side
+        panels are hidden and its camera looks at the robot. :meth:`show_frame` draws frames
+        (e.g. a goal) in it.
     :param viscous_nm_s_per_rad: viscous friction ``b`` per joint (default zeros).
     :param coulomb_nm: Coulomb friction / stiction level per joint (default zeros).
     :param initial_positions_rad: where the robot starts, at rest (default zeros).
@@ -154,6 +156,10 @@ class WristSimulator:
         self._initial = _as_vector(initial_positions_rad, self.n, 'initial_positions_rad')
         self.set_friction(viscous_nm_s_per_rad, coulomb_nm)
         self.reset(self._initial)
+        self.use_gui = bool(use_gui)
+        self._frame_lines: dict[str, list[int]] = {}
+        if self.use_gui:
+            self._aim_gui_camera()
 
     def _setup(self, xml: str, dirs: list[str], joint_names: Optional[Sequence[str]],
                solver_iterations: int) -> None:
@@ -341,6 +347,50 @@ class WristSimulator:
             self._client.resetJointState(self._body, j, float(qi), float(vi))
         self._applied[:] = 0.0
         self._read()
+
+    # -- the GUI window ------------------------------------------------------------------
+
+    def _aim_gui_camera(self) -> None:
+        """Hide the window's side panels and look at the robot (all link origins in view)."""
+        c = self._client
+        c.configureDebugVisualizer(pybullet.COV_ENABLE_GUI, 0)
+        pts = np.array([(0.0, 0.0, 0.0)] + [
+            c.getLinkState(self._body, j, computeForwardKinematics=True)[4]
+            for j in range(c.getNumJoints(self._body))])
+        centre = 0.5 * (pts.min(axis=0) + pts.max(axis=0))
+        radius = float(np.linalg.norm(pts - centre, axis=1).max()) + 0.15
+        c.resetDebugVisualizerCamera(cameraDistance=1.6 * radius, cameraYaw=50.0,
+                                     cameraPitch=-25.0, cameraTargetPosition=centre.tolist())
+
+    def show_frame(self, name: str, position_m: Sequence[float],
+                   quaternion_xyzw: Sequence[float], length_m: float = 0.1) -> bool:
+        """
+        Draw a coordinate frame (e.g. the goal) in the GUI as three lines, RGB = xyz.
+
+        ``position_m`` and ``quaternion_xyzw`` (ROS order) are in the world frame, where the
+        URDF's root link is. Calling it again with the same ``name`` moves that frame. Returns
+        False (and draws nothing) without a GUI.
+        """
+        if not self.use_gui:
+            return False
+        origin = [float(v) for v in position_m]
+        R = np.array(pybullet.getMatrixFromQuaternion([float(v) for v in quaternion_xyzw]))
+        R = R.reshape(3, 3)
+        old = self._frame_lines.get(name, [-1, -1, -1])
+        ids = []
+        for axis, color in enumerate(([1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [0.0, 0.0, 1.0])):
+            end = (np.array(origin) + length_m * R[:, axis]).tolist()
+            ids.append(self._client.addUserDebugLine(origin, end, color, lineWidth=3.0,
+                                                     replaceItemUniqueId=old[axis]))
+        self._frame_lines[name] = ids
+        return True
+
+    def gui_camera(self) -> Optional[tuple[int, int, list[float], list[float]]]:
+        """Return the GUI's (width, height, view matrix, projection matrix), None without one."""
+        if not self.use_gui:
+            return None
+        cam = self._client.getDebugVisualizerCamera()
+        return int(cam[0]), int(cam[1]), list(cam[2]), list(cam[3])
 
     def close(self) -> None:
         """Disconnect the PyBullet client (idempotent)."""

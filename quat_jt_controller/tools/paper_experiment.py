@@ -5,11 +5,15 @@ For each controller, quadratic (Eq. 37) and tanh (Eq. 38): start ``wrist_sim_nod
 ``controller_node`` as separate processes on a private loopback ROS graph with the package's
 config files (gains Eq. 43-45, q(0) = 0, the simulated Coulomb friction), publish the corrected
 goal of docs/errata.md (Eq. 40) on ``/quat_jt_controller/target_pose``, and record joint states,
-commands and the controller's error to MCAP. Then write a CSV, a figure like the paper's Fig. 2
-(||e|| against time, linear and log) and print the comparison table.
+commands and the controller's error to MCAP, with what a 3D viewer needs to replay the robot
+(``/robot_description``, ``/tf_static`` with the goal frame, ``/tf``; ``tools/robot_tf.py``).
+Then write a CSV, a figure like the paper's Fig. 2 (||e|| against time, linear and log) with
+the joint torques and angles against their URDF limits, an animated GIF of each run rendered
+offscreen from the recorded joint states (``tools/animation.py``) and print the comparison
+table. ``--xarm6`` also runs the xArm6 demo goal (``tools/xarm6_demo.py``, ROS-free).
 
     python -m quat_jt_controller.tools.paper_experiment [--out results/paper] [--duration 6]
-                                                        [--lockstep]
+                                                        [--lockstep] [--no-animation] [--xarm6]
 
 By default the simulator paces itself in real time, as the wrist would run. With ``--lockstep``
 it publishes ``/clock`` and steps as soon as the command for its last state has arrived
@@ -37,11 +41,14 @@ from quat_jt_controller.model import RobotModel
 from quat_jt_controller.reference_sim import ClosedLoop
 from quat_jt_controller.resources import default_urdf_xml
 from quat_jt_controller.tools import local_ros
+from quat_jt_controller.tools.robot_tf import write_robot_replay
 
 POTENTIALS = ('quadratic', 'tanh')
 EQUATION = {'quadratic': 'Eq. 37', 'tanh': 'Eq. 38'}
 CONTROLLER = 'quat_jt_controller'  # node name; its private topics live under /<name>/
 REACH_THRESHOLD = 0.05
+ANIMATION_FPS = 25.0  # frames per second of simulated time
+STILL_AT_S = 0.12  # the still frame saved next to each GIF: the wrist on its way
 
 
 @dataclass
@@ -60,6 +67,34 @@ class Run:
 
 def _stamp_s(stamp) -> float:
     return stamp.sec + 1e-9 * stamp.nanosec
+
+
+def goal_frame(model: RobotModel) -> tuple[np.ndarray, np.ndarray]:
+    """
+    Return (p_base_m, R_base) of the goal frame drawn by the animation and the MCAP replay.
+
+    Its orientation is the goal (Eq. 40 corrected); the orientation task sets no position, so it
+    is placed where the tip is at the goal's joint angles.
+    """
+    p_m, _ = model.forward_kinematics(paper.Q_JOINT_DESIRED_RAD)
+    return np.array(p_m), np.array(quat.to_rotation_matrix(paper.Q_DESIRED))
+
+
+def _write_replay(mcap, model: RobotModel, raw_states: list) -> None:
+    """Add /robot_description, /tf_static and /tf (from the recorded joint states) to ``mcap``."""
+    from rclpy.serialization import deserialize_message
+    from sensor_msgs.msg import JointState
+
+    if not raw_states:
+        return
+    states = [deserialize_message(d, JointState) for _, d in raw_states]
+    order = [states[0].name.index(n) for n in model.joint_names]
+    q = np.array([[s.position[i] for i in order] for s in states])
+    stamps_ns = [s.header.stamp.sec * 1_000_000_000 + s.header.stamp.nanosec for s in states]
+    p_goal, _ = goal_frame(model)
+    write_robot_replay(mcap, default_urdf_xml(), model.joint_names,
+                       [ns for ns, _ in raw_states], stamps_ns, q,
+                       goal=(model.base_link, p_goal, quat.to_xyzw(paper.Q_DESIRED)))
 
 
 def error_norm(model: RobotModel, q_rad) -> float:
@@ -160,7 +195,10 @@ def run_once(potential: str, duration_s: float, out_dir: Path, model: RobotModel
         for proc in (sim, ctrl):  # the sim first: its statistics end with the controller alive
             local_ros.stop_node(proc)
         probe.close()
-        mcap.close()
+        try:
+            _write_replay(mcap, model, records['states'])
+        finally:
+            mcap.close()
     sim_stats = json.loads(stats_file.read_text()) if stats_file.exists() else {}
 
     names = list(model.joint_names)
@@ -215,14 +253,52 @@ def write_csv(runs: list[Run], path: Path) -> None:
                             *(f'{v:.6f}' for v in r.effort_nm[k])])
 
 
-def plot(runs: list[Run], ideal: dict, path: Path) -> None:
+JOINT_COLORS = ('tab:blue', 'tab:orange', 'tab:green', 'tab:red', 'tab:purple', 'tab:brown')
+
+
+def plot_torques(ax, t_s, tau_nm, limits_nm, names, title: str) -> None:
+    """Each joint's applied torque against time, with its URDF effort limits (+/-) dashed."""
+    for j, name in enumerate(names):
+        color = JOINT_COLORS[j % len(JOINT_COLORS)]
+        ax.plot(t_s, tau_nm[:, j], color=color, lw=1, label=name)
+        for sign in (1.0, -1.0):
+            ax.axhline(sign * limits_nm[j], color=color, ls='--', lw=0.8)
+    ax.set_xlabel('t [s]')
+    ax.set_ylabel('applied torque [N m]; limits dashed')
+    ax.set_title(title, fontsize=9)
+    ax.grid(True, alpha=0.3)
+    ax.legend(fontsize=7, loc='upper right', ncol=2)
+
+
+def plot_angles(ax, t_s, q_rad, lower_rad, upper_rad, names, title: str) -> None:
+    """Each joint's angle against time, with its URDF position limits dashed."""
+    for j, name in enumerate(names):
+        color = JOINT_COLORS[j % len(JOINT_COLORS)]
+        ax.plot(t_s, q_rad[:, j], color=color, lw=1, label=name)
+        for limit in (lower_rad[j], upper_rad[j]):
+            ax.axhline(limit, color=color, ls='--', lw=0.8)
+    ax.set_xlabel('t [s]')
+    ax.set_ylabel('q [rad]; limits dashed')
+    ax.set_title(title, fontsize=9)
+    ax.grid(True, alpha=0.3)
+    ax.legend(fontsize=7, loc='upper right', ncol=2)
+
+
+def plot(runs: list[Run], ideal: dict, path: Path, model: Optional[RobotModel] = None) -> None:
+    """
+    Plot Fig. 2 of the paper (||e|| against time, linear and log) and the joints of each run.
+
+    With ``model``, two more rows: per run, the applied joint torques against the URDF effort
+    limits and the joint angles against the URDF position limits.
+    """
     import matplotlib
     matplotlib.use('Agg')
     import matplotlib.pyplot as plt
 
-    fig, axes = plt.subplots(1, 2, figsize=(11, 4.2))
+    rows = 1 if model is None else 3
+    fig, axes = plt.subplots(rows, 2, figsize=(11, 4.2 * rows), squeeze=False)
     colors = {'quadratic': 'tab:blue', 'tanh': 'tab:red'}
-    for ax, log in zip(axes, (False, True)):
+    for ax, log in zip(axes[0], (False, True)):
         for r in runs:
             ax.plot(r.t_s, r.error_norm, color=colors[r.potential],
                     label=f'{r.potential} ({EQUATION[r.potential]}), simulated wrist')
@@ -237,12 +313,34 @@ def plot(runs: list[Run], ideal: dict, path: Path) -> None:
             ax.set_yscale('log')
             ax.set_ylim(1e-5, 2.0)
         ax.grid(True, which='both', alpha=0.3)
-    axes[0].set_title('Norm of orientation error (cf. paper Fig. 2)')
-    axes[1].set_title('log scale')
-    axes[1].legend(fontsize=7, loc='lower left')
+    axes[0][0].set_title('Norm of orientation error (cf. paper Fig. 2)')
+    axes[0][1].set_title('log scale')
+    axes[0][1].legend(fontsize=7, loc='lower left')
+    if model is not None:
+        for col, r in zip(range(2), runs):
+            name = f'{r.potential} ({EQUATION[r.potential]})'
+            plot_torques(axes[1][col], r.t_s, r.effort_nm, model.effort_limits,
+                         model.joint_names, f'{name}: joint torques vs effort limits')
+            plot_angles(axes[2][col], r.t_s, r.q_rad, model.position_lower,
+                        model.position_upper, model.joint_names,
+                        f'{name}: joint angles vs limits')
     fig.tight_layout()
-    fig.savefig(path, dpi=120)
+    fig.savefig(path, dpi=120 if model is None else 100)
     plt.close(fig)
+
+
+def animate_run(run: Run, model: RobotModel, fps: float = ANIMATION_FPS):
+    """Render ``run`` (its recorded joint states) to ``<potential>.gif`` next to its MCAP."""
+    from quat_jt_controller.tools.animation import animate
+
+    label = f'{run.potential} ({EQUATION[run.potential]})'
+    return animate(
+        default_urdf_xml(), model.joint_names, run.t_s, run.q_rad,
+        run.mcap_path.with_suffix('.gif'), tip_link=model.tip_link,
+        base_link=model.base_link, goal=goal_frame(model), fps=fps,
+        text=lambda i: [label, f't = {run.t_s[i]:.2f} s', f'||e|| = {run.error_norm[i]:.3g}'],
+        still_at_s=STILL_AT_S,
+        still_path=run.mcap_path.with_name(f'{run.potential}_frame.png'))
 
 
 def table(summaries: list[dict], limits) -> str:
@@ -266,6 +364,11 @@ def main(argv: Optional[list] = None) -> int:
                         help='seconds recorded after the goal, per controller')
     parser.add_argument('--lockstep', action='store_true',
                         help='simulated clock, sim and controller in lockstep (load-proof)')
+    parser.add_argument('--no-animation', action='store_true',
+                        help='skip the GIFs rendered from the recorded joint states')
+    parser.add_argument('--xarm6', action='store_true',
+                        help='also run the xArm6 demo goal (tools/xarm6_demo.py, ROS-free) '
+                             'into <out>/xarm6')
     args = parser.parse_args(argv)
     args.out.mkdir(parents=True, exist_ok=True)
     model = RobotModel(default_urdf_xml(), 'base_link', 'tool0')
@@ -279,7 +382,7 @@ def main(argv: Optional[list] = None) -> int:
         ideal[p] = (traj.t_s, traj.error_norm)
     summaries = [summarize(r, model.effort_limits) for r in runs]
     write_csv(runs, args.out / 'paper_experiment.csv')
-    plot(runs, ideal, args.out / 'fig2_error_norm.png')
+    plot(runs, ideal, args.out / 'fig2_error_norm.png', model)
     text = table(summaries, model.effort_limits)
     (args.out / 'summary.md').write_text(text + '\n')
     print()
@@ -293,6 +396,16 @@ def main(argv: Optional[list] = None) -> int:
               f'{s["final_speed_rad_s"]:.2e} rad/s; timing: {health}')
     print(f'\nFigure {args.out / "fig2_error_norm.png"}, CSV {args.out / "paper_experiment.csv"}, '
           f'MCAP {", ".join(str(r.mcap_path) for r in runs)}')
+    if not args.no_animation:  # after the runs, from the recorded joint states
+        for r in runs:
+            a = animate_run(r, model)
+            print(f'Animation {a.path}: {a.frames} frames ({ANIMATION_FPS:g} fps of sim time, '
+                  f'320x240) rendered in {a.render_s:.1f} s, {a.size_bytes / 1e3:.0f} kB; '
+                  f'still frame {a.still_path}')
+    if args.xarm6:
+        from quat_jt_controller.tools import xarm6_demo
+        xarm6_demo.main(['--out', str(args.out / 'xarm6')]
+                        + (['--no-animation'] if args.no_animation else []))
     print(f'Done in {time.monotonic() - t_start:.0f} s.')
     return 0
 
