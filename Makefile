@@ -5,7 +5,7 @@ VENV ?= .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: venv test demo bench lint clean
+.PHONY: venv test demo bench soak flood lint clean
 
 venv: $(STAMP)
 
@@ -26,6 +26,17 @@ demo: $(STAMP)
 # The 1 kHz loop benchmark (30 s, two processes over DDS) and the core law throughput.
 bench: $(STAMP)
 	$(PY) -m quat_jt_controller.tools.benchmark
+
+# Both nodes for DURATION seconds (10 minutes by default): RSS and rates per minute, the final
+# error and the warnings seen. LOAD=N runs N busy processes beside them (a loaded host).
+DURATION ?= 600
+LOAD ?= 0
+soak: $(STAMP)
+	$(PY) -m quat_jt_controller.tools.soak --duration $(DURATION) --load $(LOAD)
+
+# Goals must never delay a tick: 1000 singular goals/s for 3 s, with a no-goal control run.
+flood: $(STAMP)
+	$(PY) -m quat_jt_controller.tools.goal_flood
 
 lint: $(STAMP)
 	$(VENV)/bin/ament_flake8 .

@@ -5,10 +5,10 @@ The wrist demo: the simulated spherical wrist and the transpose-Jacobian regulat
                                                       [use_gui:=true|false]
 
 The nodes read their parameters from this package's ``config/wrist_sim.yaml`` and
-``config/wrist_controller.yaml`` (the paper's experiment; the xarm6_*.yaml files in the same
-folder are for another robot and use the same node names, so they are not loaded here);
-``potential`` overrides the controller's, ``use_gui`` opens the PyBullet window. Then send a
-goal, e.g. the paper's corrected one (docs/errata.md, note 2):
+``config/wrist_controller.yaml`` (keyed ``/**``, so a namespace, ``-r __ns:=/arm``, keeps
+them); ``potential`` overrides the controller's, ``use_gui`` opens the PyBullet window (it needs
+a display). If either node exits, the whole launch shuts down. Then send a goal, e.g. the
+paper's corrected one (docs/errata.md, note 2):
 
     ros2 topic pub --once /quat_jt_controller/target_pose geometry_msgs/msg/PoseStamped \
       "{header: {frame_id: base_link},
@@ -18,7 +18,7 @@ import os
 
 from ament_index_python.packages import get_package_share_directory
 from launch import LaunchDescription
-from launch.actions import DeclareLaunchArgument
+from launch.actions import DeclareLaunchArgument, Shutdown
 from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
 from launch_ros.parameter_descriptions import ParameterValue
@@ -39,9 +39,11 @@ def generate_launch_description() -> LaunchDescription:
                               description='open the PyBullet window of the simulator'),
         Node(package='quat_jt_controller', executable='wrist_sim_node', name='wrist_sim',
              output='screen', emulate_tty=True,
+             on_exit=Shutdown(reason='the simulator exited'),
              parameters=[sim_config, {'use_gui': ParameterValue(use_gui, value_type=bool)}]),
         Node(package='quat_jt_controller', executable='controller_node',
              name='quat_jt_controller', output='screen', emulate_tty=True,
+             on_exit=Shutdown(reason='the controller exited'),
              parameters=[controller_config,
                          {'potential': ParameterValue(potential, value_type=str)}]),
     ])

@@ -10,8 +10,10 @@ URDF ships inside the ``pybullet_data`` Python package (no download): it is read
 the simulator inside pybullet_data). Parameters come from this package's
 ``config/xarm6_sim.yaml`` and ``config/xarm6_controller.yaml`` (task: pose, link_base ->
 link6, the gains and how they were chosen). ``potential`` overrides the controller's,
-``use_gui`` opens the PyBullet window. The arm starts at rest at a non-singular configuration
-(tool pointing down at (0.334, 0, 0.498) m) and holds that pose; then send a reachable goal,
+``use_gui`` opens the PyBullet window (it needs a display). If either node exits, the whole
+launch shuts down. The simulator node is named ``xarm6_sim``. The arm starts at rest at a
+non-singular configuration (tool pointing down at (0.334, 0, 0.498) m) and holds that pose;
+then send a reachable goal,
 e.g. this one, 0.10 m and 0.25 rad away (the arm's pose at q = [0.2, -0.4, -1.1, 0.2, 1.4, 0.3]):
 
     ros2 topic pub --once /quat_jt_controller/target_pose geometry_msgs/msg/PoseStamped \
@@ -22,14 +24,14 @@ e.g. this one, 0.10 m and 0.25 rad away (the arm's pose at q = [0.2, -0.4, -1.1,
 and watch ``/quat_jt_controller/position_error`` and ``/quat_jt_controller/orientation_error``.
 The simulator holds the arm at its start until the controller's first command arrives
 (``hold_until_first_command``), so it does not sag while the nodes discover each other;
-``ros2 service call /wrist_sim/reset std_srvs/srv/Trigger`` puts it back there, at rest.
+``ros2 service call /xarm6_sim/reset std_srvs/srv/Trigger`` puts it back there, at rest.
 """
 import os
 from pathlib import Path
 
 from ament_index_python.packages import get_package_share_directory
 from launch import LaunchDescription
-from launch.actions import DeclareLaunchArgument
+from launch.actions import DeclareLaunchArgument, Shutdown
 from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
 from launch_ros.parameter_descriptions import ParameterValue
@@ -52,13 +54,15 @@ def generate_launch_description() -> LaunchDescription:
                                           "'quadratic' (Eq. 24)"),
         DeclareLaunchArgument('use_gui', default_value='false', choices=['true', 'false'],
                               description='open the PyBullet window of the simulator'),
-        Node(package='quat_jt_controller', executable='wrist_sim_node', name='wrist_sim',
+        Node(package='quat_jt_controller', executable='wrist_sim_node', name='xarm6_sim',
              output='screen', emulate_tty=True,
+             on_exit=Shutdown(reason='the simulator exited'),
              parameters=[sim_config,
                          {'robot_description': robot_description,
                           'use_gui': ParameterValue(use_gui, value_type=bool)}]),
         Node(package='quat_jt_controller', executable='controller_node',
              name='quat_jt_controller', output='screen', emulate_tty=True,
+             on_exit=Shutdown(reason='the controller exited'),
              parameters=[controller_config,
                          {'robot_description': robot_description,
                           'potential': ParameterValue(potential, value_type=str)}]),

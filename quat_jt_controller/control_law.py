@@ -47,7 +47,22 @@ class GainsError(ValueError):
     """An invalid gain; the message names the parameter and the offending value."""
 
 
-def _vector(name: str, values: Sequence[float], size: int) -> tuple[float, ...]:
+# A gain is refused if its term alone would ask for more than the largest effort limit at an
+# error (or speed) of this size: past that it only saturates the joints (a bang-bang law).
+SATURATING_ERROR = 1e-3  # rad (orientation rows), m (position rows), rad/s (K_v)
+# tanh(Lambda y) with Lambda above this switches as sign(y) within sensor noise: it chatters.
+MAX_LAMBDA = 1e4
+MAX_GAIN_WITHOUT_LIMITS = 1e6  # when the URDF gives no effort limit
+
+
+def gain_ceiling(effort_limits_nm: Sequence[float]) -> float:
+    """Return the largest sane K_p or K_v entry for these effort limits (see SATURATING_ERROR)."""
+    finite = [lim for lim in effort_limits_nm if isfinite(lim) and lim > 0.0]
+    return max(finite) / SATURATING_ERROR if finite else MAX_GAIN_WITHOUT_LIMITS
+
+
+def _vector(name: str, values: Sequence[float], size: int,
+            upper: float = float('inf'), why: str = '') -> tuple[float, ...]:
     try:
         vals = tuple(float(v) for v in values)
     except (TypeError, ValueError) as exc:
@@ -57,6 +72,8 @@ def _vector(name: str, values: Sequence[float], size: int) -> tuple[float, ...]:
     for i, v in enumerate(vals):
         if not isfinite(v) or v <= 0.0:
             raise GainsError(f'{name}[{i}] must be finite and > 0, got {v}')
+        if v > upper:
+            raise GainsError(f'{name}[{i}] = {v:g} is above {upper:g}: {why}')
     return vals
 
 
@@ -79,8 +96,14 @@ class Gains:
     @classmethod
     def create(cls, potential: str, kp: Sequence[float], kv: Sequence[float],
                lam: Sequence[float], task: Task, n_joints: int,
-               gravity_compensation: bool = True) -> 'Gains':
-        """Validate and build. Raises GainsError naming the bad value."""
+               gravity_compensation: bool = True,
+               effort_limits_nm: Optional[Sequence[float]] = None) -> 'Gains':
+        """
+        Validate and build. Raises GainsError naming the bad value.
+
+        With ``effort_limits_nm``, K_p and K_v are also bounded by :func:`gain_ceiling` and
+        Lambda by MAX_LAMBDA, so that no gain makes the law a saturating switch.
+        """
         try:
             pot = Potential(potential)
         except ValueError:
@@ -88,10 +111,18 @@ class Gains:
                 f'potential must be one of {[p.value for p in Potential]}, got {potential!r}'
             ) from None
         task = Task(task)
+        ceiling, lam_ceiling = float('inf'), float('inf')
+        why = lam_why = ''
+        if effort_limits_nm is not None:
+            ceiling, lam_ceiling = gain_ceiling(effort_limits_nm), MAX_LAMBDA
+            why = (f'its term alone would ask for more than the largest effort limit '
+                   f'({ceiling * SATURATING_ERROR:g} N m) at an error of {SATURATING_ERROR:g} '
+                   '(rad, m or rad/s): the joints would only saturate')
+            lam_why = 'tanh(lambda y) would switch like sign(y) within sensor noise (chatter)'
         return cls(potential=pot,
-                   kp=_vector('kp', kp, task.dim),
-                   kv=_vector('kv', kv, n_joints),
-                   lam=_vector('lambda', lam, task.dim),
+                   kp=_vector('kp', kp, task.dim, ceiling, why),
+                   kv=_vector('kv', kv, n_joints, ceiling, why),
+                   lam=_vector('lambda', lam, task.dim, lam_ceiling, lam_why),
                    gravity_compensation=bool(gravity_compensation))
 
 

@@ -17,11 +17,12 @@ from quat_jt_controller import lifecycle
 from quat_jt_controller import quaternion as quat
 from quat_jt_controller.control_law import Gains, GainsError, Task
 from quat_jt_controller.goal_check import GoalCheckWorker, ModelSpec
-from quat_jt_controller.joints import StateLayout
+from quat_jt_controller.joints import stamp_problem, StateLayout
 from quat_jt_controller.loop_stats import TickStats
 from quat_jt_controller.model import ModelError, RobotModel
 from quat_jt_controller.parameters import declare_gains, declare_structural
 from quat_jt_controller.regulator import Goal, Regulator, TickOutput
+from quat_jt_controller.resources import bundled_urdf_hint
 from quat_jt_controller.throttle import cause, Throttle
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
@@ -38,11 +39,15 @@ class QuatJtController(Node):
     def __init__(self, **kwargs) -> None:
         super().__init__(NODE_NAME, **kwargs)
         cfg = self.config = declare_structural(self)
-        model = RobotModel(cfg.robot_description, cfg.base_link, cfg.tip_link, cfg.joints)
-        gains = declare_gains(self, cfg, on_apply=self._apply_gains)
+        try:
+            model = RobotModel(cfg.robot_description, cfg.base_link, cfg.tip_link, cfg.joints)
+        except ModelError as exc:
+            raise ModelError(f'{exc}{bundled_urdf_hint(cfg.given_robot_description)}') from None
+        gains = declare_gains(self, cfg, model.effort_limits, on_apply=self._apply_gains)
         self.regulator = Regulator(model, cfg.task, gains.current)
         self._layout = StateLayout(cfg.joints)
         self._use_sim_time = bool(self.get_parameter('use_sim_time').value)
+        self._max_age_ns = int(cfg.max_state_age_s * 1e9)
         self._goal_checker = GoalCheckWorker(ModelSpec(
             cfg.robot_description, cfg.base_link, cfg.tip_link, cfg.joints, cfg.task))
 
@@ -50,6 +55,7 @@ class QuatJtController(Node):
         self._goal_warning = ''
         self._reject_log = Throttle(THROTTLE_S)  # per cause (the reason without numbers)
         self._goal_log = Throttle(GOAL_LOG_PERIOD_S)
+        self._graph_log = Throttle(10.0)
         self.counters = diagnostics.Counters()
         self.stats = TickStats()
         self._last: Optional[TickOutput] = None
@@ -108,6 +114,15 @@ class QuatJtController(Node):
             self.counters.rejected_states += 1
             self._log_rejection('joint_states', str(exc))
             return
+        stamp = msg.header.stamp
+        stamp_ns = stamp.sec * 1_000_000_000 + stamp.nanosec
+        now_ns = self.get_clock().now().nanoseconds if self._use_sim_time else time.time_ns()
+        problem = stamp_problem(stamp_ns, now_ns, self._max_age_ns)
+        if problem:
+            self.counters.rejected_states += 1
+            self.counters.stale_states += 1
+            self._log_rejection('joint_states', problem)
+            return
         if self.regulator.goal is None:
             self._hold(q)
         out = self.regulator.update(q, qdot)
@@ -115,10 +130,6 @@ class QuatJtController(Node):
         t1 = time.perf_counter_ns()
         self._cmd_pub.publish(self._cmd_msg)
         t2 = time.perf_counter_ns()
-
-        stamp = msg.header.stamp
-        stamp_ns = stamp.sec * 1_000_000_000 + stamp.nanosec
-        now_ns = self.get_clock().now().nanoseconds if self._use_sim_time else time.time_ns()
         self.stats.record(t0, t1, t2, (now_ns - stamp_ns) * 1e-3 if stamp_ns else float('nan'),
                           out.saturated)
         self._last, self._last_q, self._last_qdot = out, q, qdot
@@ -140,10 +151,7 @@ class QuatJtController(Node):
         """Until the first goal: hold the pose measured on the first joint state."""
         goal = self.regulator.hold(q)
         self._goal_source = 'hold'
-        self.get_logger().info(
-            f'first joint state: holding the measured pose, quaternion (x, y, z, w) '
-            f'{tuple(round(c, 4) for c in goal.xyzw())}, position '
-            f'{tuple(round(c, 4) for c in goal.p_desired_base)} m')
+        self.get_logger().info(f'first joint state: holding the measured pose, {goal.describe()}')
 
     def _publish_feedback(self, stamp, out: TickOutput) -> None:
         pose = self._pose_msg
@@ -201,13 +209,10 @@ class QuatJtController(Node):
     def _log_goal(self, goal: Goal) -> None:
         """One line per distinct goal, at most one per GOAL_LOG_PERIOD_S (the rest counted)."""
         held = self._goal_log('goal')
-        if held is None:
-            return
-        text = f'new goal: quaternion (x, y, z, w) {tuple(round(c, 4) for c in goal.xyzw())}'
-        if self.config.task is Task.POSE:
-            text += f', position {tuple(round(c, 4) for c in goal.p_desired_base)} m'
-        self.get_logger().info(text + (f' ({held} more distinct goals since the last line)'
-                                       if held else ''))
+        if held is not None:
+            self.get_logger().info(
+                f'new goal: {goal.describe(self.config.task is Task.POSE)}'
+                + (f' ({held} more distinct goals since the last line)' if held else ''))
 
     def _log_rejection(self, topic: str, reason: str) -> None:
         """Warn once per cause and second; held-back repeats are counted in the next line."""
@@ -222,9 +227,8 @@ class QuatJtController(Node):
             if goal is self.regulator.goal and verdict != self._goal_warning:
                 self._goal_warning = verdict
                 if verdict:
-                    self.get_logger().warn(
-                        f'goal (x, y, z, w) {tuple(round(c, 4) for c in goal.xyzw())} '
-                        f'accepted with a warning: {verdict}')
+                    self.get_logger().warn(f'goal {goal.describe(False)} accepted with a '
+                                           f'warning: {verdict}')
 
     # --------------------------------------------------------------------------- diagnostics
     def _on_diagnostics(self) -> None:
@@ -234,7 +238,8 @@ class QuatJtController(Node):
         self._window_start_ns = now
         statuses = (
             ('control loop', diagnostics.loop_status(
-                figures, self._last_state_ns == 0, self._stopped, self.counters)),
+                figures, self._last_state_ns == 0, self._stopped, self.counters,
+                self._graph_warnings())),
             ('goal', diagnostics.goal_status(
                 self._goal_source, self.regulator.goal, self._goal_warning, self._last,
                 self._last_qdot, self.config.task is Task.POSE, self.counters)),
@@ -246,6 +251,18 @@ class QuatJtController(Node):
             for name, (level, message, values) in statuses])
         arr.header.stamp = self.get_clock().now().to_msg()
         self._diag_pub.publish(arr)
+
+    def _graph_warnings(self) -> list[str]:
+        """Warn (every 10 s while it lasts) of a second commander or a second node named so."""
+        me = (self.get_name(), self.get_namespace())
+        warnings = diagnostics.graph_warnings(
+            self._cmd_pub.topic_name, self.count_publishers(self._cmd_pub.topic_name),
+            self.get_fully_qualified_name(),
+            sum(1 for node in self.get_node_names_and_namespaces() if tuple(node) == me))
+        for warning in warnings:
+            if self._graph_log(cause(warning)) is not None:
+                self.get_logger().warn(warning)
+        return warnings
 
     def destroy_node(self) -> None:
         """Stop the goal-check worker, then destroy the node."""

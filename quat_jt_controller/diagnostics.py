@@ -25,12 +25,27 @@ class Counters:
     """Events counted over the node's life, reported with every status."""
 
     rejected_states: int = 0
+    stale_states: int = 0  # of the rejected: unstamped, too old or in the future
     rejected_goals: int = 0
     accepted_goals: int = 0
     nonfinite_torques: int = 0
 
 
-def loop_status(figures: dict, waiting: bool, stopped: bool, counters: Counters) -> Status:
+def graph_warnings(command_topic: str, command_publishers: int, node_name: str,
+                   nodes_with_that_name: int) -> list[str]:
+    """Warn of a second commander on the robot, or a second node of the same full name."""
+    warnings = []
+    if command_publishers > 1:
+        warnings.append(f'{command_publishers} publishers on {command_topic}: another '
+                        'controller commands this robot too, and they fight')
+    if nodes_with_that_name > 1:
+        warnings.append(f'{nodes_with_that_name} nodes are named {node_name}: parameters and '
+                        'goals reach them both; give each its own name')
+    return warnings
+
+
+def loop_status(figures: dict, waiting: bool, stopped: bool, counters: Counters,
+                graph_warnings: Sequence[str] = ()) -> Status:
     """Report the control loop: rate, timing, saturation, timeouts (TickStats.window figures)."""
     messages = []
     level = OK
@@ -43,12 +58,20 @@ def loop_status(figures: dict, waiting: bool, stopped: bool, counters: Counters)
     if n and saturated > SATURATION_WARN_FRACTION * n:
         level = max(level, WARN)
         messages.append(f'torque saturated in {saturated}/{n} ticks')
+    if counters.stale_states:
+        level = max(level, WARN)
+        messages.append(f'{counters.stale_states} joint states rejected for their stamps '
+                        '(unstamped, too old or in the future; see max_state_age)')
+    for warning in graph_warnings:
+        level = max(level, WARN)
+        messages.append(warning)
     if counters.nonfinite_torques:
         level = max(level, WARN)
         messages.append(f'{counters.nonfinite_torques} non-finite torques replaced by zero')
     message = '; '.join(messages) or f'running at {figures["control_rate_hz"]:.0f} Hz'
     values = [(k, f'{v:.1f}' if isinstance(v, float) else str(v)) for k, v in figures.items()]
     values += [('rejected_states_total', str(counters.rejected_states)),
+               ('stale_states_total', str(counters.stale_states)),
                ('nonfinite_torques_total', str(counters.nonfinite_torques)),
                ('state_timeout', str(stopped))]
     return level, message, values

@@ -92,3 +92,24 @@ class StateLayout:
         if total - total != 0.0:
             raise ValueError(f'non-finite position or velocity: q = {q}, qdot = {qdot}')
         return q, qdot
+
+
+def stamp_problem(stamp_ns: int, now_ns: int, max_age_ns: int) -> str:
+    """
+    Say why a joint state's stamp is unusable ('' if it is fine), against the node's clock.
+
+    Unusable: no stamp (zero), older than ``max_age_ns``, or that far in the future (another
+    clock). ``max_age_ns`` 0 turns the check off; ``now_ns`` 0 (a simulated clock not yet
+    received) skips it.
+    """
+    if not max_age_ns or not now_ns:
+        return ''
+    if stamp_ns == 0:
+        return 'header.stamp is zero (not stamped); set max_state_age to 0 to accept such states'
+    age_ns = now_ns - stamp_ns
+    if age_ns > max_age_ns:
+        return f'stamped {age_ns * 1e-9:.3f} s ago (max_state_age {max_age_ns * 1e-9:g} s)'
+    if age_ns < -max_age_ns:
+        return (f'stamped {-age_ns * 1e-9:.3f} s in the future (max_state_age '
+                f'{max_age_ns * 1e-9:g} s): another clock?')
+    return ''

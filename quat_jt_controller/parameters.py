@@ -18,7 +18,7 @@ from dataclasses import dataclass
 from typing import Any, Callable, Generic, Mapping, Optional, Sequence, TypeVar
 
 from quat_jt_controller import paper
-from quat_jt_controller.control_law import Gains, Potential, Task
+from quat_jt_controller.control_law import gain_ceiling, Gains, MAX_LAMBDA, Potential, Task
 from quat_jt_controller.resources import default_urdf_xml
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 from rcl_interfaces.msg import ParameterType, SetParametersResult
@@ -31,7 +31,9 @@ DEFAULT_LAMBDA_POSITION = (100.0, 100.0, 100.0)
 DEFAULT_JOINTS = ('joint1', 'joint2', 'joint3')
 DEFAULT_BASE_LINK = 'base_link'
 DEFAULT_TIP_LINK = 'tool0'
-DEFAULT_STATE_TIMEOUT_S = 0.1
+# Chosen with tools/soak.py on a loaded host (README, 'Watchdog timeouts').
+DEFAULT_STATE_TIMEOUT_S = 0.5
+DEFAULT_MAX_STATE_AGE_S = 0.5
 DEFAULT_PUBLISH_RATE_DIVIDER = 10
 
 # The live parameters that make up a Gains; everything else here is read-only.
@@ -46,8 +48,10 @@ class StructuralConfig:
     joints: tuple[str, ...]
     base_link: str
     tip_link: str
-    robot_description: str
+    robot_description: str  # the URDF in use (the bundled wrist's if none was given)
+    given_robot_description: str  # the parameter as given ('' = none)
     state_timeout_s: float
+    max_state_age_s: float  # 0: stamps not checked
     publish_rate_divider: int
 
 
@@ -154,6 +158,14 @@ def declare_structural(node: Node) -> StructuralConfig:
                     'zeroed (published once) until states return.',
                     ParameterType.PARAMETER_DOUBLE, read_only=True,
                     float_range=(0.005, 10.0))).value
+    max_age = node.declare_parameter(
+        'max_state_age', DEFAULT_MAX_STATE_AGE_S,
+        _descriptor('A joint state stamped more than this many seconds before (or after) the '
+                    "node's clock, or not stamped (zero), is rejected: no command is computed "
+                    'from it, and it counts as no state for state_timeout. 0 = stamps are not '
+                    'checked (e.g. a driver without time stamps).',
+                    ParameterType.PARAMETER_DOUBLE, read_only=True,
+                    float_range=(0.0, 60.0))).value
     divider = node.declare_parameter(
         'publish_rate_divider', DEFAULT_PUBLISH_RATE_DIVIDER,
         _descriptor('~/current_pose and the error topics are published every N-th tick '
@@ -166,7 +178,8 @@ def declare_structural(node: Node) -> StructuralConfig:
         raise ValueError('base_link and tip_link must not be empty')
     return StructuralConfig(task=task, joints=tuple(joints), base_link=base_link,
                             tip_link=tip_link, robot_description=urdf or default_urdf_xml(),
-                            state_timeout_s=float(timeout), publish_rate_divider=int(divider))
+                            given_robot_description=urdf, state_timeout_s=float(timeout),
+                            max_state_age_s=float(max_age), publish_rate_divider=int(divider))
 
 
 def default_gains(task: Task, n_joints: int) -> dict[str, Any]:
@@ -180,7 +193,7 @@ def default_gains(task: Task, n_joints: int) -> dict[str, Any]:
             'lambda': list(lam), 'gravity_compensation': True}
 
 
-def declare_gains(node: Node, config: StructuralConfig,
+def declare_gains(node: Node, config: StructuralConfig, effort_limits_nm: Sequence[float],
                   on_apply: Optional[Callable[[Gains], None]] = None) -> LiveParameters[Gains]:
     """
     Declare the live gain parameters; return them as LiveParameters of a Gains.
@@ -193,6 +206,7 @@ def declare_gains(node: Node, config: StructuralConfig,
     n = len(config.joints)
     axes = 'x, y, z, rx, ry, rz' if dim == 6 else 'rx, ry, rz'
     defaults = default_gains(config.task, n)
+    top = f'{gain_ceiling(effort_limits_nm):g}'  # the largest effort limit / SATURATING_ERROR
     descriptors = {
         'potential': _descriptor(
             "Artificial potential: 'quadratic' (Eq. 23 -> law 24/37) or 'tanh' (Eq. 31 -> law "
@@ -200,27 +214,31 @@ def declare_gains(node: Node, config: StructuralConfig,
             constraints="one of 'quadratic', 'tanh'"),
         'kp': _descriptor(
             f'Diagonal of K_p, {dim} values ({axes}); N/m for position rows, N m for '
-            'orientation rows. Finite, > 0. Live.', ParameterType.PARAMETER_DOUBLE_ARRAY,
-            constraints=f'{dim} finite values > 0'),
+            f'orientation rows. Finite, > 0, <= {top}. Live.',
+            ParameterType.PARAMETER_DOUBLE_ARRAY, constraints=f'{dim} values in (0, {top}]'),
         'kv': _descriptor(
-            f'Diagonal of K_v (joint damping), one per joint ({n}), N m s/rad. Finite, > 0. '
-            'Live.', ParameterType.PARAMETER_DOUBLE_ARRAY,
-            constraints=f'{n} finite values > 0'),
+            f'Diagonal of K_v (joint damping), one per joint ({n}), N m s/rad. Finite, > 0, '
+            f'<= {top}. Live.', ParameterType.PARAMETER_DOUBLE_ARRAY,
+            constraints=f'{n} values in (0, {top}]'),
         'lambda': _descriptor(
             f'Diagonal of Lambda in tanh(Lambda y) (Eq. 32/38), {dim} values ({axes}); used by '
-            'the tanh potential. Finite, > 0. Live.', ParameterType.PARAMETER_DOUBLE_ARRAY,
-            constraints=f'{dim} finite values > 0'),
+            f'the tanh potential. Finite, > 0, <= {MAX_LAMBDA:g}. Live.',
+            ParameterType.PARAMETER_DOUBLE_ARRAY,
+            constraints=f'{dim} values in (0, {MAX_LAMBDA:g}]'),
         'gravity_compensation': _descriptor(
             'Add g(q) from the URDF model to the torque (Eq. 22). Live.',
             ParameterType.PARAMETER_BOOL),
     }
     for name in GAIN_PARAMETERS:
         node.declare_parameter(name, defaults[name], descriptors[name])
-    return LiveParameters(node, GAIN_PARAMETERS, lambda values: build_gains(values, config),
-                          on_apply)
+    return LiveParameters(
+        node, GAIN_PARAMETERS, lambda values: build_gains(values, config, effort_limits_nm),
+        on_apply)
 
 
-def build_gains(values: Mapping[str, Any], config: StructuralConfig) -> Gains:
+def build_gains(values: Mapping[str, Any], config: StructuralConfig,
+                effort_limits_nm: Optional[Sequence[float]] = None) -> Gains:
     """Gains from parameter values keyed by parameter name. Raises GainsError."""
     return Gains.create(values['potential'], values['kp'], values['kv'], values['lambda'],
-                        config.task, len(config.joints), values['gravity_compensation'])
+                        config.task, len(config.joints), values['gravity_compensation'],
+                        effort_limits_nm)

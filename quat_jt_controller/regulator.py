@@ -63,15 +63,22 @@ class Goal:
         """
         Validate a goal request (a PoseStamped's fields); raise ValueError saying why not.
 
-        The frame must be ``base_link`` or empty (meaning ``base_link``). The orientation task
-        ignores the position.
+        The frame must be ``base_link`` or empty (meaning ``base_link``); as in tf2 for ROS 2,
+        a leading slash is not accepted. The orientation task ignores the position.
         """
-        frame = frame_id.lstrip('/')
-        if frame not in ('', base_link):
-            raise ValueError(f"header.frame_id is '{frame_id}', expected '{base_link}' "
-                             '(or empty)')
+        if frame_id not in ('', base_link):
+            hint = (' (tf2 frame ids have no leading slash)' if frame_id.lstrip('/') == base_link
+                    else ' (or empty)')
+            raise ValueError(f"header.frame_id is '{frame_id}', expected '{base_link}'{hint}")
         return cls.from_xyzw(*xyzw, p_desired_base if cl.Task(task) is cl.Task.POSE
                              else (0.0, 0.0, 0.0))
+
+    def describe(self, with_position: bool = True) -> str:
+        """Return the goal for a log line, in ROS order, rounded."""
+        text = f'quaternion (x, y, z, w) {tuple(round(c, 4) for c in self.xyzw())}'
+        if with_position:
+            text += f', position {tuple(round(c, 4) for c in self.p_desired_base)} m'
+        return text
 
     def xyzw(self) -> tuple[float, float, float, float]:
         """Return the quaternion in ROS order (x, y, z, w)."""

@@ -41,3 +41,33 @@ def share_path(relative: str) -> Path:
 def default_urdf_xml() -> str:
     """Return the bundled spherical-wrist URDF as an XML string."""
     return share_path(DEFAULT_URDF).read_text()
+
+
+def bundled_urdf_hint(robot_description: str) -> str:
+    """
+    Return advice to append to a joint or link error when ``robot_description`` was empty.
+
+    An empty ``robot_description`` means the bundled spherical wrist; a user who runs a node
+    for another robot (the xArm6, say) with ``ros2 run`` must pass its URDF.
+    """
+    if robot_description:
+        return ''
+    return ('. robot_description is empty, so the bundled spherical wrist (joint1-joint3, '
+            'base_link -> tool0) was loaded; for another robot pass its URDF, e.g. '
+            '--ros-args -p robot_description:="$(cat robot.urdf)" (the xArm6 URDF is '
+            '<pybullet_data>/xarm/xarm6_robot.urdf; python3 -c "import pybullet_data; '
+            'print(pybullet_data.getDataPath())" prints that folder), or start it with its '
+            'launch file')
+
+
+def config_parameters(name: str) -> dict:
+    """
+    Return the ``ros__parameters`` of the package's ``config/<name>``.
+
+    The config files key their parameters by ``/**`` (any node name, any namespace), so the
+    same file serves a renamed or namespaced node.
+    """
+    import yaml  # rclpy's own dependency; only needed here
+
+    with open(share_path(f'config/{name}')) as f:
+        return yaml.safe_load(f)['/**']['ros__parameters']

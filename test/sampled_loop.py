@@ -20,20 +20,12 @@ from quat_jt_controller import control_law as cl
 from quat_jt_controller import quaternion as quat
 from quat_jt_controller.model import RobotModel
 from quat_jt_controller.reference_sim import ClosedLoop, run_sampled
-import yaml
-
-CONFIG_DIR = Path(__file__).resolve().parent.parent / 'config'
-
-
-def load_params(name: str, node: str) -> dict:
-    """Return the ``ros__parameters`` of ``node`` in ``config/<name>``."""
-    with open(CONFIG_DIR / name) as f:
-        return yaml.safe_load(f)[node]['ros__parameters']
+from quat_jt_controller.resources import config_parameters
 
 
 def xarm6_gains(potential: Optional[str] = None) -> cl.Gains:
     """Return the gains of ``config/xarm6_controller.yaml`` (its potential unless given)."""
-    p = load_params('xarm6_controller.yaml', 'quat_jt_controller')
+    p = config_parameters('xarm6_controller.yaml')
     return cl.Gains.create(potential or p['potential'], p['kp'], p['kv'], p['lambda'],
                            cl.Task(p['task']), len(p['joints']),
                            p.get('gravity_compensation', True))
@@ -91,7 +83,7 @@ def _report() -> None:  # pragma: no cover - the figures behind config/xarm6_con
     from wrist_sim.simulator import WristSimulator
 
     model = xarm6_model()
-    sim_params = load_params('xarm6_sim.yaml', 'wrist_sim')
+    sim_params = config_parameters('xarm6_sim.yaml')
     q0 = sim_params['initial_positions']
     goals = {
         'near (0.10 m, 0.25 rad)': [0.2, -0.4, -1.1, 0.2, 1.4, 0.3],
@@ -117,7 +109,8 @@ def _report() -> None:  # pragma: no cover - the figures behind config/xarm6_con
                             XARM6_URDF.read_text(), model.joint_names, initial_positions_rad=q0,
                             viscous_nm_s_per_rad=(sim_params['viscous_friction']
                                                   if friction else None),
-                            coulomb_nm=sim_params['coulomb_friction'] if friction else None
+                            coulomb_nm=sim_params['coulomb_friction'] if friction else None,
+                            enforce_velocity_limits=sim_params['enforce_velocity_limits']
                     ) as sim:
                         loop = ClosedLoop(model, gains, cl.Task.POSE, q_d, p_d)
                         run = run_sampled(loop, sim, 5.0, delay)

@@ -36,8 +36,12 @@ STRUCTURAL = ('task', 'joints', 'base_link', 'tip_link', 'robot_description',
               'state_timeout', 'publish_rate_divider')
 
 
-def state(q, v=(0.0, 0.0, 0.0), names=('joint1', 'joint2', 'joint3')) -> JointState:
+def state(q, v=(0.0, 0.0, 0.0), names=('joint1', 'joint2', 'joint3'),
+          age_s: float = 0.0) -> JointState:
+    """Return a joint state stamped ``age_s`` ago by the system clock (the node's)."""
     msg = JointState()
+    msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(
+        time.time_ns() - int(age_s * 1e9), 1_000_000_000)
     msg.name = list(names)
     msg.position = [float(x) for x in q]
     msg.velocity = [float(x) for x in v]
@@ -288,11 +292,13 @@ def test_rejected_goal_keeps_the_previous_one(make_probe):
     probe.send_goal(goal(GOAL_XYZW))
     kept = probe.node.regulator.goal
     for bad in (goal(quat.to_xyzw(paper.Q_DESIRED_AS_PRINTED)), goal((math.nan, 0.0, 0.0, 1.0)),
-                goal((0.0, 0.0, 0.0, 1.0), frame='tool0')):
+                goal((0.0, 0.0, 0.0, 1.0), frame='tool0'),
+                goal((0.0, 0.0, 0.0, 1.0), frame='/base_link')):  # tf2: no leading slash
         probe.send_goal(bad)
         assert probe.node.regulator.goal is kept
-    assert probe.node.counters.rejected_goals == 3
-    probe.send_goal(goal(tuple(-c for c in GOAL_XYZW), frame='/base_link'))
+    assert probe.node.counters.rejected_goals == 4
+    probe.wait_log("header.frame_id is '/base_link', expected 'base_link' (tf2 frame ids have")
+    probe.send_goal(goal(tuple(-c for c in GOAL_XYZW), frame=''))
     assert probe.node.regulator.goal is not kept
 
 
@@ -325,3 +331,113 @@ def test_current_pose_quaternion_keeps_its_hemisphere(make_probe):
     for a, b in zip(published, published[1:]):
         assert sum(x * y for x, y in zip(a, b)) > 0.9, published
     assert published[0][3] > 0.0 > published[-1][3]  # it did go past eta = 0
+
+
+def status_values(probe: Probe, which: str) -> dict:
+    """Return the key-values of the newest /diagnostics status named '<node>: <which>'."""
+    for arr in reversed(probe.diagnostics):
+        for s in arr.status:
+            if s.name.endswith(f': {which}'):
+                return {kv.key: kv.value for kv in s.values} | {'_message': s.message,
+                                                                '_level': s.level}
+    return {}
+
+
+@pytest.mark.parametrize('age_s, words', [
+    (10.0, 'stamped 10.0'),  # 10 s in the past
+    (-10.0, 'in the future'),
+    (None, 'header.stamp is zero'),
+])
+def test_stale_unstamped_and_future_states_are_not_used(make_probe, age_s, words):
+    """No command from them; counted and flagged on /diagnostics; the state timeout follows."""
+    probe = make_probe()
+    probe.command_for(state((0.1, 0.2, 0.3)))
+    n = len(probe.commands)
+    bad = state((0.1, 0.2, 0.3), age_s=age_s or 0.0)
+    if age_s is None:
+        bad.header.stamp.sec = bad.header.stamp.nanosec = 0
+    for _ in range(5):
+        probe.state_pub.publish(bad)
+    probe.spin_until(lambda: probe.node.counters.stale_states == 5, 'five stale states')
+    assert any(words in m for m in probe.logs) or probe.wait_log(words)
+    # Only the state timeout's single zero command may come; never a command from them.
+    assert all(c == [0.0] * 3 for c in probe.commands[n:])
+    probe.spin_until(lambda: 'stale_states_total' in status_values(probe, 'control loop')
+                     and status_values(probe, 'control loop')['stale_states_total'] == '5',
+                     'the stale count on /diagnostics')
+    loop = status_values(probe, 'control loop')
+    assert loop['_level'][0] >= 1 and 'rejected for their stamps' in loop['_message']
+
+
+def test_repeated_joint_names_are_rejected_with_the_reason(make_probe):
+    probe = make_probe()
+    probe.command_for(state((0.1, 0.2, 0.3)))
+    n = len(probe.commands)
+    probe.state_pub.publish(state((0.1, 0.9, 0.2, 0.3),
+                                  names=('joint1', 'joint1', 'joint2', 'joint3')))
+    assert 'joint names repeat' in probe.wait_log("joint names repeat ['joint1']")
+    assert probe.node.counters.rejected_states == 1 and len(probe.commands) == n
+
+
+@pytest.mark.parametrize('name, value, words', [
+    ('kp', [1.7e308] * 3, 'kp[0] = 1.7e+308 is above 50000'),
+    ('kv', [1.0, 1e6, 1.0], 'kv[1] = 1e+06 is above 50000'),
+    ('lambda', [30.0, 30.0, 1e5], 'lambda[2] = 100000 is above 10000'),
+])
+def test_absurd_gains_are_refused_with_a_reason(make_node, name, value, words):
+    """Upper bounds from the effort limits (50 N m / 1e-3); the old node accepted 1.7e308."""
+    node = make_node()
+    result = node.set_parameters([Parameter(name, value=value)])[0]
+    assert not result.successful and words in result.reason, result.reason
+    assert node.gains.kp == paper.KP
+    assert '50000' in node.describe_parameter('kp').additional_constraints
+
+
+def test_pose_task_diagnostics_report_the_position_error_and_goal(make_probe):
+    probe = make_probe({'task': 'pose'})
+    probe.send_goal(goal(GOAL_XYZW, position=(0.0, 0.0, 0.05)))
+    probe.command_for(state((0.1, 0.2, 0.3)))
+    probe.spin_until(lambda: 'position_error_m' in status_values(probe, 'goal'),
+                     'the goal status')
+    values = status_values(probe, 'goal')
+    p_tip, _ = probe.node.regulator.model.forward_kinematics([0.1, 0.2, 0.3])
+    assert float(values['position_error_m']) == pytest.approx(
+        math.dist(p_tip, (0.0, 0.0, 0.05)), rel=1e-5)
+    assert values['goal_position_m'] == '[0.0, 0.0, 0.05]'
+
+
+def test_namespaced_node_keeps_its_config_file(context):
+    """The config files are keyed /**, so a namespace (or a rename) keeps their values."""
+    cli = ['--ros-args', '-r', '__ns:=/arm', '-r', '__node:=renamed', '--params-file',
+           str(CONFIG)]
+    node = QuatJtController(context=context, cli_args=cli, parameter_overrides=[])
+    try:
+        assert node.get_fully_qualified_name() == '/arm/renamed'
+        assert node.gains.kp == paper.KP and node.get_parameter('tip_link').value == 'tool0'
+    finally:
+        node.destroy_node()
+
+
+def test_xarm6_joints_without_its_urdf_say_what_to_pass(make_node):
+    with pytest.raises(ModelError, match='robot_description is empty, so the bundled spherical '
+                                         'wrist'):
+        make_node({'joints': [f'joint{i}' for i in range(1, 7)], 'base_link': 'link_base',
+                   'tip_link': 'link6', 'task': 'pose'})
+
+
+def test_a_second_commander_and_a_name_twin_are_warned_about(make_probe, context):
+    probe = make_probe()
+    twin = QuatJtController(context=context)  # same name, same namespace
+    try:
+        probe.executor.add_node(twin)
+
+        def warned() -> bool:
+            message = status_values(probe, 'control loop').get('_message', '')
+            return 'publishers on /effort_controller/commands' in message and (
+                'nodes are named /quat_jt_controller' in message)
+        probe.spin_until(warned, 'both warnings on /diagnostics', timeout=15.0)
+        probe.wait_log('another controller commands this robot too')
+        probe.wait_log('give each its own name')
+    finally:
+        probe.executor.remove_node(twin)
+        twin.destroy_node()

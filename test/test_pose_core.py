@@ -11,15 +11,15 @@ config/xarm6_sim.yaml, with both potentials:
   integrator, the demo's friction) holds the goal to < 1 mm and ||e|| < 0.01;
 * the config and launch files are consistent with the model.
 """
-import ast
 from pathlib import Path
 
 import numpy as np
 import pytest
 from quat_jt_controller import control_law as cl
 from quat_jt_controller.reference_sim import ClosedLoop, run_sampled
+from quat_jt_controller.resources import config_parameters
 from robots import xarm6_model, XARM6_URDF
-from sampled_loop import goal_of, linearized_spectral_radius, load_params
+from sampled_loop import goal_of, linearized_spectral_radius
 from sampled_loop import time_constant_s, xarm6_gains
 from wrist_sim.simulator import WristSimulator
 
@@ -41,7 +41,7 @@ def model():
 
 @pytest.fixture(scope='module')
 def sim_params():
-    return load_params('xarm6_sim.yaml', 'wrist_sim')
+    return config_parameters('xarm6_sim.yaml')
 
 
 def sigma_min(model, q) -> float:
@@ -50,7 +50,7 @@ def sigma_min(model, q) -> float:
 
 
 def test_config_files_match_the_model(model, sim_params):
-    ctrl = load_params('xarm6_controller.yaml', 'quat_jt_controller')
+    ctrl = config_parameters('xarm6_controller.yaml')
     assert ctrl['task'] == 'pose'
     assert (ctrl['base_link'], ctrl['tip_link']) == ('link_base', 'link6')
     assert tuple(ctrl['joints']) == model.joint_names == tuple(sim_params['joints'])
@@ -67,7 +67,7 @@ def test_config_files_match_the_model(model, sim_params):
 
 
 def test_pose_task_rejects_three_element_gain_vectors():
-    ctrl = load_params('xarm6_controller.yaml', 'quat_jt_controller')
+    ctrl = config_parameters('xarm6_controller.yaml')
     with pytest.raises(cl.GainsError, match=r'kp must have 6 values, got 3'):
         cl.Gains.create('tanh', ctrl['kp'][3:], ctrl['kv'], ctrl['lambda'], cl.Task.POSE, 6)
     with pytest.raises(cl.GainsError, match=r'lambda must have 6 values, got 3'):
@@ -118,7 +118,8 @@ def test_sampled_delayed_saturated_loop_holds_goal_in_pybullet(model, sim_params
     with WristSimulator(XARM6_URDF.read_text(), model.joint_names,
                         initial_positions_rad=sim_params['initial_positions'],
                         viscous_nm_s_per_rad=sim_params['viscous_friction'],
-                        coulomb_nm=sim_params['coulomb_friction']) as sim:
+                        coulomb_nm=sim_params['coulomb_friction'],
+                        enforce_velocity_limits=sim_params['enforce_velocity_limits']) as sim:
         limits = sim.effort_limits_nm.copy()
         run = run_sampled(ClosedLoop(model, xarm6_gains(potential), cl.Task.POSE, q_d, p_d), sim,
                           5.0, delay_ticks)
@@ -128,73 +129,3 @@ def test_sampled_delayed_saturated_loop_holds_goal_in_pybullet(model, sim_params
     assert position_m < POSITION_TOL_M, f'{position_m * 1e3:.3f} mm'
     assert orientation < ORIENTATION_TOL, f'||e|| = {orientation:.4f}'
     assert run.settled_at_s() < 4.5
-
-
-def test_xarm6_launch_file_is_jazzy_launch_code():
-    """launch/launch_ros are not installable here: check the file's structure instead."""
-    path = REPO / 'launch' / 'xarm6_demo.launch.py'
-    source = path.read_text()
-    tree = ast.parse(source, str(path))
-    compile(tree, str(path), 'exec')
-    functions = {n.name for n in tree.body if isinstance(n, ast.FunctionDef)}
-    assert 'generate_launch_description' in functions
-    imported = {n.module for n in ast.walk(tree) if isinstance(n, ast.ImportFrom)}
-    assert {'launch', 'launch.actions', 'launch_ros.actions',
-            'ament_index_python.packages'} <= imported
-    calls = [n for n in ast.walk(tree) if isinstance(n, ast.Call)]
-    args = {c.args[0].value for c in calls if getattr(c.func, 'id', '') == 'DeclareLaunchArgument'}
-    assert args == {'potential', 'use_gui'}
-    nodes = {kw.value.value for c in calls if getattr(c.func, 'id', '') == 'Node'
-             for kw in c.keywords if kw.arg == 'executable'}
-    assert nodes == {'controller_node', 'wrist_sim_node'}
-    for needed in ("'xarm6_controller.yaml'", "'xarm6_sim.yaml'", "'xarm6_robot.urdf'",
-                   "'robot_description'"):
-        assert needed in source, needed
-    for name in ('xarm6_controller.yaml', 'xarm6_sim.yaml'):
-        assert (REPO / 'config' / name).is_file()
-
-
-def test_xarm6_launch_description_with_stand_in_launch_modules(monkeypatch, model):
-    """Run generate_launch_description() against recording stand-ins of launch/launch_ros."""
-    import importlib.util
-    import sys
-    import types
-
-    class Recorder:
-
-        def __init__(self, *args, **kwargs):
-            self.args, self.kwargs = args, kwargs
-
-    stand_ins = {
-        'launch': {'LaunchDescription': Recorder},
-        'launch.actions': {'DeclareLaunchArgument': Recorder},
-        'launch.substitutions': {'LaunchConfiguration': Recorder},
-        'launch_ros': {},
-        'launch_ros.actions': {'Node': Recorder},
-        'launch_ros.parameter_descriptions': {'ParameterValue': Recorder},
-        'ament_index_python': {},
-        'ament_index_python.packages': {'get_package_share_directory': lambda pkg: str(REPO)},
-    }
-    for name, attrs in stand_ins.items():
-        monkeypatch.setitem(sys.modules, name, types.SimpleNamespace(**attrs))
-    spec = importlib.util.spec_from_file_location(
-        'xarm6_demo_launch', REPO / 'launch' / 'xarm6_demo.launch.py')
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    description = module.generate_launch_description()
-
-    actions = description.args[0]
-    nodes = {a.kwargs['executable']: a.kwargs for a in actions if 'executable' in a.kwargs}
-    assert set(nodes) == {'controller_node', 'wrist_sim_node'}
-    assert nodes['controller_node']['name'] == 'quat_jt_controller'
-    assert nodes['wrist_sim_node']['name'] == 'wrist_sim'
-    for exe, config in (('controller_node', 'xarm6_controller.yaml'),
-                        ('wrist_sim_node', 'xarm6_sim.yaml')):
-        config_path, overrides = nodes[exe]['parameters']
-        assert Path(config_path) == REPO / 'config' / config
-        assert overrides['robot_description'] == XARM6_URDF.read_text()
-    assert nodes['controller_node']['parameters'][1]['potential'].kwargs == {'value_type': str}
-    assert nodes['wrist_sim_node']['parameters'][1]['use_gui'].kwargs == {'value_type': bool}
-    defaults = {a.args[0]: a.kwargs['default_value'] for a in actions if 'default_value'
-                in a.kwargs}
-    assert defaults == {'potential': 'tanh', 'use_gui': 'false'}

@@ -53,7 +53,7 @@ def test_parameters_default_from_the_urdf(context):
         assert list(node.get_parameter('coulomb_friction').value) == [0.0] * 3
         assert node.get_parameter('rate_hz').value == 1000
         assert node.sim.dt_s == pytest.approx(1e-3)
-        assert node.get_parameter('command_timeout').value == pytest.approx(0.1)
+        assert node.get_parameter('command_timeout').value == pytest.approx(0.5)
     finally:
         node.destroy_node()
 
@@ -77,6 +77,22 @@ def test_friction_parameters_are_validated_and_applied(context):
         # Structural parameters are read only.
         assert not node.set_parameters([Parameter('rate_hz', value=500)])[0].successful
         assert not node.set_parameters([Parameter('command_timeout', value=-1.0)])[0].successful
+    finally:
+        node.destroy_node()
+
+
+@pytest.mark.node
+def test_namespaced_and_renamed_sim_keeps_its_config_file(context):
+    """config/wrist_sim.yaml is keyed /**: a namespace and a new name keep its values."""
+    from quat_jt_controller.resources import share_path
+    from wrist_sim.sim_node import WristSimNode
+    node = WristSimNode(context=context, cli_args=[
+        '--ros-args', '-r', '__ns:=/arm', '-r', '__node:=xarm6_sim', '--params-file',
+        str(share_path('config/wrist_sim.yaml'))])
+    try:
+        assert node.get_fully_qualified_name() == '/arm/xarm6_sim'
+        assert list(node.get_parameter('coulomb_friction').value) == [2.0, 0.8, 0.5]
+        np.testing.assert_allclose(node.sim.friction[1], [2.0, 0.8, 0.5])
     finally:
         node.destroy_node()
 
@@ -247,6 +263,18 @@ def test_bad_commands_are_rejected_and_the_node_keeps_publishing(sim, probe):
     assert 'rejected command with non-finite values' in log, log
     # Throttled: far fewer log lines than bad messages.
     assert log.count('rejected command') < 10, log
+
+
+@pytest.mark.dds
+def test_commands_beyond_the_effort_limits_are_clamped_and_said_so(sim, probe):
+    _stream(probe, [1e9, 0.0, -1e9], 0.2)
+    assert probe.latest()[4] == [50.0, 0.0, -20.0]  # the URDF limits 50 / 30 / 20 N m
+    _stream(probe, [0.0, 0.0, 0.0], 0.05)
+    probe.spin_until(lambda: 'exceeds the effort limits' in sim.log(), 5.0)
+    log = sim.log()
+    # Throttled (one line a second): an earlier test's clamped command may be the one logged.
+    assert 'N m exceeds the effort limits [50.0, 30.0, 20.0] N m: applied clamped' in log, log
+    assert log.count('exceeds the effort limits') < 5, 'throttled'
 
 
 @pytest.mark.dds

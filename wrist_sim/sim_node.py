@@ -38,7 +38,7 @@ from quat_jt_controller import lifecycle
 from quat_jt_controller.joints import movable_joints
 from quat_jt_controller.loop_stats import LoopStats
 from quat_jt_controller.parameters import LiveParameters
-from quat_jt_controller.resources import default_urdf_xml
+from quat_jt_controller.resources import bundled_urdf_hint, default_urdf_xml
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 from rclpy.node import Node
 from rclpy.qos import QoSProfile
@@ -73,11 +73,18 @@ class WristSimNode(Node):
         p, c = self.structural, self.live.current
         self.rate_hz = int(p['rate_hz'])
         self.dt_ns = int(round(1e9 / self.rate_hz))
-        self.sim = WristSimulator(
-            self._urdf_xml, p['joints'], dt_s=self.dt_ns * 1e-9, use_gui=p['use_gui'],
-            viscous_nm_s_per_rad=c.viscous_nm_s_per_rad, coulomb_nm=c.coulomb_nm,
-            initial_positions_rad=c.initial_positions_rad)
+        try:
+            self.sim = WristSimulator(
+                self._urdf_xml, p['joints'], dt_s=self.dt_ns * 1e-9, use_gui=p['use_gui'],
+                viscous_nm_s_per_rad=c.viscous_nm_s_per_rad, coulomb_nm=c.coulomb_nm,
+                initial_positions_rad=c.initial_positions_rad,
+                enforce_velocity_limits=p['enforce_velocity_limits'])
+        except SimulatorError as exc:
+            raise SimulatorError(f'{exc}{bundled_urdf_hint(self._given_urdf)}') from None
         self.n = self.sim.n
+        self._effort_limits = self.sim.effort_limits_nm.tolist()
+        self._velocity_limits = self.sim.velocity_limits_rad_s.tolist()
+        self._at_velocity_limit = [0.999 * v for v in self._velocity_limits]
         self.publish_clock = bool(p['publish_clock'])
         self.stats = LoopStats(capacity=STATS_WINDOW_STEPS)
         # Without use_sim_time the node's ROS clock is the system clock: stamp from it directly
@@ -123,7 +130,8 @@ class WristSimNode(Node):
 
         self.declare_parameter('robot_description', '', desc(
             'URDF as an XML string; empty = the bundled spherical wrist', read_only=True))
-        urdf = self.get_parameter('robot_description').value or default_urdf_xml()
+        self._given_urdf = self.get_parameter('robot_description').value
+        urdf = self._given_urdf or default_urdf_xml()
         self._urdf_xml = urdf
         try:
             movable = movable_joints(urdf)
@@ -156,18 +164,21 @@ class WristSimNode(Node):
             'viscous friction per joint, N m s/rad (>= 0)'))
         self.declare_parameter('coulomb_friction', zeros, desc(
             'Coulomb friction / stiction level per joint, N m (>= 0)'))
-        self.declare_parameter('command_timeout', 0.1, desc(
+        self.declare_parameter('command_timeout', 0.5, desc(
             'seconds (simulation time) without a valid command before the torque goes to '
             'zero; 0 disables the watchdog', floating_point_range=_float_range(0.0, 60.0)))
         self.declare_parameter('hold_until_first_command', True, desc(
             'hold the joints at rest (brakes) until the first valid command after start-up or '
             '~/reset, so the robot does not fall while a controller connects',
             read_only=True))
+        self.declare_parameter('enforce_velocity_limits', True, desc(
+            'hold each joint at its URDF velocity limit, as a drive would; off, a joint past '
+            'it is only reported', read_only=True))
         self.declare_parameter('stats_file', '', desc(
             'if set, timing statistics are written there as JSON at shutdown', read_only=True))
         self.structural = {k: self.get_parameter(k).value for k in (
             'joints', 'rate_hz', 'use_gui', 'publish_clock', 'hold_until_first_command',
-            'stats_file')}
+            'enforce_velocity_limits', 'stats_file')}
         self.live = LiveParameters(self, LIVE_PARAMETERS,
                                    lambda values: SimConfig.create(values, n),
                                    on_apply=self._apply_config)
@@ -195,6 +206,15 @@ class WristSimNode(Node):
             self.get_logger().warning(f'rejected command with non-finite values: {list(data)}',
                                       throttle_duration_sec=THROTTLE_S)
             return
+        limits = self._effort_limits
+        for v, limit in zip(data, limits):
+            if v > limit or v < -limit:
+                self.stats.clamped_commands += 1
+                self.get_logger().warning(
+                    f'command {list(data)} N m exceeds the effort limits {limits} N m: applied '
+                    f'clamped ({self.stats.clamped_commands} clamped commands so far)',
+                    throttle_duration_sec=THROTTLE_S)
+                break
         if self._cmd_seq == self._seq_at_publish:  # first command since the last state
             self.stats.record_latency(time.perf_counter() - self._publish_wall_s)
         self._cmd[:] = data
@@ -271,7 +291,16 @@ class WristSimNode(Node):
         js.header.stamp.sec = sec
         js.header.stamp.nanosec = nsec
         js.position = self.sim.q_rad.tolist()
-        js.velocity = self.sim.qdot_rad_s.tolist()
+        js.velocity = velocity = self.sim.qdot_rad_s.tolist()
+        for v, limit in zip(velocity, self._at_velocity_limit):
+            if v >= limit or v <= -limit:
+                self.get_logger().warning(
+                    f'joint speeds {velocity} rad/s: a joint runs at (or past) its URDF velocity '
+                    f'limit ({self._velocity_limits} rad/s)'
+                    + (', where the simulator holds it' if self.sim.enforces_velocity_limits
+                       else ' (enforce_velocity_limits is off)'),
+                    throttle_duration_sec=THROTTLE_S)
+                break
         js.effort = self.sim.tau_applied_nm.tolist()
         if self.clock_pub is not None:
             self._clock_msg.clock.sec = sec
@@ -303,6 +332,12 @@ class WristSimNode(Node):
             f'fresh {self.stats.fresh_steps}/{self.stats.steps}, '
             f'rejected {self.stats.rejected_commands}')
         last[0], last[1] = now, self.stats.steps
+        publishers = self.count_publishers(self.cmd_sub.topic_name)
+        if publishers > 1:
+            self.get_logger().warning(
+                f'{publishers} publishers on {self.cmd_sub.topic_name}: more than one '
+                'controller commands this robot, and they fight; stop all but one',
+                throttle_duration_sec=10.0)
 
     def _run_real_time(self, executor: Any) -> None:
         """

@@ -27,7 +27,12 @@ Friction, per joint:
 
 The commanded torque is clamped to the URDF effort limits; that clamped torque is the
 "applied" torque reported by :meth:`WristSimulator.step` and :meth:`WristSimulator.state`
-(friction is not included in it: it is the motor torque, as a drive would report it).
+(friction is not included in it: it is the motor torque, as a drive would report it). The
+URDF velocity limits are enforced as a drive's speed limit would: PyBullet's solver clamps each
+joint's speed to its limit (``maxJointVelocity``), so a huge torque cannot spin a joint faster.
+This can be turned off (``enforce_velocity_limits``) for a model whose links are so light that
+one tick of torque passes the limit (the xArm6's link 6): the clamp then acts as a switch and
+makes the link chatter.
 
 This module never imports rclpy.
 """
@@ -123,6 +128,8 @@ class WristSimulator:
     :param search_dirs: extra directories in which ``package://`` meshes are looked for (before
         ``pybullet_data``); the first also becomes PyBullet's additional search path.
     :param solver_iterations: PyBullet constraint-solver iterations (for the friction motors).
+    :param enforce_velocity_limits: hold each joint's speed at its URDF velocity limit, as a
+        drive's speed limit would (see the module docstring).
     """
 
     def __init__(self, urdf_xml: str, joint_names: Optional[Sequence[str]] = None, *,
@@ -131,7 +138,7 @@ class WristSimulator:
                  coulomb_nm: Optional[Sequence[float]] = None,
                  initial_positions_rad: Optional[Sequence[float]] = None,
                  search_dirs: Sequence[PathLike] = (),
-                 solver_iterations: int = 50) -> None:
+                 solver_iterations: int = 50, enforce_velocity_limits: bool = True) -> None:
         if not (math.isfinite(dt_s) and dt_s > 0.0):
             raise SimulatorError(f'dt_s must be finite and > 0, got {dt_s}')
         if not urdf_xml or not urdf_xml.strip():
@@ -140,9 +147,15 @@ class WristSimulator:
         dirs = [str(d) for d in search_dirs] + [pybullet_data.getDataPath()]
         xml = resolve_package_uris(urdf_xml, dirs)
 
+        if use_gui and not os.environ.get('DISPLAY'):
+            # PyBullet would exit the whole process ('cannot connect to X server'): say why.
+            raise SimulatorError(
+                'use_gui is true but DISPLAY is not set, so the PyBullet window cannot open: '
+                'run without use_gui (headless), on a desktop session, or under a virtual '
+                "display, e.g. 'xvfb-run -a ros2 launch ...'")
         self._client = BulletClient(connection_mode=pybullet.GUI if use_gui else pybullet.DIRECT)
         try:
-            self._setup(xml, dirs, joint_names, solver_iterations)
+            self._setup(xml, dirs, joint_names, solver_iterations, enforce_velocity_limits)
         except Exception:
             self.close()
             raise
@@ -162,7 +175,7 @@ class WristSimulator:
             self._aim_gui_camera()
 
     def _setup(self, xml: str, dirs: list[str], joint_names: Optional[Sequence[str]],
-               solver_iterations: int) -> None:
+               solver_iterations: int, enforce_velocity_limits: bool) -> None:
         c = self._client
         c.setAdditionalSearchPath(dirs[0])
         c.setGravity(0.0, 0.0, -GRAVITY_MPS2)
@@ -207,6 +220,13 @@ class WristSimulator:
         self.effort_limits_nm = np.array([i[10] if i[10] > 0.0 else np.inf for i in infos])
         self.position_lower = np.array([i[8] for i in infos])
         self.position_upper = np.array([i[9] for i in infos])
+        # URDF velocity limits, enforced as a drive's speed limit: the solver clamps the joint
+        # speed there (0 or absent in the URDF: no limit).
+        self.velocity_limits_rad_s = np.array([i[11] if i[11] > 0.0 else np.inf for i in infos])
+        self.enforces_velocity_limits = bool(enforce_velocity_limits)
+        for j, limit in zip(self._idx, self.velocity_limits_rad_s):
+            if math.isfinite(limit) and enforce_velocity_limits:
+                c.changeDynamics(self._body, j, maxJointVelocity=float(limit))
         # Joints not driven are held at zero by stiff motors (the "locked" joints of the model).
         others = [by_name[n] for n in movable if n not in names]
         if others:

@@ -32,11 +32,10 @@ from quat_jt_controller import control_law as cl
 from quat_jt_controller import quaternion as quat
 from quat_jt_controller.model import RobotModel
 from quat_jt_controller.reference_sim import ClosedLoop
-from quat_jt_controller.resources import share_path
+from quat_jt_controller.resources import config_parameters
 from quat_jt_controller.tools.mcap_log import cdr_joint_state, McapLog
 from quat_jt_controller.tools.robot_tf import write_robot_replay
 from wrist_sim.simulator import WristSimulator
-import yaml
 
 XARM6_URDF = Path(pybullet_data.getDataPath()) / 'xarm' / 'xarm6_robot.urdf'
 # The reachable goal of launch/xarm6_demo.launch.py: the arm's pose at these joint angles.
@@ -58,17 +57,11 @@ class PoseRun:
     orientation_error: np.ndarray  # ||e|| (Eq. 10)
 
 
-def load_params(name: str, node: str) -> dict:
-    """Return the ``ros__parameters`` of ``node`` in the package's ``config/<name>``."""
-    with open(share_path(f'config/{name}')) as f:
-        return yaml.safe_load(f)[node]['ros__parameters']
-
-
 def run(potential: str, duration_s: float, urdf_xml: str) -> tuple[PoseRun, RobotModel,
                                                                    tuple, tuple]:
     """Regulate the xArm6 to the goal with ``potential``; return the run, model and goal."""
-    ctrl = load_params('xarm6_controller.yaml', 'quat_jt_controller')
-    simp = load_params('xarm6_sim.yaml', 'wrist_sim')
+    ctrl = config_parameters('xarm6_controller.yaml')
+    simp = config_parameters('xarm6_sim.yaml')
     model = RobotModel(urdf_xml, ctrl['base_link'], ctrl['tip_link'], ctrl['joints'])
     gains = cl.Gains.create(potential, ctrl['kp'], ctrl['kv'], ctrl['lambda'], cl.Task.POSE,
                             model.n, ctrl['gravity_compensation'])
@@ -83,6 +76,7 @@ def run(potential: str, duration_s: float, urdf_xml: str) -> tuple[PoseRun, Robo
                         viscous_nm_s_per_rad=simp['viscous_friction'],
                         coulomb_nm=simp['coulomb_friction'],
                         initial_positions_rad=simp['initial_positions'],
+                        enforce_velocity_limits=simp['enforce_velocity_limits'],
                         search_dirs=[pybullet_data.getDataPath()]) as sim:
         applied = np.zeros(model.n)
         for k in range(steps + 1):

@@ -1,0 +1,200 @@
+"""
+Soak: both nodes for a long run, with the figures that show a leak, a drift or a fault.
+
+Starts ``wrist_sim_node`` and ``controller_node`` (the package's wrist configs, real time) on a
+private loopback graph, then alternates two reachable goals every 30 s.
+Every ``--report`` seconds (one minute by default; before a goal change due then) it prints
+each process's resident memory, the joint-state and command rates seen here, the controller's
+largest gap between two states, the simulator's watchdog trips so far and ``||e||``; at the end
+the final ``||e||`` and the warnings and errors the nodes logged, counted by cause.
+
+``--load N`` runs N busy processes beside the nodes (a loaded host, e.g. N = 2 on 2 cores gives
+a load average near 4): the largest gaps then measured are what the watchdog timeouts must
+tolerate (``state_timeout``, ``command_timeout``, ``max_state_age``).
+
+    python -m quat_jt_controller.tools.soak [--duration 600] [--load 0] [--out results/soak]
+"""
+import argparse
+import collections
+import json
+import math
+import multiprocessing
+from pathlib import Path
+import random
+import re
+import sys
+import time
+from typing import Optional
+
+from diagnostic_msgs.msg import DiagnosticArray
+from geometry_msgs.msg import PoseStamped
+from quat_jt_controller import paper
+from quat_jt_controller import quaternion as quat
+from quat_jt_controller.model import RobotModel
+from quat_jt_controller.resources import default_urdf_xml
+from quat_jt_controller.tools import local_ros
+from quat_jt_controller.tools.probe import ProbeNode
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64MultiArray
+
+# The paper's goal and a second reachable one (the wrist's pose at these joint angles).
+SECOND_GOAL_Q_RAD = (-0.6, 1.1, 0.4)
+LOG_LINE = re.compile(r'^\[(WARN|ERROR|FATAL)\] \[[0-9.]+\] \[([^\]]+)\]: (.*)$')
+
+
+def _burn(stop_at: float) -> None:
+    x = 0
+    while time.monotonic() < stop_at:
+        x += 1
+
+
+def rss_mb(pid: int) -> float:
+    """Resident memory of a process (MB), from /proc."""
+    for line in Path(f'/proc/{pid}/status').read_text().splitlines():
+        if line.startswith('VmRSS:'):
+            return int(line.split()[1]) / 1024.0
+    return math.nan
+
+
+def warnings_by_cause(text: str) -> collections.Counter:
+    """Count WARN/ERROR/FATAL lines of a node log by their text without numbers."""
+    counts: collections.Counter = collections.Counter()
+    for line in text.splitlines():
+        m = LOG_LINE.match(line.strip())
+        if m:
+            cause = re.sub(r'[-+]?\d+(\.\d+)?(e[-+]?\d+)?', '#', m.group(3))[:140]
+            counts[f'{m.group(1)} [{m.group(2)}] {cause}'] += 1
+    return counts
+
+
+def soak(duration_s: float, out: Path, load: int = 0, report_s: float = 60.0,
+         goal_period_s: float = 30.0) -> dict:
+    """Run the soak; print a line per report interval; return the figures."""
+    out.mkdir(parents=True, exist_ok=True)
+    domain_id = random.randint(1, 100)
+    env = local_ros.isolated_env(out, domain_id)
+    stats_file = out / 'sim_stats.json'
+    stats_file.unlink(missing_ok=True)
+    burners = [multiprocessing.Process(target=_burn, args=(time.monotonic() + duration_s + 60,),
+                                       daemon=True) for _ in range(load)]
+    for b in burners:
+        b.start()
+    sim, ctrl = local_ros.spawn_wrist_pair(env, out, sim_params={'stats_file': str(stats_file)})
+    probe = ProbeNode('soak_probe', domain_id)
+    model = RobotModel(default_urdf_xml(), 'base_link', 'tool0')
+    _, R2 = model.forward_kinematics(SECOND_GOAL_Q_RAD)
+    goals = [paper.Q_DESIRED, quat.from_rotation_matrix(R2)]
+    counts = {'states': 0, 'commands': 0}
+    last_q: list = [None]
+    max_period_us = [0.0]
+
+    def on_state(msg: JointState) -> None:
+        counts['states'] += 1
+        last_q[0] = msg
+
+    def on_diag(msg: DiagnosticArray) -> None:
+        for s in msg.status:
+            if s.name.endswith('quat_jt_controller: control loop'):
+                for kv in s.values:
+                    if kv.key == 'period_max_us' and kv.value != 'nan':
+                        max_period_us[0] = max(max_period_us[0], float(kv.value))
+
+    node = probe.node
+    node.create_subscription(JointState, '/joint_states', on_state, 100)
+    node.create_subscription(Float64MultiArray, '/effort_controller/commands',
+                             lambda _: counts.__setitem__('commands', counts['commands'] + 1),
+                             100)
+    node.create_subscription(DiagnosticArray, '/diagnostics', on_diag, 10)
+    goal_pub = node.create_publisher(PoseStamped, '/quat_jt_controller/target_pose', 10)
+    rows = []
+
+    def error_norm(goal) -> float:
+        m = last_q[0]
+        q = [m.position[list(m.name).index(j)] for j in model.joint_names]
+        _, R = model.forward_kinematics(q)
+        _, e = quat.orientation_error(quat.from_rotation_matrix(R), goal)
+        return math.sqrt(sum(x * x for x in e))
+
+    try:
+        deadline = time.monotonic() + 60.0
+        while (counts['commands'] < 100 or goal_pub.get_subscription_count() == 0):
+            if time.monotonic() > deadline or sim.poll() is not None or ctrl.poll() is not None:
+                raise RuntimeError(f'the nodes did not start; logs in {out}')
+            probe.executor.spin_once(timeout_sec=0.05)
+        print(f'soak: {duration_s:.0f} s, {load} busy processes beside the nodes; logs in {out}',
+              flush=True)
+        print(f'{"t [s]":>6} {"sim RSS MB":>10} {"ctrl RSS MB":>11} {"states/s":>9} '
+              f'{"cmds/s":>7} {"max state gap ms":>16} {"sim watchdog trips":>18} '
+              f'{"||e||":>9}', flush=True)
+        t0 = time.monotonic()
+        next_goal, next_report, k_goal = t0, t0 + report_s, 0
+        window = dict(counts)
+        goal = goals[0]
+        while (now := time.monotonic()) < t0 + duration_s:
+            for proc, name in ((sim, 'wrist_sim_node'), (ctrl, 'controller_node')):
+                if proc.poll() is not None:
+                    raise RuntimeError(f'{name} exited ({proc.returncode}); logs in {out}')
+            if now >= next_report:
+                trips = (out / 'wrist_sim_node.log').read_text(errors='replace').count(
+                    'torque set to zero')
+                row = {'t_s': now - t0, 'sim_rss_mb': rss_mb(sim.pid),
+                       'controller_rss_mb': rss_mb(ctrl.pid),
+                       'state_rate_hz': (counts['states'] - window['states']) / report_s,
+                       'command_rate_hz': (counts['commands'] - window['commands']) / report_s,
+                       'max_state_gap_ms': max_period_us[0] / 1e3, 'error_norm':
+                       error_norm(goal)}
+                rows.append(row)
+                print(f'{row["t_s"]:6.0f} {row["sim_rss_mb"]:10.1f} '
+                      f'{row["controller_rss_mb"]:11.1f} {row["state_rate_hz"]:9.1f} '
+                      f'{row["command_rate_hz"]:7.1f} {row["max_state_gap_ms"]:16.1f} '
+                      f'{trips:>18} {row["error_norm"]:9.2e}',
+                      flush=True)
+                window = dict(counts)
+                max_period_us[0] = 0.0
+                next_report += report_s
+            if now >= next_goal:
+                goal = goals[k_goal % 2]
+                msg = PoseStamped()
+                msg.header.frame_id = 'base_link'
+                o = msg.pose.orientation
+                o.x, o.y, o.z, o.w = quat.to_xyzw(goal)
+                goal_pub.publish(msg)
+                k_goal += 1
+                next_goal += goal_period_s
+            probe.executor.spin_once(timeout_sec=0.05)
+        final_error = error_norm(goal)
+    finally:
+        for proc in (sim, ctrl):
+            local_ros.stop_node(proc)
+        probe.close()
+        for b in burners:
+            b.terminate()
+    sim_stats = json.loads(stats_file.read_text()) if stats_file.exists() else {}
+    warnings = warnings_by_cause((out / 'wrist_sim_node.log').read_text(errors='replace')
+                                 + (out / 'controller_node.log').read_text(errors='replace'))
+    return {'rows': rows, 'final_error': final_error, 'sim_stats': sim_stats,
+            'warnings': dict(warnings)}
+
+
+def main(argv: Optional[list] = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split('\n')[1])
+    parser.add_argument('--duration', type=float, default=600.0, help='seconds')
+    parser.add_argument('--load', type=int, default=0, help='busy processes beside the nodes')
+    parser.add_argument('--report', type=float, default=60.0, help='seconds per report line')
+    parser.add_argument('--out', type=Path, default=Path('results/soak'))
+    args = parser.parse_args(argv)
+    r = soak(args.duration, args.out, args.load, min(args.report, args.duration))
+    s = r['sim_stats']
+    print(f'final ||e|| {r["final_error"]:.3e} (towards the last goal); simulator: '
+          f'{s.get("watchdog_trips")} watchdog trips, {s.get("missed_deadlines")} late ticks, '
+          f'command latency max {s.get("cmd_latency_us_max", math.nan) / 1e3:.1f} ms')
+    print('warnings and errors logged, by cause:' if r['warnings'] else
+          'no warnings or errors logged')
+    for cause, n in sorted(r['warnings'].items(), key=lambda kv: -kv[1]):
+        print(f'  {n:6d} x {cause}')
+    (args.out / 'soak.json').write_text(json.dumps(r, indent=1))
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

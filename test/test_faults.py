@@ -1,0 +1,272 @@
+"""
+Faults, over real DDS: killed, stopped and interrupted processes, floods, resets, twins.
+
+Each test runs ``wrist_sim_node`` and ``controller_node`` as processes (the package's config
+files, no friction) on a private loopback graph of its own, and asserts the documented safe
+behaviour. Every wait is a condition with a deadline; the whole module takes about a minute.
+"""
+import math
+import os
+from pathlib import Path
+import random
+import re
+import signal
+import subprocess
+import time
+from typing import Callable
+
+from geometry_msgs.msg import PoseStamped
+from process_harness import call_service
+import pytest
+from quat_jt_controller import paper
+from quat_jt_controller import quaternion as quat
+from quat_jt_controller.resources import share_path
+from quat_jt_controller.tools import local_ros
+import rclpy
+from rclpy.experimental import EventsExecutor
+from sensor_msgs.msg import JointState
+from std_msgs.msg import Float64MultiArray
+from std_srvs.srv import Trigger
+
+pytestmark = pytest.mark.dds
+
+SIM_PARAMS = {'coulomb_friction': [0.0] * 3}
+CONFIGS = {'wrist_sim_node': 'config/wrist_sim.yaml',
+           'controller_node': 'config/wrist_controller.yaml'}
+
+
+class Pair:
+    """The two nodes on their own domain, and a probe that watches states and commands."""
+
+    def __init__(self, work_dir: Path) -> None:
+        self.dir = work_dir
+        self.env = local_ros.isolated_env(work_dir, random.randint(101, 200))
+        self.procs: dict[str, subprocess.Popen] = {}
+        self.context = rclpy.Context()
+        rclpy.init(context=self.context, domain_id=int(self.env['ROS_DOMAIN_ID']))
+        self.node = rclpy.create_node('fault_probe', context=self.context)
+        self.executor = EventsExecutor(context=self.context)
+        self.executor.add_node(self.node)
+        self.states: list[JointState] = []
+        self.commands: list[tuple[float, list[float]]] = []
+        self.node.create_subscription(JointState, 'joint_states', self._on_state, 100)
+        self.node.create_subscription(Float64MultiArray, 'effort_controller/commands',
+                                      lambda m: self.commands.append(
+                                          (time.monotonic(), list(m.data))), 100)
+        self.goal_pub = self.node.create_publisher(
+            PoseStamped, 'quat_jt_controller/target_pose', 100)
+        self.reset = self.node.create_client(Trigger, 'wrist_sim/reset')
+
+    def _on_state(self, msg: JointState) -> None:
+        self.states.append(msg)
+        del self.states[:-200]
+
+    def start(self, executable: str, log_name: str = '', **params) -> subprocess.Popen:
+        name = log_name or executable
+        params = {**(SIM_PARAMS if executable == 'wrist_sim_node' else {}), **params}
+        self.procs[name] = local_ros.spawn_node(
+            executable, self.env, self.dir, params=params, name=name,
+            params_files=(share_path(CONFIGS[executable]),))
+        return self.procs[name]
+
+    def log(self, name: str) -> str:
+        path = self.dir / f'{name}.log'
+        return path.read_text(errors='replace') if path.exists() else ''
+
+    def logs(self) -> str:
+        return '\n'.join(f'--- {n}.log ---\n{self.log(n)[-4000:]}' for n in self.procs)
+
+    def spin_until(self, condition: Callable[[], bool], timeout: float, what: str) -> None:
+        deadline = time.monotonic() + timeout
+        while not condition():
+            if time.monotonic() > deadline:
+                pytest.fail(f'timed out after {timeout} s waiting for {what}\n{self.logs()}')
+            self.executor.spin_once(timeout_sec=0.02)
+
+    def commands_flow(self, since: float, count: int = 50) -> Callable[[], bool]:
+        return lambda: sum(1 for t, _ in self.commands if t > since) >= count
+
+    def running(self, timeout: float = 30.0) -> None:
+        """Wait until states flow and the controller answers them."""
+        now = time.monotonic()
+        self.spin_until(lambda: len(self.states) > 50 and self.commands_flow(now)(), timeout,
+                        'states and commands')
+
+    def q(self) -> list[float]:
+        m = self.states[-1]
+        return [m.position[list(m.name).index(j)] for j in ('joint1', 'joint2', 'joint3')]
+
+    def error_norm(self) -> float:
+        from quat_jt_controller.model import RobotModel
+        from quat_jt_controller.resources import default_urdf_xml
+        if not hasattr(self, '_model'):
+            self._model = RobotModel(default_urdf_xml(), 'base_link', 'tool0')
+        _, R = self._model.forward_kinematics(self.q())
+        _, e = quat.orientation_error(quat.from_rotation_matrix(R), paper.Q_DESIRED)
+        return math.sqrt(sum(x * x for x in e))
+
+    def send_paper_goal(self) -> None:
+        goal = PoseStamped()
+        goal.header.frame_id = 'base_link'
+        o = goal.pose.orientation
+        o.x, o.y, o.z, o.w = quat.to_xyzw(paper.Q_DESIRED)
+        self.spin_until(lambda: self.goal_pub.get_subscription_count() > 0, 10.0, 'goal sub')
+        self.goal_pub.publish(goal)
+
+    def close(self) -> None:
+        for proc in self.procs.values():
+            local_ros.stop_node(proc)
+        self.executor.shutdown(timeout_sec=1.0)
+        self.node.destroy_node()
+        rclpy.try_shutdown(context=self.context)
+
+
+@pytest.fixture
+def pair(tmp_path):
+    p = Pair(tmp_path)
+    yield p
+    p.close()
+
+
+def wait_log(pair: Pair, name: str, pattern: str, timeout: float = 10.0) -> None:
+    pair.spin_until(lambda: re.search(pattern, pair.log(name)), timeout,
+                    f'{pattern!r} in {name}.log')
+
+
+def children_of(pid: int) -> list[int]:
+    """Return the processes whose parent is ``pid`` (from /proc)."""
+    out = []
+    for entry in os.listdir('/proc'):
+        if entry.isdigit():
+            try:
+                stat = Path(f'/proc/{entry}/stat').read_text()
+            except OSError:
+                continue
+            if int(stat.rsplit(')', 1)[1].split()[1]) == pid:
+                out.append(int(entry))
+    return out
+
+
+def alive(pid: int) -> bool:
+    try:
+        state = Path(f'/proc/{pid}/stat').read_text().rsplit(')', 1)[1].split()[0]
+    except OSError:
+        return False
+    return state != 'Z'
+
+
+def test_sigint_with_states_flowing_exits_cleanly_every_time(pair):
+    """Ctrl-C mid-loop: exit code 0, no publish on a dead context, the sim's stats logged."""
+    pair.start('wrist_sim_node')
+    for k in range(3):
+        ctrl = pair.start('controller_node', f'controller_{k}')
+        pair.running()
+        assert local_ros.stop_node(ctrl, timeout=10.0) == 0, pair.logs()
+        text = pair.log(f'controller_{k}')
+        assert 'context is invalid' not in text and 'Traceback' not in text, text[-3000:]
+    sim = pair.procs['wrist_sim_node']
+    assert local_ros.stop_node(sim, timeout=10.0) == 0, pair.logs()
+    text = pair.log('wrist_sim_node')
+    assert ']: stats {' in text, text[-3000:]
+    assert 'Failed to publish' not in text and 'Traceback' not in text, text[-3000:]
+
+
+def test_kill9_of_the_controller_zeroes_the_torque_and_a_restart_recovers(pair):
+    pair.start('wrist_sim_node')
+    ctrl = pair.start('controller_node')
+    pair.running()
+    pair.spin_until(lambda: children_of(ctrl.pid), 10.0, 'the goal-check worker')
+    workers = children_of(ctrl.pid)
+    ctrl.kill()
+    ctrl.wait()
+    wait_log(pair, 'wrist_sim_node', r'no command for [0-9.]+ s .*torque set to zero')
+    # The goal-check worker does not outlive its controller.
+    pair.spin_until(lambda: not any(alive(w) for w in workers), 10.0, 'the worker to exit')
+    restarted = time.monotonic()
+    pair.start('controller_node', 'controller_restarted')
+    pair.spin_until(pair.commands_flow(restarted), 30.0, 'commands from the new controller')
+    wait_log(pair, 'wrist_sim_node', 'commands are back')
+
+
+def test_kill9_of_the_sim_stops_the_controller_and_a_restart_recovers(pair):
+    sim = pair.start('wrist_sim_node')
+    pair.start('controller_node')
+    pair.running()
+    sim.kill()
+    sim.wait()
+    wait_log(pair, 'controller_node', r'no valid joint_states for .*published zero torque')
+    pair.spin_until(lambda: pair.commands and pair.commands[-1][1] == [0.0, 0.0, 0.0], 5.0,
+                    'the zero command')
+    pair.start('wrist_sim_node', 'wrist_sim_restarted')
+    pair.running()
+    wait_log(pair, 'controller_node', 'joint_states are back')
+
+
+def test_sigstop_of_the_controller_trips_the_sim_watchdog_and_sigcont_resumes(pair):
+    pair.start('wrist_sim_node')
+    ctrl = pair.start('controller_node')
+    pair.running()
+    ctrl.send_signal(signal.SIGSTOP)
+    try:
+        wait_log(pair, 'wrist_sim_node', r'no command for .*torque set to zero')
+    finally:
+        ctrl.send_signal(signal.SIGCONT)
+    resumed = time.monotonic()
+    pair.spin_until(pair.commands_flow(resumed), 10.0, 'commands after SIGCONT')
+    wait_log(pair, 'wrist_sim_node', 'commands are back')
+    assert ctrl.poll() is None, pair.logs()
+
+
+@pytest.mark.parametrize('kind', ['nan', 'valid'])
+def test_goal_floods_keep_the_loop_running_with_few_log_lines(pair, kind):
+    pair.start('wrist_sim_node')
+    pair.start('controller_node')
+    pair.running()
+    goal = PoseStamped()
+    goal.header.frame_id = 'base_link'
+    start = time.monotonic()
+    for k in range(1000):  # as fast as this process publishes: about 1000 goals in 1 s
+        angle = 0.8 + 1e-3 * k
+        o = goal.pose.orientation
+        o.x, o.y, o.z, o.w = 0.0, 0.0, math.sin(angle / 2), math.cos(angle / 2)
+        if kind == 'nan':
+            o.w = math.nan
+        pair.goal_pub.publish(goal)
+        pair.executor.spin_once(timeout_sec=0.0)
+    flood_s = time.monotonic() - start
+    pair.spin_until(pair.commands_flow(start, int(500 * flood_s)), 10.0,
+                    'commands during the flood')
+    settled = time.monotonic()
+    pair.spin_until(pair.commands_flow(settled, 200), 5.0, 'commands after the flood')
+    text = pair.log('controller_node')
+    if kind == 'nan':
+        lines = text.count('target_pose rejected')
+        assert 1 <= lines <= 3 + flood_s, text[-3000:]
+        assert 'more like it' in text or lines == 1
+    else:
+        lines = text.count('new goal')
+        assert 1 <= lines <= 6 * (1 + flood_s), text[-3000:]
+
+
+def test_reset_during_motion_returns_to_the_start_and_regulation_resumes(pair):
+    pair.start('wrist_sim_node')
+    pair.start('controller_node')
+    pair.running()
+    pair.send_paper_goal()
+    pair.spin_until(lambda: 0.2 < pair.error_norm() < 0.7, 10.0, 'the wrist on its way')
+    pair.states.clear()
+    assert call_service(pair.executor, pair.reset, Trigger.Request()).success
+    # Back at q(0) = 0 at rest (the controller moves it on within milliseconds).
+    pair.spin_until(lambda: any(max(map(abs, s.position)) < 1e-9 and max(map(abs, s.velocity))
+                                < 1e-9 for s in pair.states), 5.0, 'the reset to q(0) = 0')
+    pair.spin_until(lambda: pair.error_norm() < 1e-2, 20.0, 'the goal again after the reset')
+
+
+def test_a_duplicate_controller_is_reported_by_both_nodes(pair):
+    pair.start('wrist_sim_node')
+    pair.start('controller_node')
+    pair.running()
+    pair.start('controller_node', 'controller_twin')
+    wait_log(pair, 'wrist_sim_node', r'2 publishers on /effort_controller/commands', 15.0)
+    for name in ('controller_node', 'controller_twin'):
+        wait_log(pair, name, r'2 nodes are named /quat_jt_controller', 15.0)

@@ -1,0 +1,92 @@
+"""
+The launch files, run against recording stand-ins of launch/launch_ros (not on PyPI).
+
+Both demos: the two nodes with the package's config files, the launch arguments, the nodes'
+names (the xArm6's simulator has its own), and ``on_exit`` shutting the whole launch down when
+either node exits (so a simulator that cannot open its window does not leave a controller
+running alone).
+"""
+import ast
+import importlib.util
+from pathlib import Path
+import sys
+import types
+
+import pytest
+from robots import XARM6_URDF
+
+pytestmark = pytest.mark.unit
+
+REPO = Path(__file__).resolve().parent.parent
+DEMOS = {
+    'wrist_demo.launch.py': ('wrist_sim', 'wrist_sim.yaml', 'wrist_controller.yaml', None),
+    'xarm6_demo.launch.py': ('xarm6_sim', 'xarm6_sim.yaml', 'xarm6_controller.yaml',
+                             XARM6_URDF),
+}
+
+
+class Recorder:
+
+    def __init__(self, *args, **kwargs):
+        self.args, self.kwargs = args, kwargs
+
+
+class ShutdownRecorder(Recorder):
+    """Stands in for launch.actions.Shutdown."""
+
+
+def describe(monkeypatch, launch_file: str):
+    stand_ins = {
+        'launch': {'LaunchDescription': Recorder},
+        'launch.actions': {'DeclareLaunchArgument': Recorder, 'Shutdown': ShutdownRecorder},
+        'launch.substitutions': {'LaunchConfiguration': Recorder},
+        'launch_ros': {},
+        'launch_ros.actions': {'Node': Recorder},
+        'launch_ros.parameter_descriptions': {'ParameterValue': Recorder},
+        'ament_index_python': {},
+        'ament_index_python.packages': {'get_package_share_directory': lambda pkg: str(REPO)},
+    }
+    for name, attrs in stand_ins.items():
+        monkeypatch.setitem(sys.modules, name, types.SimpleNamespace(**attrs))
+    spec = importlib.util.spec_from_file_location('demo_launch', REPO / 'launch' / launch_file)
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module.generate_launch_description().args[0]
+
+
+@pytest.mark.parametrize('launch_file', sorted(DEMOS))
+def test_launch_file_is_jazzy_launch_code(launch_file):
+    path = REPO / 'launch' / launch_file
+    tree = ast.parse(path.read_text(), str(path))
+    compile(tree, str(path), 'exec')
+    assert 'generate_launch_description' in {n.name for n in tree.body
+                                             if isinstance(n, ast.FunctionDef)}
+    imported = {n.module for n in ast.walk(tree) if isinstance(n, ast.ImportFrom)}
+    assert {'launch', 'launch.actions', 'launch_ros.actions',
+            'ament_index_python.packages'} <= imported
+
+
+@pytest.mark.parametrize('launch_file', sorted(DEMOS))
+def test_launch_description(monkeypatch, launch_file):
+    sim_name, sim_config, controller_config, urdf = DEMOS[launch_file]
+    actions = describe(monkeypatch, launch_file)
+    nodes = {a.kwargs['executable']: a.kwargs for a in actions if 'executable' in a.kwargs}
+    assert set(nodes) == {'controller_node', 'wrist_sim_node'}
+    assert nodes['controller_node']['name'] == 'quat_jt_controller'
+    assert nodes['wrist_sim_node']['name'] == sim_name
+    for exe, config in (('controller_node', controller_config),
+                        ('wrist_sim_node', sim_config)):
+        config_path, overrides = nodes[exe]['parameters']
+        assert Path(config_path) == REPO / 'config' / config
+        if urdf is not None:
+            assert overrides['robot_description'] == urdf.read_text()
+        # Either node exiting ends the launch.
+        assert isinstance(nodes[exe]['on_exit'], ShutdownRecorder)
+        assert nodes[exe]['on_exit'].kwargs['reason']
+    assert nodes['controller_node']['parameters'][1]['potential'].kwargs == {'value_type': str}
+    assert nodes['wrist_sim_node']['parameters'][1]['use_gui'].kwargs == {'value_type': bool}
+    defaults = {a.args[0]: a.kwargs['default_value'] for a in actions
+                if 'default_value' in a.kwargs}
+    assert defaults == {'potential': 'tanh', 'use_gui': 'false'}
+    assert {a.args[0]: a.kwargs['choices'] for a in actions if 'choices' in a.kwargs} == {
+        'potential': ['tanh', 'quadratic'], 'use_gui': ['true', 'false']}
