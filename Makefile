@@ -20,8 +20,10 @@ test: $(STAMP)
 	$(PY) -m pytest test
 
 # The main job: the paper's experiment, both potentials, real nodes over DDS.
+# DEMO_ARGS go to the experiment, e.g. make demo DEMO_ARGS='--lockstep --duration 12 --composed'
+DEMO_ARGS ?=
 demo: $(STAMP)
-	$(PY) -m quat_jt_controller.tools.paper_experiment
+	$(PY) -m quat_jt_controller.tools.paper_experiment $(DEMO_ARGS)
 
 # The 1 kHz loop benchmark (30 s, two processes over DDS) and the core law throughput.
 bench: $(STAMP)

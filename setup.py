@@ -44,6 +44,7 @@ setup(
         'console_scripts': [
             'controller_node = quat_jt_controller.controller_node:main',
             'wrist_sim_node = wrist_sim.sim_node:main',
+            'composed = quat_jt_controller.composed:main',
         ],
     },
 )

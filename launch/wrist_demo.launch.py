@@ -3,6 +3,7 @@ The wrist demo: the simulated spherical wrist and the transpose-Jacobian regulat
 
     ros2 launch quat_jt_controller wrist_demo.launch.py [potential:=tanh|quadratic]
                                                       [use_gui:=true|false]
+                                                      [composed:=true|false]
 
 The nodes read their parameters from this package's ``config/wrist_sim.yaml`` and
 ``config/wrist_controller.yaml`` (keyed ``/**``, so a namespace, ``-r __ns:=/arm``, keeps
@@ -19,6 +20,7 @@ import os
 from ament_index_python.packages import get_package_share_directory
 from launch import LaunchDescription
 from launch.actions import DeclareLaunchArgument, Shutdown
+from launch.conditions import IfCondition, UnlessCondition
 from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
 from launch_ros.parameter_descriptions import ParameterValue
@@ -30,6 +32,9 @@ def generate_launch_description() -> LaunchDescription:
     controller_config = os.path.join(share, 'config', 'wrist_controller.yaml')
     potential = LaunchConfiguration('potential')
     use_gui = LaunchConfiguration('use_gui')
+    composed = LaunchConfiguration('composed')
+    overrides = {'use_gui': ParameterValue(use_gui, value_type=bool),
+                 'potential': ParameterValue(potential, value_type=str)}
     return LaunchDescription([
         DeclareLaunchArgument('potential', default_value='tanh',
                               choices=['tanh', 'quadratic'],
@@ -37,13 +42,22 @@ def generate_launch_description() -> LaunchDescription:
                                           "'quadratic' (Eq. 37)"),
         DeclareLaunchArgument('use_gui', default_value='false', choices=['true', 'false'],
                               description='open the PyBullet window of the simulator'),
+        DeclareLaunchArgument('composed', default_value='false', choices=['true', 'false'],
+                              description='both nodes in one process on one executor '
+                                          '(the composed mode)'),
         Node(package='quat_jt_controller', executable='wrist_sim_node', name='wrist_sim',
-             output='screen', emulate_tty=True,
+             output='screen', emulate_tty=True, condition=UnlessCondition(composed),
              on_exit=Shutdown(reason='the simulator exited'),
-             parameters=[sim_config, {'use_gui': ParameterValue(use_gui, value_type=bool)}]),
+             parameters=[sim_config, {'use_gui': overrides['use_gui']}]),
         Node(package='quat_jt_controller', executable='controller_node',
              name='quat_jt_controller', output='screen', emulate_tty=True,
+             condition=UnlessCondition(composed),
              on_exit=Shutdown(reason='the controller exited'),
-             parameters=[controller_config,
-                         {'potential': ParameterValue(potential, value_type=str)}]),
+             parameters=[controller_config, {'potential': overrides['potential']}]),
+        # Composed: one process holds both nodes (their own names: no name= here, which would
+        # rename both); each takes the parameters it declares from both files.
+        Node(package='quat_jt_controller', executable='composed', output='screen',
+             emulate_tty=True, condition=IfCondition(composed),
+             on_exit=Shutdown(reason='the composed process exited'),
+             parameters=[sim_config, controller_config, overrides]),
     ])

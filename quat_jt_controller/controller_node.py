@@ -72,7 +72,8 @@ class QuatJtController(Node):
             PoseStamped(), Vector3Stamped(), Vector3Stamped())
         for msg in (self._pose_msg, self._eo_msg, self._ep_msg):
             msg.header.frame_id = cfg.base_link
-        self._cmd_pub = self.create_publisher(Float64MultiArray, 'effort_controller/commands', 10)
+        self._cmd_pub = self.create_publisher(  # deep history: see the simulator's joint_states
+            Float64MultiArray, 'effort_controller/commands', 1000)
         self._pose_pub = self.create_publisher(PoseStamped, '~/current_pose', 10)
         self._eo_pub = self.create_publisher(Vector3Stamped, '~/orientation_error', 10)
         self._ep_pub = (self.create_publisher(Vector3Stamped, '~/position_error', 10)

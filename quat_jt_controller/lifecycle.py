@@ -52,24 +52,27 @@ def run_node(make_node: Callable[[], object], name: str, startup_errors: tuple,
     """
     Run a node of this package: its ``main()``, the Jazzy way.
 
-    Build the node (``startup_errors`` exit with status 1 and a FATAL line saying why), add it
-    to an EventsExecutor, freeze what is built so far from the garbage collector, then
-    ``run(node, executor, keep_running)``. On the way out (Ctrl-C, SIGTERM, an external
-    shutdown) the node is destroyed before the context is shut down.
+    Build the node, or a tuple of nodes sharing the process (``startup_errors`` exit with
+    status 1 and a FATAL line saying why), add it to one EventsExecutor, freeze what is built
+    so far from the garbage collector, then ``run(node, executor, keep_running)``. On the way
+    out (Ctrl-C, SIGTERM, an external shutdown) the nodes are destroyed, last built first,
+    before the context is shut down.
     """
     from rclpy.executors import ExternalShutdownException
     from rclpy.experimental import EventsExecutor
 
     keep_running = init(args)
-    node = None
+    nodes: list = []
     try:
         try:
             node = make_node()
         except startup_errors as exc:
             rclpy.logging.get_logger(name).fatal(f'cannot start: {exc}')
             raise SystemExit(1) from None
-        executor = EventsExecutor(context=node.context)
-        executor.add_node(node)
+        nodes = list(node) if isinstance(node, tuple) else [node]
+        executor = EventsExecutor(context=nodes[0].context)
+        for each in nodes:
+            executor.add_node(each)
         # What is built so far lives as long as the node: keep the cyclic garbage collector
         # from rescanning it during the 1 kHz loop.
         gc.collect()
@@ -78,6 +81,6 @@ def run_node(make_node: Callable[[], object], name: str, startup_errors: tuple,
     except (KeyboardInterrupt, ExternalShutdownException):
         pass
     finally:
-        if node is not None:
-            node.destroy_node()
+        for each in reversed(nodes):
+            each.destroy_node()
         rclpy.try_shutdown()

@@ -31,8 +31,9 @@ from std_srvs.srv import Trigger
 pytestmark = pytest.mark.dds
 
 SIM_PARAMS = {'coulomb_friction': [0.0] * 3}
-CONFIGS = {'wrist_sim_node': 'config/wrist_sim.yaml',
-           'controller_node': 'config/wrist_controller.yaml'}
+CONFIGS = {'wrist_sim_node': ('config/wrist_sim.yaml',),
+           'controller_node': ('config/wrist_controller.yaml',),
+           'composed': ('config/wrist_sim.yaml', 'config/wrist_controller.yaml')}
 
 
 class Pair:
@@ -63,10 +64,10 @@ class Pair:
 
     def start(self, executable: str, log_name: str = '', **params) -> subprocess.Popen:
         name = log_name or executable
-        params = {**(SIM_PARAMS if executable == 'wrist_sim_node' else {}), **params}
+        params = {**(SIM_PARAMS if executable != 'controller_node' else {}), **params}
         self.procs[name] = local_ros.spawn_node(
             executable, self.env, self.dir, params=params, name=name,
-            params_files=(share_path(CONFIGS[executable]),))
+            params_files=tuple(share_path(f) for f in CONFIGS[executable]))
         return self.procs[name]
 
     def log(self, name: str) -> str:
@@ -270,3 +271,15 @@ def test_a_duplicate_controller_is_reported_by_both_nodes(pair):
     wait_log(pair, 'wrist_sim_node', r'2 publishers on /effort_controller/commands', 15.0)
     for name in ('controller_node', 'controller_twin'):
         wait_log(pair, name, r'2 nodes are named /quat_jt_controller', 15.0)
+
+
+def test_the_composed_process_regulates_and_exits_cleanly(pair):
+    """Both nodes in one process: the same topics, the goal reached, Ctrl-C exits with 0."""
+    both = pair.start('composed')
+    pair.running()
+    pair.send_paper_goal()
+    pair.spin_until(lambda: pair.error_norm() < 1e-2, 20.0, 'the paper goal, composed')
+    assert local_ros.stop_node(both, timeout=10.0) == 0, pair.logs()
+    text = pair.log('composed')
+    assert '[wrist_sim]: stats {' in text and '[quat_jt_controller]: new goal' in text, text
+    assert 'Traceback' not in text and 'context is invalid' not in text, text[-3000:]

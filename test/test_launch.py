@@ -18,6 +18,7 @@ from robots import XARM6_URDF
 pytestmark = pytest.mark.unit
 
 REPO = Path(__file__).resolve().parent.parent
+COMPOSED = {'wrist_demo.launch.py'}  # launch files with composed:=true
 DEMOS = {
     'wrist_demo.launch.py': ('wrist_sim', 'wrist_sim.yaml', 'wrist_controller.yaml', None),
     'xarm6_demo.launch.py': ('xarm6_sim', 'xarm6_sim.yaml', 'xarm6_controller.yaml',
@@ -35,11 +36,20 @@ class ShutdownRecorder(Recorder):
     """Stands in for launch.actions.Shutdown."""
 
 
+class IfRecorder(Recorder):
+    """Stands in for launch.conditions.IfCondition."""
+
+
+class UnlessRecorder(Recorder):
+    """Stands in for launch.conditions.UnlessCondition."""
+
+
 def describe(monkeypatch, launch_file: str):
     stand_ins = {
         'launch': {'LaunchDescription': Recorder},
         'launch.actions': {'DeclareLaunchArgument': Recorder, 'Shutdown': ShutdownRecorder},
         'launch.substitutions': {'LaunchConfiguration': Recorder},
+        'launch.conditions': {'IfCondition': IfRecorder, 'UnlessCondition': UnlessRecorder},
         'launch_ros': {},
         'launch_ros.actions': {'Node': Recorder},
         'launch_ros.parameter_descriptions': {'ParameterValue': Recorder},
@@ -71,7 +81,17 @@ def test_launch_description(monkeypatch, launch_file):
     sim_name, sim_config, controller_config, urdf = DEMOS[launch_file]
     actions = describe(monkeypatch, launch_file)
     nodes = {a.kwargs['executable']: a.kwargs for a in actions if 'executable' in a.kwargs}
+    composed = nodes.pop('composed', None)
+    assert (composed is not None) == (launch_file in COMPOSED)
     assert set(nodes) == {'controller_node', 'wrist_sim_node'}
+    if composed is not None:  # composed:=true runs one process instead of the two
+        assert isinstance(composed['condition'], IfRecorder)
+        assert all(isinstance(n['condition'], UnlessRecorder) for n in nodes.values())
+        assert composed['condition'].args == nodes['wrist_sim_node']['condition'].args
+        assert 'name' not in composed  # a name would rename both nodes to one
+        files = [Path(f) for f in composed['parameters'][:2]]
+        assert files == [REPO / 'config' / sim_config, REPO / 'config' / controller_config]
+        assert isinstance(composed['on_exit'], ShutdownRecorder)
     assert nodes['controller_node']['name'] == 'quat_jt_controller'
     assert nodes['wrist_sim_node']['name'] == sim_name
     for exe, config in (('controller_node', controller_config),
@@ -87,6 +107,8 @@ def test_launch_description(monkeypatch, launch_file):
     assert nodes['wrist_sim_node']['parameters'][1]['use_gui'].kwargs == {'value_type': bool}
     defaults = {a.args[0]: a.kwargs['default_value'] for a in actions
                 if 'default_value' in a.kwargs}
-    assert defaults == {'potential': 'tanh', 'use_gui': 'false'}
-    assert {a.args[0]: a.kwargs['choices'] for a in actions if 'choices' in a.kwargs} == {
-        'potential': ['tanh', 'quadratic'], 'use_gui': ['true', 'false']}
+    assert defaults == {'potential': 'tanh', 'use_gui': 'false',
+                        **({'composed': 'false'} if composed is not None else {})}
+    choices = {a.args[0]: a.kwargs['choices'] for a in actions if 'choices' in a.kwargs}
+    assert choices['potential'] == ['tanh', 'quadratic'] and choices['use_gui'] == [
+        'true', 'false']

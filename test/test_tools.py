@@ -20,14 +20,18 @@ def run_tool(module, *args, timeout=240):
     return out.stdout
 
 
-def test_paper_experiment_reproduces_the_qualitative_result(tmp_path):
+@pytest.mark.parametrize('mode', ['two processes', 'composed'])
+def test_paper_experiment_reproduces_the_qualitative_result(tmp_path, mode):
     """
     Both controllers over DDS with the simulated friction: tanh ends far below quadratic.
 
-    Lockstep (simulated clock), so the outcome does not depend on how busy the machine is.
+    Lockstep (simulated clock), so the outcome does not depend on how busy the machine is; the
+    nodes as two processes, or composed in one.
     """
     stdout = run_tool('quat_jt_controller.tools.paper_experiment', '--out', str(tmp_path),
-                      '--duration', '2.5', '--lockstep')
+                      '--duration', '2.5', '--lockstep',
+                      *(['--composed'] if mode == 'composed' else []))
+    assert f'({mode if mode == "two processes" else "composed (one process)"}):' in stdout
     rows = list(csv.DictReader(open(tmp_path / 'paper_experiment.csv')))
     final = {}
     for potential in ('quadratic', 'tanh'):
@@ -58,14 +62,18 @@ def test_paper_experiment_reproduces_the_qualitative_result(tmp_path):
 def test_benchmark_reports_every_figure(tmp_path):
     stdout = run_tool('quat_jt_controller.tools.benchmark', '--out', str(tmp_path),
                       '--duration', '3', '--warmup', '1')
+    assert '| figure | two processes | composed (one process) | minimal pair' in stdout
     for row in ('state rate (Hz)', 'command rate (Hz)', 'missed ticks: steps without a fresh',
                 'latency p50 / p99 / max (ms)', 'controller compute p50 / p99 (us)',
-                'CPU % wrist_sim_node / controller_node', 'host CPU steal during the run (%)',
-                'core tick, xArm6 6-DOF pose'):
+                'CPU % (sim / controller, or the one process)',
+                'paper experiment in lockstep (x real time)', 'host CPU steal during the run (%)',
+                'core tick Regulator.update, xArm6 6-DOF pose'):
         assert f'| {row}' in stdout, row
     result = json.loads((tmp_path / 'bench.json').read_text())
-    assert result['loop']['sim']['window_steps'] > 1000
+    for mode in ('two processes', 'composed'):  # the loop ran; figures are not asserted
+        assert result['loops'][mode]['sim']['window_steps'] > 1000, mode
+        assert result['loops'][mode]['command_rate_hz'] > 100.0, mode
+        assert result['lockstep'][mode]['real_time_factor'] > 0.0, mode
     assert result['baseline']['window_steps'] > 1000  # the minimal pair ran too
-    assert result['loop']['command_rate_hz'] > 100.0  # the loop ran; figures are not asserted
     for name, core in result['core'].items():
         assert math.isfinite(core['us_per_tick']) and core['us_per_tick'] > 0.0, name

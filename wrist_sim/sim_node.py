@@ -105,7 +105,9 @@ class WristSimNode(Node):
         self._js = JointState()
         self._js.name = list(self.sim.joint_names)
         self._clock_msg = Clock()
-        self.js_pub = self.create_publisher(JointState, 'joint_states', 10)
+        # A deep history (keep-last, never blocking) lets a recorder that lags for a moment
+        # catch up instead of losing states: lockstep runs several times faster than real time.
+        self.js_pub = self.create_publisher(JointState, 'joint_states', 1000)
         self.clock_pub = (self.create_publisher(Clock, '/clock', QoSProfile(depth=1))
                           if self.publish_clock else None)
         self.cmd_sub = self.create_subscription(

@@ -46,8 +46,9 @@ from quat_jt_controller.resources import default_urdf_xml
 from quat_jt_controller.tools import local_ros
 
 CONTROLLER = 'quat_jt_controller'
-TARGETS = {'command rate (Hz)': '>= 995', 'missed ticks (%)': '<= 0.5',
-           'latency p99 (ms)': '<= 1.0', 'compute p50 (us)': '<= 20'}
+TARGETS = {'command rate (Hz)': '>= 995', 'missed ticks (%)': 'two: floor + 0.1 pt; composed: 0',
+           'latency p99 (ms)': '<= 1.0', 'compute p50 (us)': '<= 25',
+           'CPU per node (%)': '<= 30 per node', 'lockstep (x real time)': '>= 3 / >= 6'}
 
 
 def xarm6_urdf_xml() -> str:
@@ -118,18 +119,22 @@ def baseline_benchmark(duration_s: float, warmup_s: float, out: Path) -> dict:
             'host_steal_percent': 100.0 * host[7] / max(sum(host), 1)}
 
 
-def loop_benchmark(duration_s: float, warmup_s: float, out: Path) -> dict:
+def loop_benchmark(duration_s: float, warmup_s: float, out: Path, composed: bool = False) -> dict:
+    """Measure the real-time loop of the two nodes: two processes, or composed in one."""
     from diagnostic_msgs.msg import DiagnosticArray
     from quat_jt_controller.tools.probe import ProbeNode
     from geometry_msgs.msg import PoseStamped
 
+    out = out / ('composed' if composed else 'two_processes')
+    out.mkdir(parents=True, exist_ok=True)
     domain_id = random.randint(1, 100)
     env = local_ros.isolated_env(out, domain_id)
     stats_file = out / 'sim_stats.json'
     stats_file.unlink(missing_ok=True)
     sim, ctrl = local_ros.spawn_wrist_pair(
         env, out, sim_params={'stats_file': str(stats_file), 'coulomb_friction': [0.0] * 3},
-        controller_params={'potential': 'tanh'})
+        controller_params={'potential': 'tanh'}, composed=composed)
+    procs = {sim.pid: sim, ctrl.pid: ctrl}  # one entry when composed
     probe = ProbeNode('benchmark_probe', domain_id)
     node, executor = probe.node, probe.executor
     windows: list[dict] = []
@@ -152,7 +157,8 @@ def loop_benchmark(duration_s: float, warmup_s: float, out: Path) -> dict:
             executor.spin_once(timeout_sec=min(0.1, max(end - time.monotonic(), 0.0)))
 
     try:
-        print(f'loop: starting the nodes (domain {domain_id}), warm-up {warmup_s} s')
+        print(f'loop ({"composed" if composed else "two processes"}): starting the nodes '
+              f'(domain {domain_id}), warm-up {warmup_s} s')
         goal = PoseStamped()
         goal.header.frame_id = 'base_link'
         o = goal.pose.orientation
@@ -160,7 +166,7 @@ def loop_benchmark(duration_s: float, warmup_s: float, out: Path) -> dict:
         spin_for(2.0)
         goal_pub.publish(goal)
         spin_for(warmup_s)
-        cpu0 = {p.pid: _cpu_seconds(p.pid) for p in (sim, ctrl)}
+        cpu0 = {pid: _cpu_seconds(pid) for pid in procs}
         host0 = _cpu_times()
         t0 = time.monotonic()
         measuring[0] = True
@@ -168,7 +174,7 @@ def loop_benchmark(duration_s: float, warmup_s: float, out: Path) -> dict:
         spin_for(duration_s)
         measuring[0] = False
         wall = time.monotonic() - t0
-        cpu = {p.pid: 100.0 * (_cpu_seconds(p.pid) - cpu0[p.pid]) / wall for p in (sim, ctrl)}
+        cpu = {pid: 100.0 * (_cpu_seconds(pid) - cpu0[pid]) / wall for pid in procs}
         host = [b - a for a, b in zip(host0, _cpu_times())]
     finally:
         for proc in (sim, ctrl):  # the sim first: its statistics end with the controller alive
@@ -182,7 +188,8 @@ def loop_benchmark(duration_s: float, warmup_s: float, out: Path) -> dict:
         'duration_s': wall,
         'sim': sim_stats,
         'controller_windows': full,
-        'cpu_percent': {'wrist_sim_node': cpu[sim.pid], 'controller_node': cpu[ctrl.pid]},
+        'cpu_percent': ({'composed': cpu[sim.pid]} if composed else
+                        {'wrist_sim_node': cpu[sim.pid], 'controller_node': cpu[ctrl.pid]}),
         'host_steal_percent': 100.0 * host[7] / max(sum(host), 1),
         'command_rate_hz': statistics.mean(float(w['control_rate_hz']) for w in full),
         'compute_us_p50': statistics.median(float(w['compute_us_p50']) for w in full),
@@ -199,36 +206,68 @@ def _loop_rows(s: dict) -> list[str]:
             f'{s["cmd_latency_us_max"] / 1e3:.3f}']
 
 
-def report(loop: dict, core: dict, baseline: dict) -> str:
-    s = loop['sim']
-    ours, floor = _loop_rows(s), _loop_rows(baseline)
+def lockstep_benchmark(out: Path, duration_s: float = 6.0) -> dict:
+    """Run the paper experiment (tanh) in lockstep in both modes: how many times real time."""
+    from quat_jt_controller.tools.paper_experiment import run_once
+
+    model = RobotModel(default_urdf_xml(), 'base_link', 'tool0')
+    factors = {}
+    for mode, composed in (('two processes', False), ('composed', True)):
+        run = run_once('tanh', duration_s, out / 'lockstep' / mode.replace(' ', '_'), model,
+                       lockstep=True, composed=composed, progress=lambda *_: None)
+        factors[mode] = {'real_time_factor': duration_s / run.recording_wall_s,
+                         'missing_states': run.missing_states}
+        print(f'lockstep ({mode}): {factors[mode]["real_time_factor"]:.2f}x real time')
+    return factors
+
+
+def report(loops: dict, core: dict, baseline: dict, lockstep: dict) -> str:
+    """Return the figures as a markdown table: both modes and the minimal pair, side by side."""
+    two, comp = loops['two processes'], loops['composed']
+    cells = {mode: _loop_rows(loop['sim']) for mode, loop in loops.items()}
+    floor = _loop_rows(baseline)
+
+    def both(fmt) -> tuple[str, str]:
+        return fmt(two), fmt(comp)
+
     rows = [
-        ('state rate (Hz)', f'{s["window_rate_hz"]:.1f}', f'{baseline["window_rate_hz"]:.1f}',
-         ''),
-        ('command rate (Hz)', f'{loop["command_rate_hz"]:.1f}', '',
+        ('state rate (Hz)', *both(lambda r: f'{r["sim"]["window_rate_hz"]:.1f}'),
+         f'{baseline["window_rate_hz"]:.1f}', ''),
+        ('command rate (Hz)', *both(lambda r: f'{r["command_rate_hz"]:.1f}'), '',
          TARGETS['command rate (Hz)']),
-        ('missed ticks: steps without a fresh command (%)', ours[0], floor[0],
-         TARGETS['missed ticks (%)']),
-        ('late deadlines (total, incl. start-up)', str(s['missed_deadlines']),
+        ('missed ticks: steps without a fresh command (%)', cells['two processes'][0],
+         cells['composed'][0], floor[0], TARGETS['missed ticks (%)']),
+        ('late deadlines (total, incl. start-up)',
+         *both(lambda r: str(r['sim']['missed_deadlines'])),
          str(baseline['missed_deadlines']), ''),
-        ('period jitter p50 / p99 / max (us)', ours[1], floor[1], ''),
-        ('latency p50 / p99 / max (ms)', ours[2], floor[2], TARGETS['latency p99 (ms)']),
+        ('period jitter p50 / p99 / max (us)', cells['two processes'][1], cells['composed'][1],
+         floor[1], ''),
+        ('latency p50 / p99 / max (ms)', cells['two processes'][2], cells['composed'][2],
+         floor[2], TARGETS['latency p99 (ms)']),
         ('controller compute p50 / p99 (us)',
-         f'{loop["compute_us_p50"]:.1f} / {loop["compute_us_p99"]:.1f}', '',
+         *both(lambda r: f'{r["compute_us_p50"]:.1f} / {r["compute_us_p99"]:.1f}'), '',
          TARGETS['compute p50 (us)']),
         ('sim step + publish p50 / p99 (us)',
-         f'{s["step_compute_us_p50"]:.1f} / {s["step_compute_us_p99"]:.1f}', '', ''),
-        ('CPU % wrist_sim_node / controller_node',
-         f'{loop["cpu_percent"]["wrist_sim_node"]:.0f} / '
-         f'{loop["cpu_percent"]["controller_node"]:.0f}', '', ''),
-        ('host CPU steal during the run (%)', f'{loop["host_steal_percent"]:.1f}',
+         *both(lambda r: f'{r["sim"]["step_compute_us_p50"]:.1f} / '
+                         f'{r["sim"]["step_compute_us_p99"]:.1f}'), '', ''),
+        ('CPU % (sim / controller, or the one process)',
+         f'{two["cpu_percent"]["wrist_sim_node"]:.0f} / '
+         f'{two["cpu_percent"]["controller_node"]:.0f}',
+         f'{comp["cpu_percent"]["composed"]:.0f}', '', TARGETS['CPU per node (%)']),
+        ('paper experiment in lockstep (x real time)',
+         *(f'{lockstep[m]["real_time_factor"]:.2f}'
+           + (f' ({lockstep[m]["missing_states"]} states lost)'
+              if lockstep[m]['missing_states'] else '') for m in ('two processes', 'composed')),
+         '', TARGETS['lockstep (x real time)']),
+        ('host CPU steal during the run (%)', *both(lambda r: f'{r["host_steal_percent"]:.1f}'),
          f'{baseline["host_steal_percent"]:.1f}', ''),
     ]
     for name, c in core.items():
-        rows.append((f'core tick, {name} (us; ticks/s)',
-                     f'{c["us_per_tick"]:.1f}; {c["ticks_per_s"]:,.0f}', '', ''))
-    lines = ['| figure | our nodes | minimal pair (host floor) | target |', '|---|---|---|---|']
-    lines += [f'| {a} | {b} | {c} | {d} |' for a, b, c, d in rows]
+        rows.append((f'core tick Regulator.update, {name} (us; ticks/s)',
+                     f'{c["us_per_tick"]:.1f}; {c["ticks_per_s"]:,.0f}', '', '', ''))
+    lines = ['| figure | two processes | composed (one process) | minimal pair (host floor) | '
+             'target |', '|---|---|---|---|---|']
+    lines += [f'| {a} | {b} | {c} | {d} | {e} |' for a, b, c, d, e in rows]
     return '\n'.join(lines)
 
 
@@ -243,10 +282,12 @@ def main(argv: Optional[list] = None) -> int:
     core = core_benchmark()
     print(f'baseline: a minimal rclpy pair for {args.duration} s')
     baseline = baseline_benchmark(args.duration, args.warmup, args.out)
-    loop = loop_benchmark(args.duration, args.warmup, args.out)
-    text = report(loop, core, baseline)
+    loops = {mode: loop_benchmark(args.duration, args.warmup, args.out, composed)
+             for mode, composed in (('two processes', False), ('composed', True))}
+    lockstep = lockstep_benchmark(args.out)
+    text = report(loops, core, baseline, lockstep)
     (args.out / 'bench.json').write_text(json.dumps(
-        {'loop': loop, 'core': core, 'baseline': baseline}, indent=1))
+        {'loops': loops, 'core': core, 'baseline': baseline, 'lockstep': lockstep}, indent=1))
     (args.out / 'bench.md').write_text(text + '\n')
     print()
     print(text)

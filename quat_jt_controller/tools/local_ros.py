@@ -19,6 +19,7 @@ from quat_jt_controller.resources import share_path
 NODE_MODULES = {
     'controller_node': 'quat_jt_controller.controller_node',
     'wrist_sim_node': 'wrist_sim.sim_node',
+    'composed': 'quat_jt_controller.composed',  # both in one process
     'minimal_pair': 'quat_jt_controller.tools.minimal_pair',  # the benchmark's baseline
 }
 
@@ -80,14 +81,21 @@ def spawn_node(executable: str, env: Mapping[str, str], work_dir: Path,
 
 def spawn_wrist_pair(env: Mapping[str, str], work_dir: Path,
                      sim_params: Optional[Mapping[str, Any]] = None,
-                     controller_params: Optional[Mapping[str, Any]] = None
-                     ) -> tuple[subprocess.Popen, subprocess.Popen]:
+                     controller_params: Optional[Mapping[str, Any]] = None,
+                     composed: bool = False) -> tuple[subprocess.Popen, subprocess.Popen]:
     """
     Start ``wrist_sim_node`` and ``controller_node`` as the wrist demo does.
 
     Each reads the package's ``config/wrist_sim.yaml`` / ``config/wrist_controller.yaml`` (the
-    paper's experiment), then the given overrides. Returns ``(sim, controller)``.
+    paper's experiment), then the given overrides. Returns ``(sim, controller)``; with
+    ``composed`` both run in one ``composed`` process, returned twice.
     """
+    if composed:
+        both = spawn_node('composed', env, work_dir,
+                          params={**(sim_params or {}), **(controller_params or {})},
+                          params_files=(share_path('config/wrist_sim.yaml'),
+                                        share_path('config/wrist_controller.yaml')))
+        return both, both
     sim = spawn_node('wrist_sim_node', env, work_dir, params=sim_params,
                      params_files=(share_path('config/wrist_sim.yaml'),))
     controller = spawn_node('controller_node', env, work_dir, params=controller_params,

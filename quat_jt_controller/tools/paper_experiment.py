@@ -13,7 +13,8 @@ offscreen from the recorded joint states (``tools/animation.py``) and print the 
 table. ``--xarm6`` also runs the xArm6 demo goal (``tools/xarm6_demo.py``, ROS-free).
 
     python -m quat_jt_controller.tools.paper_experiment [--out results/paper] [--duration 6]
-                                                        [--lockstep] [--no-animation] [--xarm6]
+                                                        [--lockstep] [--composed]
+                                                        [--no-animation] [--xarm6]
 
 By default the simulator paces itself in real time, as the wrist would run. With ``--lockstep``
 it publishes ``/clock`` and steps as soon as the command for its last state has arrived
@@ -63,6 +64,8 @@ class Run:
     command_nm: np.ndarray
     mcap_path: Path
     sim_stats: dict  # the simulator's loop statistics (LoopStats.summary)
+    recording_wall_s: float  # wall time to record duration_s of (simulated) time after the goal
+    missing_states: int  # states of the recorded span that did not reach the recorder
 
 
 def _stamp_s(stamp) -> float:
@@ -105,8 +108,13 @@ def error_norm(model: RobotModel, q_rad) -> float:
 
 
 def run_once(potential: str, duration_s: float, out_dir: Path, model: RobotModel,
-             lockstep: bool = False, progress=print) -> Run:
-    """One experiment: two node processes over DDS, recorded by a node in this process."""
+             lockstep: bool = False, progress=print, composed: bool = False,
+             max_rtf: float = 0.0) -> Run:
+    """
+    Run one experiment: the two nodes over DDS, recorded by a node in this process.
+
+    The nodes are two processes, or one ``composed`` process with ``composed``.
+    """
     from rclpy.serialization import deserialize_message
 
     from quat_jt_controller.tools.probe import ProbeNode
@@ -123,8 +131,9 @@ def run_once(potential: str, duration_s: float, out_dir: Path, model: RobotModel
     stats_file = work / 'sim_stats.json'
     stats_file.unlink(missing_ok=True)
     sim, ctrl = local_ros.spawn_wrist_pair(
-        env, work, sim_params={'stats_file': str(stats_file), 'publish_clock': lockstep},
-        controller_params={'potential': potential, 'use_sim_time': lockstep})
+        env, work, sim_params={'stats_file': str(stats_file), 'publish_clock': lockstep,
+                               'max_real_time_factor': max_rtf},
+        controller_params={'potential': potential, 'use_sim_time': lockstep}, composed=composed)
     probe = ProbeNode('paper_experiment_recorder', domain_id)
     node, executor = probe.node, probe.executor
     mcap = McapLog(work / f'{potential}.mcap')
@@ -132,13 +141,12 @@ def run_once(potential: str, duration_s: float, out_dir: Path, model: RobotModel
     channels = {}
 
     def recorder(topic, type_name, key):
-        channels[topic] = mcap.channel(topic, type_name)
-        ch = channels[topic]
+        channels[key] = mcap.channel(topic, type_name)
+        append = records[key].append
+        clock = time.time_ns
 
-        def callback(data: bytes) -> None:
-            now = time.time_ns()
-            mcap.write(ch, data, now)
-            records[key].append((now, data))
+        def callback(data: bytes) -> None:  # as cheap as can be: lockstep runs fast
+            append((clock(), data))
         return callback
 
     for topic, msg, type_name, key in (
@@ -186,16 +194,22 @@ def run_once(potential: str, duration_s: float, out_dir: Path, model: RobotModel
         progress(f'[{potential}] goal sent ({EQUATION[potential]}), recording {duration_s} s'
                  f'{" of simulated time (lockstep)" if lockstep else ""}')
         report_at = 0.0
+        t_recording = time.monotonic()
         while report_at <= duration_s:
             spin_until(lambda: last_state_time_s() - t_goal_s >= report_at, 10.0 + duration_s,
                        'recording')
             progress(f'[{potential}]   t = {report_at:4.1f} s   ||e|| = {last_error_norm():.4g}')
             report_at += 1.0
+        recording_wall_s = time.monotonic() - t_recording
     finally:
         for proc in (sim, ctrl):  # the sim first: its statistics end with the controller alive
             local_ros.stop_node(proc)
         probe.close()
         try:
+            # The MCAP is written after the run, in time order, so recording costs little.
+            for ns, key, data in sorted((ns, key, data) for key, rows in records.items()
+                                        for ns, data in rows):
+                mcap.write(channels[key], data, ns)
             _write_replay(mcap, model, records['states'])
         finally:
             mcap.close()
@@ -216,7 +230,9 @@ def run_once(potential: str, duration_s: float, out_dir: Path, model: RobotModel
     cmd_ns = np.array([ns for ns, _ in cmds])
     cmd_t = t[np.clip(np.searchsorted(state_ns, cmd_ns) - 1, 0, len(t) - 1)]
     return Run(potential, t[keep], q[keep], qdot[keep], effort[keep], err[keep], cmd_t,
-               np.array([list(c) for _, c in cmds]), work / f'{potential}.mcap', sim_stats)
+               np.array([list(c) for _, c in cmds]), work / f'{potential}.mcap', sim_stats,
+               recording_wall_s,
+               int(round(duration_s / np.median(np.diff(t[keep])))) + 1 - int(keep.sum()))
 
 
 def summarize(run: Run, limits) -> dict:
@@ -364,6 +380,11 @@ def main(argv: Optional[list] = None) -> int:
                         help='seconds recorded after the goal, per controller')
     parser.add_argument('--lockstep', action='store_true',
                         help='simulated clock, sim and controller in lockstep (load-proof)')
+    parser.add_argument('--composed', action='store_true',
+                        help='both nodes in one process on one executor (the composed mode)')
+    parser.add_argument('--max-rtf', type=float, default=0.0,
+                        help='lockstep: at most this many times real time (0 = as fast as it '
+                             'goes); lower it if the recording reports missing states')
     parser.add_argument('--no-animation', action='store_true',
                         help='skip the GIFs rendered from the recorded joint states')
     parser.add_argument('--xarm6', action='store_true',
@@ -373,7 +394,8 @@ def main(argv: Optional[list] = None) -> int:
     args.out.mkdir(parents=True, exist_ok=True)
     model = RobotModel(default_urdf_xml(), 'base_link', 'tool0')
     t_start = time.monotonic()
-    runs = [run_once(p, args.duration, args.out, model, args.lockstep) for p in POTENTIALS]
+    runs = [run_once(p, args.duration, args.out, model, args.lockstep, composed=args.composed,
+                     max_rtf=args.max_rtf) for p in POTENTIALS]
     ideal = {}
     for p in POTENTIALS:
         gains = cl.Gains.create(p, paper.KP, paper.KV, paper.LAMBDA, cl.Task.ORIENTATION, 3)
@@ -394,6 +416,14 @@ def main(argv: Optional[list] = None) -> int:
             health += ' -- DEGRADED: the machine was too busy for real time; try --lockstep'
         print(f'{s["potential"]}: {s["states"]} joint states, final max |qdot| '
               f'{s["final_speed_rad_s"]:.2e} rad/s; timing: {health}')
+    mode = 'composed (one process)' if args.composed else 'two processes'
+    for r in runs:
+        print(f'{r.potential}: {args.duration:g} s {"simulated" if args.lockstep else "real"} '
+              f'time recorded in {r.recording_wall_s:.2f} s of wall time ({mode}): '
+              f'{args.duration / r.recording_wall_s:.2f}x real time'
+              + (f'; RECORDING INCOMPLETE: {r.missing_states} states missing (this process '
+                 'fell behind; rerun with --max-rtf)' if r.missing_states else
+                 '; recording complete'))
     print(f'\nFigure {args.out / "fig2_error_norm.png"}, CSV {args.out / "paper_experiment.csv"}, '
           f'MCAP {", ".join(str(r.mcap_path) for r in runs)}')
     if not args.no_animation:  # after the runs, from the recorded joint states
