@@ -20,7 +20,7 @@ from quat_jt_controller.goal_check import GoalCheckWorker, ModelSpec
 from quat_jt_controller.joints import stamp_problem, StateLayout
 from quat_jt_controller.loop_stats import TickStats
 from quat_jt_controller.model import ModelError, RobotModel
-from quat_jt_controller.parameters import declare_gains, declare_structural
+from quat_jt_controller.parameters import declare_gains, declare_structural, history_qos
 from quat_jt_controller.regulator import Goal, Regulator, TickOutput
 from quat_jt_controller.resources import bundled_urdf_hint
 from quat_jt_controller.throttle import cause, Throttle
@@ -72,8 +72,8 @@ class QuatJtController(Node):
             PoseStamped(), Vector3Stamped(), Vector3Stamped())
         for msg in (self._pose_msg, self._eo_msg, self._ep_msg):
             msg.header.frame_id = cfg.base_link
-        self._cmd_pub = self.create_publisher(  # deep history: see the simulator's joint_states
-            Float64MultiArray, 'effort_controller/commands', 1000)
+        self._cmd_pub = self.create_publisher(
+            Float64MultiArray, 'effort_controller/commands', history_qos(self._use_sim_time))
         self._pose_pub = self.create_publisher(PoseStamped, '~/current_pose', 10)
         self._eo_pub = self.create_publisher(Vector3Stamped, '~/orientation_error', 10)
         self._ep_pub = (self.create_publisher(Vector3Stamped, '~/position_error', 10)

@@ -23,6 +23,7 @@ from quat_jt_controller.resources import default_urdf_xml
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 from rcl_interfaces.msg import ParameterType, SetParametersResult
 from rclpy.node import Node
+from rclpy.qos import HistoryPolicy, QoSProfile
 
 # Pose task (Eq. 24/32): position rows (N/m, 1/m) then the paper's orientation rows.
 DEFAULT_KP_POSITION = (200.0, 200.0, 200.0)
@@ -53,6 +54,20 @@ class StructuralConfig:
     state_timeout_s: float
     max_state_age_s: float  # 0: stamps not checked
     publish_rate_divider: int
+
+
+def history_qos(simulated_time: bool) -> QoSProfile:
+    """
+    Return the QoS of the 1 kHz topics (joint_states, effort commands): reliable, a history.
+
+    On simulated time (lockstep), every subscriber gets every message: KEEP_ALL, so a slow
+    recorder slows simulated time down instead of losing messages. In real time a late
+    subscriber must never stall the loop: KEEP_LAST 1000, which never blocks and lets a
+    subscriber that lags for a moment catch up.
+    """
+    if simulated_time:
+        return QoSProfile(history=HistoryPolicy.KEEP_ALL, depth=1000)
+    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1000)
 
 
 Snapshot = TypeVar('Snapshot')

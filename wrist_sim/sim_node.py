@@ -37,7 +37,7 @@ import numpy as np
 from quat_jt_controller import lifecycle
 from quat_jt_controller.joints import movable_joints
 from quat_jt_controller.loop_stats import LoopStats
-from quat_jt_controller.parameters import LiveParameters
+from quat_jt_controller.parameters import history_qos, LiveParameters
 from quat_jt_controller.resources import bundled_urdf_hint, default_urdf_xml
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 from rclpy.node import Node
@@ -86,6 +86,7 @@ class WristSimNode(Node):
         self._velocity_limits = self.sim.velocity_limits_rad_s.tolist()
         self._at_velocity_limit = [0.999 * v for v in self._velocity_limits]
         self.publish_clock = bool(p['publish_clock'])
+        self._clock_divider = int(p['clock_divider'])
         self.stats = LoopStats(capacity=STATS_WINDOW_STEPS)
         # Without use_sim_time the node's ROS clock is the system clock: stamp from it directly
         # (time.time_ns) rather than through rclpy's Clock object on every tick.
@@ -105,9 +106,8 @@ class WristSimNode(Node):
         self._js = JointState()
         self._js.name = list(self.sim.joint_names)
         self._clock_msg = Clock()
-        # A deep history (keep-last, never blocking) lets a recorder that lags for a moment
-        # catch up instead of losing states: lockstep runs several times faster than real time.
-        self.js_pub = self.create_publisher(JointState, 'joint_states', 1000)
+        self.js_pub = self.create_publisher(JointState, 'joint_states',
+                                            history_qos(self.publish_clock))
         self.clock_pub = (self.create_publisher(Clock, '/clock', QoSProfile(depth=1))
                           if self.publish_clock else None)
         self.cmd_sub = self.create_subscription(
@@ -156,6 +156,11 @@ class WristSimNode(Node):
         self.declare_parameter('publish_clock', False, desc(
             'publish /clock with the simulation time and step in lockstep with the commands '
             'instead of in real time', read_only=True))
+        self.declare_parameter('clock_divider', 10, desc(
+            'with publish_clock: publish /clock every N-th step (10 at 1 kHz: 100 Hz of '
+            'simulated time); each /clock costs a publish here and a callback in every node on '
+            'simulated time', read_only=True,
+            integer_range=[IntegerRange(from_value=1, to_value=1000, step=1)]))
         self.declare_parameter('lockstep_timeout', 0.05, desc(
             'lockstep: wall seconds to wait for the command of the last state before stepping '
             'anyway', floating_point_range=_float_range(1e-4, 10.0)))
@@ -179,7 +184,8 @@ class WristSimNode(Node):
         self.declare_parameter('stats_file', '', desc(
             'if set, timing statistics are written there as JSON at shutdown', read_only=True))
         self.structural = {k: self.get_parameter(k).value for k in (
-            'joints', 'rate_hz', 'use_gui', 'publish_clock', 'hold_until_first_command',
+            'joints', 'rate_hz', 'use_gui', 'publish_clock', 'clock_divider',
+            'hold_until_first_command',
             'enforce_velocity_limits', 'stats_file')}
         self.live = LiveParameters(self, LIVE_PARAMETERS,
                                    lambda values: SimConfig.create(values, n),
@@ -304,7 +310,7 @@ class WristSimNode(Node):
                     throttle_duration_sec=THROTTLE_S)
                 break
         js.effort = self.sim.tau_applied_nm.tolist()
-        if self.clock_pub is not None:
+        if self.clock_pub is not None and self.sim.step_count % self._clock_divider == 0:
             self._clock_msg.clock.sec = sec
             self._clock_msg.clock.nanosec = nsec
             self.clock_pub.publish(self._clock_msg)

@@ -39,6 +39,7 @@ from quat_jt_controller import control_law as cl
 from quat_jt_controller import paper
 from quat_jt_controller import quaternion as quat
 from quat_jt_controller.model import RobotModel
+from quat_jt_controller.parameters import history_qos
 from quat_jt_controller.reference_sim import ClosedLoop
 from quat_jt_controller.resources import default_urdf_xml
 from quat_jt_controller.tools import local_ros
@@ -155,7 +156,10 @@ def run_once(potential: str, duration_s: float, out_dir: Path, model: RobotModel
              'std_msgs/msg/Float64MultiArray', 'commands'),
             (f'/{CONTROLLER}/orientation_error', Vector3Stamped,
              'geometry_msgs/msg/Vector3Stamped', 'errors')):
-        node.create_subscription(msg, topic, recorder(topic, type_name, key), 1000, raw=True)
+        # KEEP_ALL (as the nodes publish on simulated time): in lockstep nothing is lost, the
+        # simulation waits for this recorder instead.
+        node.create_subscription(msg, topic, recorder(topic, type_name, key),
+                                 history_qos(lockstep), raw=True)
     goal_pub = node.create_publisher(PoseStamped, f'/{CONTROLLER}/target_pose', 10)
     goal = PoseStamped()
     goal.header.frame_id = 'base_link'
