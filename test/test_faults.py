@@ -16,7 +16,7 @@ import time
 from typing import Callable
 
 from geometry_msgs.msg import PoseStamped
-from process_harness import call_service
+from process_harness import call_service, ProcessHarnessMixin
 import pytest
 from quat_jt_controller import paper
 from quat_jt_controller import quaternion as quat
@@ -36,11 +36,11 @@ CONFIGS = {'wrist_sim_node': ('config/wrist_sim.yaml',),
            'composed': ('config/wrist_sim.yaml', 'config/wrist_controller.yaml')}
 
 
-class Pair:
+class Pair(ProcessHarnessMixin):
     """The two nodes on their own domain, and a probe that watches states and commands."""
 
     def __init__(self, work_dir: Path) -> None:
-        self.dir = work_dir
+        self.work_dir = work_dir
         self.env = local_ros.isolated_env(work_dir, random.randint(101, 200))
         self.procs: dict[str, subprocess.Popen] = {}
         self.context = rclpy.Context()
@@ -66,18 +66,19 @@ class Pair:
         name = log_name or executable
         params = {**(SIM_PARAMS if executable != 'controller_node' else {}), **params}
         self.procs[name] = local_ros.spawn_node(
-            executable, self.env, self.dir, params=params, name=name,
+            executable, self.env, self.work_dir, params=params, name=name,
             params_files=tuple(share_path(f) for f in CONFIGS[executable]))
         return self.procs[name]
 
     def log(self, name: str) -> str:
-        path = self.dir / f'{name}.log'
+        path = self.work_dir / f'{name}.log'
         return path.read_text(errors='replace') if path.exists() else ''
 
     def logs(self) -> str:
         return '\n'.join(f'--- {n}.log ---\n{self.log(n)[-4000:]}' for n in self.procs)
 
     def spin_until(self, condition: Callable[[], bool], timeout: float, what: str) -> None:
+        """Wait for ``condition``; unlike the mixin's, a node that exits is no failure here."""
         deadline = time.monotonic() + timeout
         while not condition():
             if time.monotonic() > deadline:
@@ -113,13 +114,6 @@ class Pair:
         o.x, o.y, o.z, o.w = quat.to_xyzw(paper.Q_DESIRED)
         self.spin_until(lambda: self.goal_pub.get_subscription_count() > 0, 10.0, 'goal sub')
         self.goal_pub.publish(goal)
-
-    def close(self) -> None:
-        for proc in self.procs.values():
-            local_ros.stop_node(proc)
-        self.executor.shutdown(timeout_sec=1.0)
-        self.node.destroy_node()
-        rclpy.try_shutdown(context=self.context)
 
 
 @pytest.fixture
