@@ -43,6 +43,7 @@ setup(
         'console_scripts': [
             'controller_node = quat_jt_controller.controller_node:main',
             'wrist_sim_node = wrist_sim.sim_node:main',
+            'design_gains = quat_jt_controller.gain_design:main',
         ],
     },
 )
