@@ -22,6 +22,7 @@ from quat_jt_controller.loop_stats import TickStats
 from quat_jt_controller.model import ModelError, RobotModel
 from quat_jt_controller.parameters import declare_gains, declare_shaping, declare_structural
 from quat_jt_controller.regulator import Goal, Regulator, TickOutput
+from quat_jt_controller.shaping import describe as describe_shaping
 from quat_jt_controller.stall import StallDetector
 from quat_jt_controller.throttle import cause, Throttle
 from rclpy.node import Node
@@ -51,6 +52,7 @@ class QuatJtController(Node):
                                        on_apply=self._apply_shaping)
         self.regulator.set_shaping(self.shaping.current)
         self.stall = StallDetector(self.regulator)
+        self.get_logger().info(f'issue-10 extensions: {describe_shaping(self.shaping.current)}')
 
         self._goal_source = 'none'  # 'none' | 'hold' (initial pose) | 'target_pose'
         self._goal_warning = ''
@@ -106,7 +108,7 @@ class QuatJtController(Node):
 
     def _apply_shaping(self, shaping) -> None:
         self.regulator.set_shaping(shaping)
-        self.get_logger().info(f'extensions updated: {shaping}')
+        self.get_logger().info(f'issue-10 extensions updated: {describe_shaping(shaping)}')
 
     # ---------------------------------------------------------------------------------- tick
     def _on_joint_state(self, msg: JointState) -> None:

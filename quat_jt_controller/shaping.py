@@ -348,3 +348,20 @@ def from_parameters(values: dict, n_joints: int) -> Shaping:
         configuration_radius=values.get('configuration_radius', d.configuration_radius_rad),
         configuration_ramp=values.get('configuration_ramp', d.configuration_ramp_rad),
         damping_speed=values.get('damping_speed'))
+
+
+def describe(shaping: Shaping) -> str:
+    """Return one line saying which extensions are on, for the node's log."""
+    parts = []
+    if shaping.limits_on:
+        parts.append(f'joint-limit band {shaping.joint_limit_margin_rad:g} rad, stiffness '
+                     f'{list(shaping.joint_limit_gain)} N m/rad')
+    if shaping.large_error_gain > 0.0:
+        parts.append(f'large-error term {shaping.large_error_gain:g} N m')
+    if shaping.configuration_on:
+        parts.append(f'goal-configuration term {list(shaping.configuration_gain)} N m')
+    if shaping.speed_damping_on:
+        parts.append(f'cubic damping v_c {list(shaping.damping_speed_rad_s)} rad/s')
+    if shaping.friction_on:
+        parts.append(f'friction compensation {list(shaping.friction_compensation_nm)} N m')
+    return '; '.join(parts) if parts else "off (the paper's law)"

@@ -27,6 +27,7 @@ from dataclasses import dataclass
 import math
 import os
 from pathlib import Path
+import shutil
 import sys
 import tempfile
 import time
@@ -308,8 +309,11 @@ def run_dds(count: int, seed: int, progress=print) -> str:
             _, e = quat.orientation_error(quat.from_rotation_matrix(R), q_d)
             err = math.sqrt(sum(c * c for c in e))
             verdict = 'reached' if ok and err < robot.orientation_tol else 'NOT reached'
+            if verdict == 'reached':
+                shutil.rmtree(work, ignore_errors=True)  # else keep the nodes' logs
             lines.append(f'  DDS case {i}: ||e|| after {robot.duration_s:g} s (simulated) = '
-                         f'{err:.3g} -> {verdict}')
+                         f'{err:.3g} -> {verdict}' + ('' if verdict == 'reached'
+                                                      else f' (logs in {work})'))
             progress(lines[-1], flush=True)
         finally:
             for proc in (sim, ctrl):
