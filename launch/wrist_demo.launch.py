@@ -5,8 +5,9 @@ The wrist demo: the simulated spherical wrist and the transpose-Jacobian regulat
                                                       [use_gui:=true|false]
 
 The nodes read their parameters from this package's ``config/wrist_sim.yaml`` and
-``config/wrist_controller.yaml`` (the paper's experiment; the xarm6_*.yaml files in the same
-folder are for another robot and use the same node names, so they are not loaded here);
+``config/wrist_controller.yaml`` (gains from the robot with the issue-10 extensions;
+``config/paper_wrist_controller.yaml`` is the paper's experiment; the xarm6_*.yaml files in the
+same folder are for another robot, so they are not loaded here);
 ``potential`` overrides the controller's, ``use_gui`` opens the PyBullet window. Then send a
 goal, e.g. the paper's corrected one (docs/errata.md, note 2):
 

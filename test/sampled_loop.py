@@ -12,6 +12,7 @@ lives in ``quat_jt_controller.gain_design``, which computed the gains of
 
     .venv/bin/python test/sampled_loop.py     # the figures quoted in config/xarm6_controller.yaml
 """
+import dataclasses
 from pathlib import Path
 import sys
 from typing import Optional, Sequence
@@ -78,7 +79,9 @@ def _report() -> None:  # pragma: no cover - the figures behind config/xarm6_con
             print(f'{potential:9s} {label}: linearised rho (delay 1/3/6/7) '
                   + ' '.join(f'{r:.5f}' for r in rho)
                   + f', slowest time constant {time_constant_s(rho[0]):.3f} s (delay 1)')
-            ideal = ClosedLoop(model, gains, cl.Task.POSE, q_d, p_d, shaping=shaping,
+            # no friction in the ideal loop, so no compensation (docs/lyapunov.md, section 4)
+            frictionless = dataclasses.replace(shaping, friction_compensation_nm=())
+            ideal = ClosedLoop(model, gains, cl.Task.POSE, q_d, p_d, shaping=frictionless,
                                q_star=q_goal).run(q0, 5.0)
             y, _, _ = ClosedLoop(model, gains, cl.Task.POSE, q_d, p_d).error(ideal.q_rad[-1])
             print(f'    ideal 5 s: |p_d - p| {np.linalg.norm(y[:3]) * 1e3:.4f} mm, '
@@ -93,7 +96,7 @@ def _report() -> None:  # pragma: no cover - the figures behind config/xarm6_con
                             coulomb_nm=sim_params['coulomb_friction'] if friction else None
                     ) as sim:
                         loop = ClosedLoop(model, gains, cl.Task.POSE, q_d, p_d,
-                                          shaping=shaping)
+                                          shaping=shaping if friction else frictionless)
                         run = run_sampled(loop, sim, 5.0, delay, q_goal, 0.1)
                     fp, fe = run.final()
                     print(f'    PyBullet delay {delay} friction {friction!s:5s}: last 0.5 s '

@@ -18,11 +18,13 @@ their likely cause (``stall.StallDetector.diagnose`` at the final state).
 
     python -m quat_jt_controller.tools.reach_experiment [--robot wrist xarm6]
         [--potential tanh quadratic] [--cases N] [--seed S] [--dds K]
+        [--without configuration|friction|limits]
 
 ``--dds K`` also runs the first K wrist cases over DDS with the real nodes (``local_ros``).
 """
 import argparse
 import contextlib
+import dataclasses
 from dataclasses import dataclass
 import math
 import os
@@ -241,10 +243,19 @@ def report(robot: Robot, potential: str, outcomes: list, elapsed_s: float) -> st
     return '\n'.join(lines)
 
 
+ABLATIONS = {  # --without: turn one extension off to see what it does
+    'configuration': {'configuration_gain': ()},
+    'friction': {'friction_compensation_nm': ()},
+    'limits': {'joint_limit_gain': ()},
+}
+
+
 def run_robot(robot: Robot, potential: str, count: int, seed: int, delay_ticks: int = 1,
-              progress=print) -> list:
+              progress=print, without: Optional[str] = None) -> list:
     """Run ``count`` cases of ``robot`` with ``potential``; return their outcomes."""
     model, gains, shaping = load_controller(robot, potential)
+    if without:
+        shaping = dataclasses.replace(shaping, **ABLATIONS[without])
     sim_params = config_parameters(robot.sim_config)
     outcomes = []
     for i, (q0, qg) in enumerate(cases(model, robot, count, seed)):
@@ -333,6 +344,8 @@ def main(argv: Optional[list] = None) -> int:
     parser.add_argument('--delay', type=int, default=1, help='ticks of delay')
     parser.add_argument('--dds', type=int, default=0,
                         help='also run this many wrist cases over DDS (real nodes)')
+    parser.add_argument('--without', choices=list(ABLATIONS),
+                        help='turn this extension off (to see what it does)')
     args = parser.parse_args(argv)
     default_cases = {'wrist': 200, 'xarm6': 100}
     text = []
@@ -341,8 +354,9 @@ def main(argv: Optional[list] = None) -> int:
         for potential in args.potential:
             t0 = time.monotonic()
             outcomes = run_robot(robot, potential, args.cases or default_cases[name],
-                                 args.seed, args.delay)
-            text.append(report(robot, potential, outcomes, time.monotonic() - t0))
+                                 args.seed, args.delay, without=args.without)
+            label = potential + (f' without {args.without}' if args.without else '')
+            text.append(report(robot, label, outcomes, time.monotonic() - t0))
             print(text[-1], flush=True)
     if args.dds:
         text.append('wrist over DDS (nodes in lockstep, tanh, config/wrist_controller.yaml):\n'
