@@ -13,14 +13,15 @@ The law of Eq. (22) becomes
   within the limits is known (the goal check's inverse kinematics, in a worker process), a
   joint-space term that is zero within ``radius`` of ``q*`` in every joint and pulls towards
   ``q*`` outside, with at most ``T_j`` N m (Huber profile). The joint box is convex, so this
-  leads the long way round a joint's stop instead of into it; near the goal only the paper's
-  transpose-Jacobian term acts.
+  leads the long way round a joint's stop instead of into it. Within the radius only the
+  paper's transpose-Jacobian term acts; with radius 0 both share their minimum at ``q*``.
+* The cubic damping (section 6): ``-k_v qdot min(qdot^2, v_m^2) / v_c^2`` on top of ``K_v``.
 * The large-error term of ``U_a`` (section 3): ``k_L B(||e||)`` with
   ``B'(s) = s^2 / sqrt(1 + delta^2 - s^2)``, so that ``Q^T grad`` keeps its size up to a few
   degrees from 180 degrees instead of fading like ``eta_e``; computed in ``control_law``.
 * ``tau_fc``, Coulomb friction compensation (section 4): per joint
   ``f_j [t_v + (1 - |t_v|) phi(y_tilde) t_p]``, ``t_v = tanh(qdot_j / v_eps)`` while moving,
-  ``t_p = tanh(tau_p,j / (0.02 f_j))`` in the direction of the potential torque ``tau_p`` at
+  ``t_p = tanh(tau_p,j / (0.001 f_j))`` in the direction of the potential torque ``tau_p`` at
   rest, faded by ``phi`` to zero inside a small error band. Its size never exceeds ``f_j``,
   which is what keeps dV/dt <= -qdot^T K_v qdot against a Coulomb friction of at least ``f_j``.
 
@@ -28,13 +29,14 @@ All are off by default (:class:`Shaping` ()), which gives the paper's law exactl
 floats: the functions here run in the 1 kHz tick.
 """
 from dataclasses import dataclass
+from functools import cached_property
 from math import isfinite, pi, sqrt, tanh
 from typing import Optional, Sequence
 
 # A joint whose URDF range is at least this long turns freely: it gets no limit term.
 FULL_TURN_RAD = 2.0 * pi - 1e-6
 # t_p = tanh(tau_p / (TORQUE_BAND_FRACTION f)): the breakaway reaches 76% of f when the
-# potential torque is 2% of f, and changes sign smoothly through tau_p = 0.
+# potential torque is 0.1% of f, and changes sign smoothly (C-infinity) through tau_p = 0.
 TORQUE_BAND_FRACTION = 0.001
 # Width of the fade of the large-error term at 180 degrees, in eta_e (docs/lyapunov.md, 3).
 LARGE_ERROR_DELTA = 0.1
@@ -144,22 +146,22 @@ class Shaping:
                                    f'{len(values)}')
         return self
 
-    @property
+    @cached_property  # read every tick: computed once per snapshot
     def friction_on(self) -> bool:
         """Return True if any joint has a friction estimate."""
         return any(f > 0.0 for f in self.friction_compensation_nm)
 
-    @property
+    @cached_property  # read every tick: computed once per snapshot
     def speed_damping_on(self) -> bool:
         """Return True if some joint has the cubic damping term."""
         return any(v > 0.0 for v in self.damping_speed_rad_s)
 
-    @property
+    @cached_property  # read every tick: computed once per snapshot
     def configuration_on(self) -> bool:
         """Return True if the goal-configuration term can act (some gain > 0)."""
         return any(t > 0.0 for t in self.configuration_gain)
 
-    @property
+    @cached_property  # read every tick: computed once per snapshot
     def limits_on(self) -> bool:
         """Return True if the joint-limit potential can act (margin and some gain > 0)."""
         return self.joint_limit_margin_rad > 0.0 and any(k > 0.0 for k in self.joint_limit_gain)
@@ -263,7 +265,7 @@ def friction_compensation(tau_potential: Sequence[float], qdot: Sequence[float],
     tau_fc per joint: f [t_v + (1 - |t_v|) phi t_p], never larger than f in size.
 
     ``t_v = tanh(qdot / v_eps)`` compensates the friction of a moving joint; at rest
-    ``t_p = tanh(tau_p / (0.02 f))`` adds f in the direction of the potential torque
+    ``t_p = tanh(tau_p / (0.001 f))`` adds f in the direction of the potential torque
     ``tau_potential`` (breakaway), faded out by ``phi`` near the goal (:func:`fade`).
     """
     v_eps = shaping.friction_velocity_rad_s
