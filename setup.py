@@ -45,6 +45,7 @@ setup(
             'controller_node = quat_jt_controller.controller_node:main',
             'wrist_sim_node = wrist_sim.sim_node:main',
             'composed = quat_jt_controller.composed:main',
+            'design_gains = quat_jt_controller.gain_design:main',
         ],
     },
 )

@@ -6,10 +6,11 @@ The wrist demo: the simulated spherical wrist and the transpose-Jacobian regulat
                                                       [composed:=true|false]
 
 The nodes read their parameters from this package's ``config/wrist_sim.yaml`` and
-``config/wrist_controller.yaml`` (keyed ``/**``, so a namespace, ``-r __ns:=/arm``, keeps
-them); ``potential`` overrides the controller's, ``use_gui`` opens the PyBullet window (it needs
-a display). If either node exits, the whole launch shuts down. Then send a goal, e.g. the
-paper's corrected one (docs/errata.md, note 2):
+``config/wrist_controller.yaml`` (gains from the robot with the issue-10 extensions;
+``config/paper_wrist_controller.yaml`` is the paper's experiment). The files are keyed ``/**``,
+so a namespace (``-r __ns:=/arm``) keeps them. ``potential`` overrides the controller's,
+``use_gui`` opens the PyBullet window (it needs a display). If either node exits, the whole
+launch shuts down. Then send a goal, e.g. the paper's corrected one (docs/errata.md, note 2):
 
     ros2 topic pub --once /quat_jt_controller/target_pose geometry_msgs/msg/PoseStamped \
       "{header: {frame_id: base_link},

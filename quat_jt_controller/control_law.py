@@ -5,6 +5,8 @@ The transpose-Jacobian regulators of Campa and Kelly, Eq. (22), with two potenti
 
 * quadratic potential  U_a = 1/2 y^T K_p y                      -> grad = K_p y        (23, 24)
 * log-cosh potential   U_a = sum k_pi / l_i ln cosh(l_i y_i)    -> grad = K_p tanh(L y) (31, 32)
+* either, plus the optional large-error term k_L B(||e||) of issue 10 (docs/lyapunov.md,
+  section 3), which keeps the orientation torque from fading towards 180 degrees
 
 Two tasks share one implementation:
 
@@ -17,10 +19,11 @@ differences.
 """
 from dataclasses import dataclass
 import enum
-from math import exp, isfinite, log, log1p, tanh
+from math import asin, exp, isfinite, log, log1p, sqrt, tanh
 from typing import Optional, Sequence
 
 from quat_jt_controller import quaternion as quat
+from quat_jt_controller.shaping import LARGE_ERROR_DELTA
 
 LN2 = log(2.0)
 
@@ -126,32 +129,66 @@ class Gains:
                    gravity_compensation=bool(gravity_compensation))
 
 
-def potential_energy(y_tilde: Sequence[float], gains: Gains) -> float:
-    """U_a(y_tilde): Eq. (23) (quadratic) or Eq. (31) (log-cosh)."""
+def large_error_energy(s: float, k_l: float) -> float:
+    """
+    k_L B(s), s = ||e||: the large-error term of U_a (docs/lyapunov.md, section 3).
+
+    B(s) = integral of sigma^2 / sqrt(a^2 - sigma^2) from 0 to s, a^2 = 1 + delta^2:
+    a^2 / 2 asin(s / a) - s / 2 sqrt(a^2 - s^2).
+    """
+    a2 = 1.0 + LARGE_ERROR_DELTA * LARGE_ERROR_DELTA
+    a = sqrt(a2)
+    return k_l * (0.5 * a2 * asin(min(s / a, 1.0)) - 0.5 * s * sqrt(max(a2 - s * s, 0.0)))
+
+
+def large_error_gradient_scale(s2: float, k_l: float) -> float:
+    """
+    Return c with grad_e (k_L B(||e||)) = c e: c = k_L ||e|| / sqrt(1 + delta^2 - ||e||^2).
+
+    ``s2`` is ||e||^2. Since 1 + delta^2 - ||e||^2 = eta_e^2 + delta^2, Q^T grad has the size
+    1/2 k_L ||e||^2 |eta_e| / sqrt(eta_e^2 + delta^2): ~ 1/2 k_L at large errors, 0 at 180.
+    """
+    return k_l * sqrt(s2) / sqrt(1.0 + LARGE_ERROR_DELTA * LARGE_ERROR_DELTA - s2)
+
+
+def potential_energy(y_tilde: Sequence[float], gains: Gains, k_l: float = 0.0) -> float:
+    """U_a(y_tilde): Eq. (23) (quadratic) or Eq. (31) (log-cosh), + k_L B(||e||) if k_l > 0."""
+    extra = 0.0
+    if k_l > 0.0:
+        e = y_tilde[-3:]
+        extra = large_error_energy(sqrt(e[0] * e[0] + e[1] * e[1] + e[2] * e[2]), k_l)
     if gains.potential is Potential.QUADRATIC:
-        return 0.5 * sum(k * y * y for k, y in zip(gains.kp, y_tilde))
-    total = 0.0
+        return 0.5 * sum(k * y * y for k, y in zip(gains.kp, y_tilde)) + extra
+    total = extra
     for k, lam, y in zip(gains.kp, gains.lam, y_tilde):
         x = abs(lam * y)
         total += k / lam * (x + log1p(exp(-2.0 * x)) - LN2)  # = ln cosh x, without overflow
     return total
 
 
-def potential_gradient(y_tilde: Sequence[float], gains: Gains) -> tuple[float, ...]:
-    """grad_y U_a: K_p y (Eq. 24) or K_p tanh(Lambda y) (Eq. 32)."""
+def potential_gradient(y_tilde: Sequence[float], gains: Gains,
+                       k_l: float = 0.0) -> tuple[float, ...]:
+    """grad_y U_a: K_p y (Eq. 24) or K_p tanh(Lambda y) (Eq. 32), + the large-error term."""
     if gains.potential is Potential.QUADRATIC:
-        return tuple(k * y for k, y in zip(gains.kp, y_tilde))
-    return tuple(k * tanh(lam * y) for k, lam, y in zip(gains.kp, gains.lam, y_tilde))
+        w = tuple(k * y for k, y in zip(gains.kp, y_tilde))
+    else:
+        w = tuple(k * tanh(lam * y) for k, lam, y in zip(gains.kp, gains.lam, y_tilde))
+    if k_l <= 0.0:
+        return w
+    e = y_tilde[-3:]
+    c = large_error_gradient_scale(e[0] * e[0] + e[1] * e[1] + e[2] * e[2], k_l)
+    return w[:-3] + (w[-3] + c * e[0], w[-2] + c * e[1], w[-1] + c * e[2])
 
 
-def task_force(y_tilde: Sequence[float], eta_e: float, gains: Gains) -> tuple[float, ...]:
+def task_force(y_tilde: Sequence[float], eta_e: float, gains: Gains,
+               k_l: float = 0.0) -> tuple[float, ...]:
     """
     Q(eta_e, e)^T grad U_a(y_tilde), the task-space 'force' that J^T maps to torque.
 
     ``y_tilde`` is ``e`` (3) or ``[p_tilde, e]`` (6); Q is Eq. (15): identity on the position
-    rows, 1/2 (eta_e I + S(e)) on the orientation rows.
+    rows, 1/2 (eta_e I + S(e)) on the orientation rows. ``k_l`` > 0 adds the large-error term.
     """
-    w = potential_gradient(y_tilde, gains)
+    w = potential_gradient(y_tilde, gains, k_l)
     e = y_tilde[-3:]
     w_o = quat.q_transpose_times(eta_e, e, w[-3:])
     return w_o if len(w) == 3 else (w[0], w[1], w[2]) + w_o
@@ -168,15 +205,25 @@ def control_torque(jacobian: Sequence[Sequence[float]], y_tilde: Sequence[float]
     ``gravity`` is g(q); it is added only when ``gains.gravity_compensation`` is set.
     Returns tau in N m, one entry per joint. Effort limits are applied by :func:`saturate`.
     """
-    f = task_force(y_tilde, eta_e, gains)
+    tau = potential_torque(jacobian, y_tilde, eta_e, gains)
     n = len(qdot)
-    tau = [-gains.kv[j] * qdot[j] for j in range(n)]
-    for row, fi in zip(jacobian, f):
-        for j in range(n):
-            tau[j] += row[j] * fi
+    for j in range(n):
+        tau[j] -= gains.kv[j] * qdot[j]
     if gravity is not None and gains.gravity_compensation:
         for j in range(n):
             tau[j] += gravity[j]
+    return tau
+
+
+def potential_torque(jacobian: Sequence[Sequence[float]], y_tilde: Sequence[float],
+                     eta_e: float, gains: Gains, k_l: float = 0.0) -> list[float]:
+    """J^T Q(eta_e, e)^T grad U_a(y_tilde) = -grad_q U_a(y_tilde(q)) (Eqs. 21-22), in N m."""
+    f = task_force(y_tilde, eta_e, gains, k_l)
+    n = len(jacobian[0])
+    tau = [0.0] * n
+    for row, fi in zip(jacobian, f):
+        for j in range(n):
+            tau[j] += row[j] * fi
     return tau
 
 

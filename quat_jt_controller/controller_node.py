@@ -20,9 +20,12 @@ from quat_jt_controller.goal_check import GoalCheckWorker, ModelSpec
 from quat_jt_controller.joints import stamp_problem, StateLayout
 from quat_jt_controller.loop_stats import TickStats
 from quat_jt_controller.model import ModelError, RobotModel
-from quat_jt_controller.parameters import declare_gains, declare_structural, history_qos
+from quat_jt_controller.parameters import declare_gains, declare_shaping, declare_structural
+from quat_jt_controller.parameters import history_qos
 from quat_jt_controller.regulator import Goal, Regulator, TickOutput
 from quat_jt_controller.resources import bundled_urdf_hint
+from quat_jt_controller.shaping import describe as describe_shaping
+from quat_jt_controller.stall import StallDetector
 from quat_jt_controller.throttle import cause, Throttle
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
@@ -50,6 +53,12 @@ class QuatJtController(Node):
         self._max_age_ns = int(cfg.max_state_age_s * 1e9)
         self._goal_checker = GoalCheckWorker(ModelSpec(
             cfg.robot_description, cfg.base_link, cfg.tip_link, cfg.joints, cfg.task))
+        # Issue 10: the extensions (live, whole) and stall detection for /diagnostics.
+        self.shaping = declare_shaping(self, cfg, check=self.regulator.check_shaping,
+                                       on_apply=self._apply_shaping)
+        self.regulator.set_shaping(self.shaping.current)
+        self.stall = StallDetector(self.regulator)
+        self.get_logger().info(f'issue-10 extensions: {describe_shaping(self.shaping.current)}')
 
         self._goal_source = 'none'  # 'none' | 'hold' (initial pose) | 'target_pose'
         self._goal_warning = ''
@@ -105,6 +114,10 @@ class QuatJtController(Node):
             f'{list(gains.kv)}, lambda {list(gains.lam)}, gravity_compensation '
             f'{gains.gravity_compensation}')
 
+    def _apply_shaping(self, shaping) -> None:
+        self.regulator.set_shaping(shaping)
+        self.get_logger().info(f'issue-10 extensions updated: {describe_shaping(shaping)}')
+
     # ---------------------------------------------------------------------------------- tick
     def _on_joint_state(self, msg: JointState) -> None:
         """One control tick: the regulator's torque for this state, published at once."""
@@ -135,6 +148,7 @@ class QuatJtController(Node):
                           out.saturated)
         self._last, self._last_q, self._last_qdot = out, q, qdot
         self._last_state_ns = time.monotonic_ns()
+        self.stall.feed(t0 * 1e-9, q, qdot, out)
         if not out.finite:
             self.counters.nonfinite_torques += 1
             self.get_logger().error(
@@ -204,7 +218,10 @@ class QuatJtController(Node):
         if goal == previous:
             return
         self._goal_warning = ''
-        self._goal_checker.submit(goal, self._last_q, goal.q_desired_base, goal.p_desired_base)
+        shaping = self.regulator.shaping
+        self._goal_checker.submit(goal, self._last_q, goal.q_desired_base, goal.p_desired_base,
+                                  shaping.joint_limit_margin_rad
+                                  if shaping.configuration_on else None)
         self._log_goal(goal)
 
     def _log_goal(self, goal: Goal) -> None:
@@ -225,6 +242,9 @@ class QuatJtController(Node):
     def _on_goal_checks(self) -> None:
         """Take the A1/A2 verdicts of the worker; only the goal still in force counts."""
         for goal, verdict in self._goal_checker.poll():
+            q_star = self._goal_checker.take_configuration(goal)
+            if q_star is not None:  # issue 10: the goal-configuration term pulls towards it
+                self.regulator.set_goal_configuration(goal, q_star)
             if goal is self.regulator.goal and verdict != self._goal_warning:
                 self._goal_warning = verdict
                 if verdict:
@@ -244,6 +264,7 @@ class QuatJtController(Node):
             ('goal', diagnostics.goal_status(
                 self._goal_source, self.regulator.goal, self._goal_warning, self._last,
                 self._last_qdot, self.config.task is Task.POSE, self.counters)),
+            ('stall', self.stall.status()),
         )
         arr = DiagnosticArray(status=[
             DiagnosticStatus(name=f'{self._diag_name}: {name}', hardware_id=self.config.tip_link,

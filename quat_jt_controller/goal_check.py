@@ -9,7 +9,9 @@ bounded by a number of starts and of iterations, never by wall time, so the same
 give the same verdict on any host. At the solution, the smallest singular value of J_o
 (orientation task) or J_G (pose task) tells whether it is singular.
 
-The regulator itself never uses this: it is advice for the user. It costs milliseconds, so the
+The verdict is advice for the user. The same inverse kinematics also gives, on request, the
+goal configuration q* that the goal-configuration term of issue 10 pulls towards
+(:func:`goal_configuration`, docs/lyapunov.md section 5). It costs milliseconds, so the
 controller runs it in :class:`GoalCheckWorker`, a separate process, never on the control thread.
 """
 from dataclasses import dataclass
@@ -114,6 +116,72 @@ def check_goal(model: RobotModel, q_measured: Optional[Sequence[float]],
             f'residual {best[1]:.3g} at q = {q_text}): assumption A1 may not hold')
 
 
+def _representative(q: np.ndarray, near: np.ndarray, lower: np.ndarray,
+                    upper: np.ndarray) -> np.ndarray:
+    """Move each full-turn joint by whole turns to the angle within its range nearest ``near``."""
+    out = q.copy()
+    for j in range(q.size):
+        if upper[j] - lower[j] >= 2.0 * pi - 1e-6 and np.isfinite(upper[j] - lower[j]):
+            turns = np.round((near[j] - q[j]) / (2.0 * pi))
+            best = None
+            for k in (turns - 1, turns, turns + 1):
+                c = q[j] + 2.0 * pi * k
+                closer = best is None or abs(c - near[j]) < abs(best - near[j])
+                if lower[j] <= c <= upper[j] and closer:
+                    best = c
+            if best is not None:
+                out[j] = best
+    return out
+
+
+CONFIGURATION_STARTS = (MAX_STARTS, 48)  # at least / at most, for goal_configuration
+
+
+def goal_configuration(model: RobotModel, q_measured: Optional[Sequence[float]],
+                       q_desired: Sequence[float], p_desired: Sequence[float], task: Task,
+                       margin_rad: float = 0.0,
+                       starts_range: tuple[int, int] = CONFIGURATION_STARTS,
+                       seed: int = 0) -> Optional[np.ndarray]:
+    """
+    Return q*, a regular joint configuration within the limits that reaches the goal, or None.
+
+    The goal-configuration potential of issue 10 (docs/lyapunov.md, section 5) pulls towards
+    it. The starts of :func:`check_goal` (a robot has several IK branches, so at least
+    ``starts_range[0]`` of them, and more, up to ``starts_range[1]``, until a solution outside
+    the joint-limit bands is found); among the solutions with ``sigma_min(J) >=
+    SINGULAR_SIGMA_MIN``, full-turn joints moved by whole turns to the angle nearest the
+    measured one (the joint box is convex: the way there stays within the limits), it prefers
+    those outside the joint-limit bands (``margin_rad``), then the nearest to ``q_measured``.
+    Deterministic.
+    """
+    lower = np.array(model.position_lower, dtype=float)
+    upper = np.array(model.position_upper, dtype=float)
+    lo = np.maximum(lower, -pi)
+    hi = np.minimum(upper, pi)
+    q_now = (0.5 * (lo + hi) if q_measured is None else np.asarray(q_measured, float))
+    rng = np.random.default_rng(seed)
+    starts = [q_now, 0.5 * (lo + hi)]
+    limited = (upper - lower) < 2.0 * pi - 1e-6
+    best = None
+    for k in range(starts_range[1]):
+        if k >= starts_range[0] and best is not None and not best[0][0]:
+            break
+        q_start = starts.pop(0) if starts else rng.uniform(lo, hi)
+        q, residual, J = solve_ik(model, q_start + 1e-3, q_desired, p_desired, task)
+        if residual >= RESIDUAL_TOLERANCE:
+            continue
+        if float(np.linalg.svd(J, compute_uv=False)[-1]) < SINGULAR_SIGMA_MIN:
+            continue
+        q = _representative(q, q_now, lower, upper)
+        if np.any(q < lower) or np.any(q > upper):
+            continue
+        in_band = bool(np.any(limited & ((q < lower + margin_rad) | (q > upper - margin_rad))))
+        score = (in_band, float(np.linalg.norm(q - q_now)))
+        if best is None or score < best[0]:
+            best = (score, q)
+    return None if best is None else best[1]
+
+
 @dataclass(frozen=True)
 class ModelSpec:
     """What the worker process needs to build the same RobotModel."""
@@ -149,6 +217,7 @@ class GoalCheckWorker:
                                         daemon=True)
         self._reader.start()
         self._keys: dict[int, object] = {}
+        self._configurations: dict[object, Optional[list[float]]] = {}
         self._next_id = 0
         self._running: Optional[int] = None
         self._next: Optional[tuple[object, dict]] = None
@@ -170,11 +239,19 @@ class GoalCheckWorker:
         self._done.put({'id': None, 'verdict': 'the goal-check worker exited'})
 
     def submit(self, key: object, q_measured: Optional[Sequence[float]],
-               q_desired: Sequence[float], p_desired: Sequence[float]) -> None:
-        """Queue a check; ``key`` comes back with its verdict (e.g. the goal object)."""
+               q_desired: Sequence[float], p_desired: Sequence[float],
+               configuration_margin_rad: Optional[float] = None) -> None:
+        """
+        Queue a check; ``key`` comes back with its verdict (e.g. the goal object).
+
+        With ``configuration_margin_rad`` (not None) the worker also looks for the goal
+        configuration (:func:`goal_configuration` with that joint-limit margin); take it with
+        :meth:`take_configuration` once ``key`` has come back from :meth:`poll`.
+        """
         request = {'q_measured': None if q_measured is None else [float(x) for x in q_measured],
                    'q_desired': [float(x) for x in q_desired],
-                   'p_desired': [float(x) for x in p_desired]}
+                   'p_desired': [float(x) for x in p_desired],
+                   'configuration_margin': configuration_margin_rad}
         self._next = (key, request)
         if self._running is None:
             self._start_next()
@@ -201,10 +278,22 @@ class GoalCheckWorker:
             key = self._keys.pop(reply.get('id'), None)
             if reply.get('id') == self._running or reply.get('id') is None:
                 self._running = None
+            if reply.get('configuration') is not None and key is not None:
+                try:
+                    self._configurations[key] = reply['configuration']
+                except TypeError:  # an unhashable key: nobody can take it
+                    pass
             out.append((key, str(reply.get('verdict', ''))))
         if self._running is None and self._next is not None:
             self._start_next()
         return out
+
+    def take_configuration(self, key: object) -> Optional[list[float]]:
+        """Return (once) the goal configuration found for ``key``, or None if none was."""
+        try:
+            return self._configurations.pop(key, None)
+        except TypeError:  # an unhashable key never has one
+            return None
 
     def close(self) -> None:
         """Stop the worker (closing its stdin ends it); idempotent."""
@@ -234,12 +323,19 @@ def _serve() -> None:
     task = Task(spec['task'])
     for line in lines:
         request = json.loads(line)
+        configuration = None
         try:
             verdict = check_goal(model, request['q_measured'], request['q_desired'],
                                  request['p_desired'], task)
+            margin = request.get('configuration_margin')
+            if margin is not None:
+                q_star = goal_configuration(model, request['q_measured'], request['q_desired'],
+                                            request['p_desired'], task, float(margin))
+                configuration = None if q_star is None else q_star.tolist()
         except Exception as exc:  # noqa: B902 - reported to the node, which logs it
             verdict = f'the goal check failed: {exc!r}'
-        sys.stdout.write(json.dumps({'id': request['id'], 'verdict': verdict}) + '\n')
+        sys.stdout.write(json.dumps({'id': request['id'], 'verdict': verdict,
+                                     'configuration': configuration}) + '\n')
         sys.stdout.flush()
 
 

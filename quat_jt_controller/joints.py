@@ -94,6 +94,12 @@ class StateLayout:
         return q, qdot
 
 
+# Watchdog defaults of the controller (state_timeout, max_state_age), chosen with tools/soak.py
+# on a loaded host (README, 'Watchdog timeouts'): 0.1 s tripped in normal running there.
+DEFAULT_STATE_TIMEOUT_S = 0.5
+DEFAULT_MAX_STATE_AGE_S = 0.5
+
+
 def stamp_problem(stamp_ns: int, now_ns: int, max_age_ns: int) -> str:
     """
     Say why a joint state's stamp is unusable ('' if it is fine), against the node's clock.

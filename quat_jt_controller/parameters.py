@@ -19,7 +19,9 @@ from typing import Any, Callable, Generic, Mapping, Optional, Sequence, TypeVar
 
 from quat_jt_controller import paper
 from quat_jt_controller.control_law import gain_ceiling, Gains, MAX_LAMBDA, Potential, Task
+from quat_jt_controller.joints import DEFAULT_MAX_STATE_AGE_S, DEFAULT_STATE_TIMEOUT_S
 from quat_jt_controller.resources import default_urdf_xml
+from quat_jt_controller.shaping import from_parameters as shaping_from_parameters, Shaping
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 from rcl_interfaces.msg import ParameterType, SetParametersResult
 from rclpy.node import Node
@@ -32,9 +34,6 @@ DEFAULT_LAMBDA_POSITION = (100.0, 100.0, 100.0)
 DEFAULT_JOINTS = ('joint1', 'joint2', 'joint3')
 DEFAULT_BASE_LINK = 'base_link'
 DEFAULT_TIP_LINK = 'tool0'
-# Chosen with tools/soak.py on a loaded host (README, 'Watchdog timeouts').
-DEFAULT_STATE_TIMEOUT_S = 0.5
-DEFAULT_MAX_STATE_AGE_S = 0.5
 DEFAULT_PUBLISH_RATE_DIVIDER = 10
 
 # The live parameters that make up a Gains; everything else here is read-only.
@@ -257,3 +256,100 @@ def build_gains(values: Mapping[str, Any], config: StructuralConfig,
     return Gains.create(values['potential'], values['kp'], values['kv'], values['lambda'],
                         config.task, len(config.joints), values['gravity_compensation'],
                         effort_limits_nm)
+
+
+# Issue 10: the extensions of the regulator (shaping.Shaping), live, applied whole. Defaults
+# are all off, the paper's law; config/wrist_controller.yaml and config/xarm6_controller.yaml
+# turn them on with the values of quat_jt_controller.gain_design.
+SHAPING_PARAMETERS = ('joint_limit_margin', 'joint_limit_gain', 'large_error_gain',
+                      'friction_compensation', 'friction_velocity', 'friction_error_band',
+                      'friction_position_band', 'configuration_gain', 'configuration_radius',
+                      'configuration_ramp', 'damping_speed')
+
+
+def default_shaping(n_joints: int) -> dict[str, Any]:
+    """Return the extensions' default values: all off (the paper's law)."""
+    s = Shaping()
+    return {'joint_limit_margin': 0.0, 'joint_limit_gain': [0.0] * n_joints,
+            'large_error_gain': 0.0, 'friction_compensation': [0.0] * n_joints,
+            'friction_velocity': s.friction_velocity_rad_s,
+            'friction_error_band': s.friction_error_band,
+            'friction_position_band': s.friction_position_band_m,
+            'configuration_gain': [0.0] * n_joints,
+            'configuration_radius': s.configuration_radius_rad,
+            'configuration_ramp': s.configuration_ramp_rad,
+            'damping_speed': [0.0] * n_joints}
+
+
+def declare_shaping(node: Node, config: StructuralConfig,
+                    check: Optional[Callable[[Shaping], Shaping]] = None,
+                    on_apply: Optional[Callable[[Shaping], None]] = None
+                    ) -> LiveParameters[Shaping]:
+    """
+    Declare the live extension parameters (docs/lyapunov.md); return them as a Shaping.
+
+    ``check`` validates a Shaping against the robot (``Regulator.check_shaping``: the margin
+    must fit inside the joint ranges) as part of the on-set validation; ``on_apply`` is called
+    with each new Shaping after a successful set. Raises ShapingError (naming the bad value)
+    if the start-up values are invalid.
+    """
+    n = len(config.joints)
+    joint_vector = ParameterType.PARAMETER_DOUBLE_ARRAY
+    number = ParameterType.PARAMETER_DOUBLE
+    descriptors = {
+        'joint_limit_margin': _descriptor(
+            'Width (rad) of the band inside each joint limit where the joint-limit potential '
+            'acts (joints whose range is less than a full turn). 0 = off. Live.', number,
+            float_range=(0.0, 1.0)),
+        'joint_limit_gain': _descriptor(
+            f'Stiffness (N m/rad) of the joint-limit potential in the band, one per joint '
+            f'({n}); 0 = no limit term for that joint. Live.', joint_vector,
+            constraints=f'{n} finite values >= 0'),
+        'large_error_gain': _descriptor(
+            'k_L (N m) of the large-error term of the orientation potential, which keeps the '
+            'torque from fading towards 180 degrees. 0 = off. Live.', number,
+            float_range=(0.0, 1000.0)),
+        'friction_compensation': _descriptor(
+            f'Coulomb friction estimates (N m), one per joint ({n}), compensated without '
+            'exceeding them: by velocity while moving, in the direction of the potential '
+            'torque at rest (fading out near the goal). Zeros = off. Over-estimates break '
+            'the stability argument (docs/lyapunov.md). Live.', joint_vector,
+            constraints=f'{n} finite values >= 0'),
+        'friction_velocity': _descriptor(
+            'v_eps (rad/s) of the velocity part, f tanh(qdot / v_eps). Live.', number,
+            float_range=(1e-4, 10.0)),
+        'friction_error_band': _descriptor(
+            '||e|| below which the at-rest part of the friction compensation fades out '
+            '(it is off below half of it). Live.', number, float_range=(1e-5, 1.0)),
+        'friction_position_band': _descriptor(
+            '||p_d - p|| (m) below which the at-rest part fades out (pose task). Live.',
+            number, float_range=(1e-6, 1.0)),
+        'configuration_gain': _descriptor(
+            f'Most torque (N m) the goal-configuration term asks of each joint ({n}); it '
+            'pulls towards a goal configuration within the limits found by the goal check. '
+            'Zeros = off. Live.', joint_vector, constraints=f'{n} finite values >= 0'),
+        'configuration_radius': _descriptor(
+            'Dead zone (rad, per joint) around the goal configuration where only the '
+            "paper's term acts. Live.", number, float_range=(0.0, 3.2)),
+        'configuration_ramp': _descriptor(
+            'Width (rad) over which the goal-configuration torque rises to its gain. Live.',
+            number, float_range=(1e-3, 3.2)),
+        'damping_speed': _descriptor(
+            f'v_c (rad/s) of the cubic damping term -k_v qdot (qdot / v_c)^2, one per joint '
+            f'({n}); 0 = linear damping only. Live.', joint_vector,
+            constraints=f'{n} finite values >= 0'),
+    }
+    defaults = default_shaping(n)
+    for name in SHAPING_PARAMETERS:
+        node.declare_parameter(name, defaults[name], descriptors[name])
+
+    def build(values: Mapping[str, Any]) -> Shaping:
+        shaping = build_shaping(values, config)
+        return shaping if check is None else check(shaping)
+
+    return LiveParameters(node, SHAPING_PARAMETERS, build, on_apply)
+
+
+def build_shaping(values: Mapping[str, Any], config: StructuralConfig) -> Shaping:
+    """Shaping from parameter values keyed by parameter name. Raises ShapingError."""
+    return shaping_from_parameters(dict(values), len(config.joints))

@@ -2,11 +2,18 @@
 The ideal closed loop, Eq. (25) / (33): robot dynamics (1) + control law (24) / (32).
 
 Integrated with classic RK4 on Pinocchio's dynamics, the law evaluated continuously at every
-stage (no sampling, no delay, no friction, no torque limits), so the Lyapunov function of
-Eq. (27) / (34) is non-increasing up to integration error (Eq. 28 / 35). It is the reference
-the PyBullet + ROS runs are compared with, and a test of the control law's theory.
+stage (no sampling, no delay, no torque limits, and no friction unless asked for), so the
+Lyapunov function of Eq. (27) / (34) -- with the joint-limit and large-error terms of issue 10
+when they are on (docs/lyapunov.md) -- is non-increasing up to integration error (Eq. 28 / 35).
+It is the reference the PyBullet + ROS runs are compared with, and a test of the control law's
+theory.
+
+The optional plant friction is a smooth Coulomb model, ``-f tanh(qdot / v_s)``: with friction
+compensation on, the law does work against it, and docs/lyapunov.md (section 4) shows why V
+still decreases when the compensation never exceeds the plant's friction.
 """
 from dataclasses import dataclass
+from math import tanh
 from typing import Optional, Sequence
 
 import numpy as np
@@ -14,6 +21,7 @@ import numpy as np
 from quat_jt_controller import control_law as cl
 from quat_jt_controller.model import RobotModel
 from quat_jt_controller.regulator import Goal, Regulator
+from quat_jt_controller.shaping import Shaping
 
 
 @dataclass
@@ -31,15 +39,38 @@ class ClosedLoop:
 
     The law is the node's :class:`~quat_jt_controller.regulator.Regulator` tick; the ideal loop
     (:meth:`run`) gives it no effort limits, the sampled loop (:func:`run_sampled`) the URDF's.
+    ``coulomb_nm`` adds plant friction ``-f tanh(qdot / coulomb_velocity_rad_s)`` to the ideal
+    loop (the sampled loop takes its friction from the simulator). ``shaping`` turns on the
+    issue-10 extensions, ``q_star`` gives the goal configuration to their joint-space term.
     """
 
     def __init__(self, model: RobotModel, gains: cl.Gains, task: cl.Task,
-                 q_desired: Sequence[float], p_desired: Optional[Sequence[float]] = None):
+                 q_desired: Sequence[float], p_desired: Optional[Sequence[float]] = None,
+                 coulomb_nm: Optional[Sequence[float]] = None,
+                 coulomb_velocity_rad_s: float = 0.01, shaping: Optional[Shaping] = None,
+                 q_star: Optional[Sequence[float]] = None):
         self.model, self.gains, self.task = model, gains, cl.Task(task)
         goal = Goal(tuple(q_desired), tuple(p_desired) if p_desired is not None
                     else (0.0, 0.0, 0.0))
-        self.regulator = Regulator(model, task, gains, [float('inf')] * model.n, goal)
-        self.clamped = Regulator(model, task, gains, None, goal)
+        self.goal = goal
+        self.regulator = Regulator(model, task, gains, [float('inf')] * model.n, goal, shaping)
+        self.clamped = Regulator(model, task, gains, None, goal, shaping)
+        if q_star is not None:
+            self.set_goal_configuration(q_star)
+        self.coulomb_nm = None if coulomb_nm is None else [float(f) for f in coulomb_nm]
+        self.coulomb_velocity_rad_s = float(coulomb_velocity_rad_s)
+
+    def set_goal_configuration(self, q_star: Optional[Sequence[float]]) -> None:
+        """Give both regulators the goal configuration q* (docs/lyapunov.md, section 5)."""
+        self.regulator.set_goal_configuration(self.goal, q_star)
+        self.clamped.set_goal_configuration(self.goal, q_star)
+
+    def plant_friction(self, qdot: Sequence[float]) -> list[float]:
+        """Return the ideal loop's plant friction torque, -f tanh(qdot / v_s) (or zeros)."""
+        if self.coulomb_nm is None:
+            return [0.0] * self.model.n
+        v_s = self.coulomb_velocity_rad_s
+        return [-f * tanh(v / v_s) for f, v in zip(self.coulomb_nm, qdot)]
 
     def error(self, q: Sequence[float]) -> tuple[tuple[float, ...], float, list[list[float]]]:
         """Return y_tilde (Eq. 8), eta_e and the task Jacobian at ``q``."""
@@ -51,13 +82,16 @@ class ClosedLoop:
         return self.regulator.update(q, qdot).tau_nm
 
     def lyapunov(self, q: np.ndarray, qdot: np.ndarray) -> float:
-        """V = 1/2 qdot^T M(q) qdot + U_a(y_tilde(q)), Eq. (27) / (34)."""
+        """V = 1/2 qdot^T M(q) qdot + U_a(y_tilde(q)) + U_lim(q), Eq. (27) / (34)."""
         return self.regulator.lyapunov(q, qdot)
 
     def _f(self, x: np.ndarray) -> np.ndarray:
         n = self.model.n
         q, qdot = x[:n], x[n:]
-        qddot = self.model.forward_dynamics(q, qdot, self.torque(q, qdot))
+        tau = self.torque(q, qdot)
+        if self.coulomb_nm is not None:
+            tau = [t + f for t, f in zip(tau, self.plant_friction(qdot))]
+        qddot = self.model.forward_dynamics(q, qdot, tau)
         return np.concatenate((qdot, qddot))
 
     def run(self, q0: Sequence[float], duration_s: float, dt_s: float = 1e-3,
@@ -89,6 +123,8 @@ class SampledRun:
     max_abs_torque_nm: np.ndarray  # max_j |tau_j| applied (N,)
     saturated_ticks: int
     all_finite: bool
+    q_rad: Optional[np.ndarray] = None  # (N, n) joint positions after each step
+    tau_nm: Optional[np.ndarray] = None  # (N, n) torque applied in each step
 
     def settled_at_s(self, position_m: float = 1e-3, orientation: float = 1e-2) -> float:
         """First time after which both errors stay below the tolerances (inf if never)."""
@@ -104,7 +140,9 @@ class SampledRun:
         return float(self.position_error_m[-k:].max()), float(self.orientation_error[-k:].max())
 
 
-def run_sampled(loop: ClosedLoop, sim, duration_s: float, delay_ticks: int = 1) -> SampledRun:
+def run_sampled(loop: ClosedLoop, sim, duration_s: float, delay_ticks: int = 1,
+                q_star: Optional[Sequence[float]] = None,
+                q_star_after_s: float = 0.0) -> SampledRun:
     """
     Run ``loop``'s regulator on a simulator as the nodes do: sampled, delayed, held, clamped.
 
@@ -115,13 +153,19 @@ def run_sampled(loop: ClosedLoop, sim, duration_s: float, delay_ticks: int = 1) 
     steps earlier. The nodes run
     with no extra delay (0) while every command arrives in time: the sim steps from the state
     it published with the command computed from it. Records the errors after each step.
+    ``q_star`` is given to the regulators as the goal configuration after ``q_star_after_s``
+    (the node gets it from its goal-check worker a little after the goal).
     """
+    q_star_step = int(round(q_star_after_s / sim.dt_s)) if q_star is not None else -1
     history = [(sim.q_rad.tolist(), sim.qdot_rad_s.tolist())] * (delay_ticks + 1)
     steps = int(round(duration_s / sim.dt_s))
     pos, ori, tau_max = np.zeros(steps), np.empty(steps), np.empty(steps)
+    qs, taus = np.zeros((steps, sim.n)), np.zeros((steps, sim.n))
     saturated = 0
     finite = True
     for k in range(steps):
+        if k == q_star_step:
+            loop.set_goal_configuration(q_star)
         q, qdot = history[-1 - delay_ticks]
         out = loop.clamped.update(q, qdot)
         saturated += out.saturated
@@ -136,6 +180,8 @@ def run_sampled(loop: ClosedLoop, sim, duration_s: float, delay_ticks: int = 1) 
             pos[k] = np.linalg.norm(y[:3])
         ori[k] = np.linalg.norm(y[-3:])
         tau_max[k] = np.abs(applied).max()
+        qs[k] = sim.q_rad
+        taus[k] = applied
         finite = finite and bool(np.all(np.isfinite(sim.q_rad)))
     t = (np.arange(steps) + 1) * sim.dt_s
-    return SampledRun(t, pos, ori, tau_max, saturated, finite)
+    return SampledRun(t, pos, ori, tau_max, saturated, finite, qs, taus)

@@ -3,6 +3,10 @@ The control tick, written once: joint state in, clamped joint torque out (Eq. 22
 
     tau = J^T Q(eta_e, e)^T grad U_a(y_tilde) - K_v qdot + g(q),  clamped to the effort limits
 
+With the issue-10 extensions of ``gains.shaping`` (``shaping.py``, docs/lyapunov.md) it is
+
+    tau = J^T Q^T grad U_a - grad U_lim(q) - K_v qdot + g(q) + tau_fc,  clamped
+
 :class:`Regulator` owns the robot model, the task, the effort limits and immutable snapshots of
 the gains (:class:`~quat_jt_controller.control_law.Gains`) and of the goal (:class:`Goal`).
 :meth:`Regulator.update` is the tick: kinematics, output error (Eqs. 8-10), the law of the
@@ -19,6 +23,7 @@ from typing import NamedTuple, Optional, Sequence
 
 from quat_jt_controller import control_law as cl
 from quat_jt_controller import quaternion as quat
+from quat_jt_controller import shaping as sh
 from quat_jt_controller.model import RobotModel
 
 Vector3 = tuple[float, float, float]
@@ -95,6 +100,8 @@ class TickOutput(NamedTuple):
     R_tip_base: list[list[float]]  # measured tip rotation
     saturated: bool  # an entry was clamped
     finite: bool  # False: the law gave NaN/Inf (e.g. from extreme gains); tau_nm is zero
+    # -grad of the potentials (U_a and U_lim), N m: what moves the robot towards the goal
+    tau_potential_nm: tuple[float, ...] = ()
 
     @property
     def orientation_error_norm(self) -> float:
@@ -129,44 +136,102 @@ class Regulator:
     :param effort_limits_nm: clamp per joint; default the URDF's. Pass ``[inf] * n`` for the
         ideal loop of the paper's analysis (no saturation).
     :param goal: the initial goal; None until :meth:`set_goal` or :meth:`hold`.
+    :param shaping: the issue-10 extensions (``shaping.Shaping``); default all off, the
+        paper's law.
+
+    Two snapshots, each one reference swapped whole: the law ``(gains, shaping, limit band)``
+    and the target ``(goal, goal configuration q* or None)``. A tick reads each once.
     """
 
     def __init__(self, model: RobotModel, task: cl.Task, gains: cl.Gains,
                  effort_limits_nm: Optional[Sequence[float]] = None,
-                 goal: Optional[Goal] = None) -> None:
+                 goal: Optional[Goal] = None, shaping: Optional[sh.Shaping] = None) -> None:
         self.model = model
         self.task = cl.Task(task)
         self.n = model.n
         self.effort_limits_nm = _limits(model, effort_limits_nm)
         self._zero = [0.0] * self.n
         self._orientation_only = self.task is cl.Task.ORIENTATION
-        self._gains = gains
-        self.set_gains(gains)
-        self._goal = goal
+        # where the cubic damping turns linear: the URDF velocity limits (2 pi rad/s if none)
+        self._speed_cap = [v if isfinite(v) and v > 0.0 else sh.DEFAULT_SPEED_CAP_RAD_S
+                           for v in model.velocity_limits]
+        self._check_gains(gains)
+        shaping = sh.Shaping() if shaping is None else shaping
+        self._law: tuple[cl.Gains, sh.Shaping, Optional[sh.LimitBand]] = (
+            gains, shaping, self._band(shaping))
+        self._target: tuple[Optional[Goal], Optional[tuple[float, ...]]] = (goal, None)
 
     # -- snapshots ------------------------------------------------------------------------
     @property
     def gains(self) -> cl.Gains:
         """Return the gains in force (immutable)."""
-        return self._gains
+        return self._law[0]
 
-    def set_gains(self, gains: cl.Gains) -> None:
-        """Swap in new gains, whole; raise GainsError if their sizes do not fit."""
+    @property
+    def shaping(self) -> sh.Shaping:
+        """Return the issue-10 extensions in force (immutable)."""
+        return self._law[1]
+
+    @property
+    def limit_band(self) -> Optional[sh.LimitBand]:
+        """Return the joint-limit potential in force, or None if it is off."""
+        return self._law[2]
+
+    def _check_gains(self, gains: cl.Gains) -> None:
         if len(gains.kp) != self.task.dim or len(gains.lam) != self.task.dim:
             raise cl.GainsError(f'kp and lambda must have {self.task.dim} values for the '
                                 f'{self.task.value} task')
         if len(gains.kv) != self.n:
             raise cl.GainsError(f'kv must have {self.n} values')
-        self._gains = gains
+
+    def _band(self, shaping: sh.Shaping) -> Optional[sh.LimitBand]:
+        return sh.LimitBand.create(self.model.position_lower, self.model.position_upper,
+                                   shaping.check_size(self.n))
+
+    def set_gains(self, gains: cl.Gains) -> None:
+        """Swap in new gains, whole; raise GainsError if their sizes do not fit."""
+        self._check_gains(gains)
+        _, shaping, band = self._law
+        self._law = (gains, shaping, band)
+
+    def check_shaping(self, shaping: sh.Shaping) -> sh.Shaping:
+        """Return ``shaping`` if it fits this robot; raise ShapingError saying why not."""
+        self._band(shaping)
+        return shaping
+
+    def set_shaping(self, shaping: sh.Shaping) -> None:
+        """Swap in new extensions (and their limit band), whole; raise ShapingError if unfit."""
+        band = self._band(shaping)
+        self._law = (self._law[0], shaping, band)
 
     @property
     def goal(self) -> Optional[Goal]:
         """Return the goal in force (immutable), or None before the first."""
-        return self._goal
+        return self._target[0]
+
+    @property
+    def goal_configuration(self) -> Optional[tuple[float, ...]]:
+        """Return q* of the goal in force (rad), or None if none is known."""
+        return self._target[1]
 
     def set_goal(self, goal: Goal) -> None:
-        """Swap in a new goal, whole."""
-        self._goal = goal
+        """Swap in a new goal, whole; its goal configuration is unknown until given."""
+        self._target = (goal, None)
+
+    def set_goal_configuration(self, goal: Goal, q_star: Optional[Sequence[float]]) -> bool:
+        """
+        Give q*, a joint configuration within the limits that reaches ``goal`` (rad).
+
+        Taken only if ``goal`` is still the goal in force (it may have been replaced while q*
+        was being computed); returns whether it was taken.
+        """
+        current = self._target[0]
+        if goal is not current:
+            return False
+        if q_star is not None and len(q_star) != self.n:
+            raise ValueError(f'expected {self.n} joint positions, got {len(q_star)}')
+        self._target = (current, None if q_star is None else tuple(float(x) for x in q_star))
+        return True
 
     def pose(self, q: Sequence[float]) -> Goal:
         """Return the measured tip pose at ``q`` as a Goal (scalar-first quaternion, eta >= 0)."""
@@ -174,9 +239,10 @@ class Regulator:
         return Goal(quat.from_rotation_matrix(R), (p[0], p[1], p[2]))
 
     def hold(self, q: Sequence[float]) -> Goal:
-        """Make the pose measured at ``q`` the goal (hold still where the robot is)."""
-        self._goal = self.pose(q)
-        return self._goal
+        """Make the pose measured at ``q`` the goal (hold still where the robot is), q* = q."""
+        goal = self.pose(q)
+        self._target = (goal, tuple(float(x) for x in q))
+        return goal
 
     # -- the law ----------------------------------------------------------------------------
     def error(self, q: Sequence[float], goal: Optional[Goal] = None):
@@ -185,7 +251,7 @@ class Regulator:
 
         ``rows`` is the Jacobian of the task, J_o (orientation) or J_G (pose), Eq. (12).
         """
-        goal = self._goal if goal is None else goal
+        goal = self._target[0] if goal is None else goal
         p, R, J = self.model.kinematics(q)
         y, eta_e = cl.output_error(p, R, goal.p_desired_base, goal.q_desired_base, self.task)
         return y, eta_e, (J[3:] if self._orientation_only else J), p, R
@@ -194,27 +260,58 @@ class Regulator:
         """
         One control tick at the measured ``(q, qdot)``: Eq. (22) + g(q), checked and clamped.
 
-        Reads the gains and the goal once each. A goal must have been set (or :meth:`hold`).
+        With the extensions of :attr:`shaping`: + the joint-limit, large-error and
+        goal-configuration terms of the potential, + friction compensation (``shaping.py``).
+        Reads the law and the target once each. A goal must have been set (or :meth:`hold`).
         If the law gives a non-finite torque the command is zero and ``finite`` is False.
         """
-        gains = self._gains
-        y, eta_e, rows, p, R = self.error(q)
-        gravity = self.model.gravity(q) if gains.gravity_compensation else None
-        tau = cl.control_torque(rows, y, eta_e, qdot, gravity, gains)
+        gains, shaping, band = self._law
+        goal, q_star = self._target
+        y, eta_e, rows, p, R = self.error(q, goal)
+        n = self.n
+        tau_p = cl.potential_torque(rows, y, eta_e, gains, shaping.large_error_gain)
+        if band is not None:
+            band.add_torque(q, tau_p)
+        if q_star is not None and shaping.configuration_on:
+            sh.add_configuration_torque(q, q_star, shaping, tau_p)
+        kv = gains.kv
+        tau = [tau_p[j] - kv[j] * qdot[j] for j in range(n)]
+        if shaping.speed_damping_on:
+            sh.add_speed_damping(qdot, kv, shaping, tau, self._speed_cap)
+        if gains.gravity_compensation:
+            g = self.model.gravity(q)
+            for j in range(n):
+                tau[j] += g[j]
+        if shaping.friction_on:
+            fc = sh.friction_compensation(tau_p, qdot, sh.fade(y, shaping), shaping)
+            for j in range(n):
+                tau[j] += fc[j]
         total = 0.0
         for t in tau:
             total += t
         if total - total != 0.0:  # NaN or Inf somewhere (inf - inf is NaN)
-            return TickOutput(list(self._zero), y, eta_e, p, R, False, False)
+            return TickOutput(list(self._zero), y, eta_e, p, R, False, False, tuple(self._zero))
         saturated = cl.saturate(tau, self.effort_limits_nm)
-        return TickOutput(tau, y, eta_e, p, R, saturated, True)
+        return TickOutput(tau, y, eta_e, p, R, saturated, True, tuple(tau_p))
 
     def potential_energy(self, q: Sequence[float]) -> float:
-        """U_a(y_tilde(q)) of Eq. (23) or (31) with the gains in force."""
-        return cl.potential_energy(self.error(q)[0], self._gains)
+        """
+        Return the total potential at ``q`` (J), docs/lyapunov.md.
+
+        U_a(y_tilde(q)) of Eq. (23) or (31) (+ the large-error term), + U_lim(q) + U_c(q) of
+        the extensions in force.
+        """
+        gains, shaping, band = self._law
+        goal, q_star = self._target
+        u = cl.potential_energy(self.error(q, goal)[0], gains, shaping.large_error_gain)
+        if band is not None:
+            u += band.energy(q)
+        if q_star is not None and shaping.configuration_on:
+            u += sh.configuration_energy(q, q_star, shaping)
+        return u
 
     def lyapunov(self, q: Sequence[float], qdot: Sequence[float]) -> float:
-        """V = 1/2 qdot^T M(q) qdot + U_a(y_tilde(q)), Eq. (27) / (34)."""
+        """V = 1/2 qdot^T M(q) qdot + the total potential, Eq. (27) / (34), docs/lyapunov.md."""
         M = self.model.mass_matrix(q)
         kinetic = 0.5 * sum(qdot[i] * M[i, j] * qdot[j]
                             for i in range(self.n) for j in range(self.n))

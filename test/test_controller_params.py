@@ -19,7 +19,8 @@ from quat_jt_controller import quaternion as quat
 from quat_jt_controller.control_law import GainsError, Potential, Task
 from quat_jt_controller.controller_node import NODE_NAME, QuatJtController
 from quat_jt_controller.model import ModelError
-from quat_jt_controller.parameters import GAIN_PARAMETERS
+from quat_jt_controller.parameters import GAIN_PARAMETERS, SHAPING_PARAMETERS
+from quat_jt_controller.shaping import Shaping
 from rcl_interfaces.msg import Log, ParameterType
 import rclpy
 from rclpy.executors import SingleThreadedExecutor
@@ -29,7 +30,8 @@ from std_msgs.msg import Float64MultiArray
 
 pytestmark = pytest.mark.node
 
-CONFIG = Path(__file__).resolve().parent.parent / 'config' / 'wrist_controller.yaml'
+CONFIG = Path(__file__).resolve().parent.parent / 'config' / 'paper_wrist_controller.yaml'
+PRODUCT = Path(__file__).resolve().parent.parent / 'config' / 'wrist_controller.yaml'
 PAPER_KP = list(paper.KP)
 GOAL_XYZW = quat.to_xyzw(paper.Q_DESIRED)
 STRUCTURAL = ('task', 'joints', 'base_link', 'tip_link', 'robot_description',
@@ -164,8 +166,9 @@ def test_parameters_are_declared_with_descriptors(make_node):
     assert node.describe_parameter('publish_rate_divider').integer_range
 
 
-def test_defaults_and_config_file_are_the_paper_experiment(make_node):
+def test_defaults_and_paper_config_file_are_the_paper_experiment(make_node):
     for node in (make_node(), make_node(cli_args=['--ros-args', '--params-file', str(CONFIG)])):
+        assert node.regulator.shaping == Shaping.create(3)  # no extension on
         g = node.gains
         assert node.get_parameter('task').value == 'orientation'
         assert g.kp == paper.KP and g.kv == paper.KV
@@ -441,3 +444,77 @@ def test_a_second_commander_and_a_name_twin_are_warned_about(make_probe, context
     finally:
         probe.executor.remove_node(twin)
         twin.destroy_node()
+
+
+# ------------------------------------------------------------------------------- issue 10
+def test_product_config_turns_the_extensions_on(make_node):
+    node = make_node(cli_args=['--ros-args', '--params-file', str(PRODUCT)])
+    s = node.regulator.shaping
+    assert s.limits_on and s.friction_on and s.configuration_on and s.speed_damping_on
+    assert node.regulator.limit_band is not None
+    assert node.gains.kp != paper.KP  # designed, not the paper's
+    for name in SHAPING_PARAMETERS:
+        d = node.describe_parameter(name)
+        assert d.description and not d.read_only and not d.dynamic_typing, name
+
+
+@pytest.mark.parametrize('changes, words', [
+    ({'joint_limit_margin': 2.0, 'joint_limit_gain': [1.0, 1.0, 1.0]}, 'out of range'),
+    ({'friction_compensation': [1.0, -1.0, 0.0]}, 'friction_compensation[1] must be finite'),
+    ({'configuration_gain': [1.0, 1.0]}, 'configuration_gain must have 3 values'),
+])
+def test_invalid_extension_sets_are_rejected_and_nothing_changes(make_node, changes, words):
+    node = make_node()
+    before = node.regulator.shaping
+    result = node.set_parameters_atomically(
+        [Parameter(k, value=v) for k, v in changes.items()])
+    assert not result.successful and words in result.reason, result.reason
+    assert node.regulator.shaping is before
+
+
+def test_a_valid_extension_set_swaps_one_shaping(make_node):
+    node = make_node()
+    result = node.set_parameters_atomically([
+        Parameter('joint_limit_margin', value=0.2),
+        Parameter('joint_limit_gain', value=[30.0, 30.0, 30.0]),
+        Parameter('friction_compensation', value=[1.8, 0.72, 0.45])])
+    assert result.successful, result.reason
+    s = node.regulator.shaping
+    assert s.joint_limit_margin_rad == 0.2 and s.friction_compensation_nm == (1.8, 0.72, 0.45)
+    assert node.regulator.limit_band is not None
+
+
+def test_the_goal_configuration_arrives_from_the_worker(make_probe):
+    probe = make_probe({'configuration_gain': [5.0, 5.0, 5.0]})
+    node = probe.node
+    probe.command_for(state((0.1, 0.5, 0.2)))
+    probe.send_goal(goal(GOAL_XYZW))
+    probe.spin_until(lambda: node.regulator.goal_configuration is not None,
+                     'q* from the goal-check worker', timeout=20.0)
+    _, R = node.regulator.model.forward_kinematics(list(node.regulator.goal_configuration))
+    eta_e, _ = quat.orientation_error(quat.from_rotation_matrix(R), paper.Q_DESIRED)
+    assert abs(eta_e) > 1.0 - 1e-8  # q* reaches the goal
+
+
+def test_diagnostics_report_a_stall_with_its_cause(make_probe):
+    """At rest against joint 1's stop, off the goal, for more than 0.5 s: a WARN naming it."""
+    probe = make_probe()
+    probe.command_for(state((0.0, 0.0, 0.0)))
+    probe.send_goal(goal(GOAL_XYZW))
+    stuck = (math.pi - 0.01, 0.8, 0.3)
+
+    def stall_status():
+        for arr in reversed(probe.diagnostics):
+            for s in arr.status:
+                if s.name.endswith(': stall'):
+                    return s
+        return None
+
+    def warned() -> bool:
+        probe.command_for(state(stuck))  # one tick at rest, freshly stamped
+        s = stall_status()
+        return s is not None and s.level == bytes([1])
+    probe.spin_until(warned, 'a stall warning on /diagnostics', timeout=15.0)
+    s = stall_status()
+    assert 'joint1' in s.message and 'upper limit' in s.message
+    assert {kv.key: kv.value for kv in s.values}['stalled'] == 'True'

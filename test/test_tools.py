@@ -2,6 +2,7 @@
 import csv
 import json
 import math
+from pathlib import Path
 import subprocess
 import sys
 
@@ -34,7 +35,7 @@ def test_paper_experiment_reproduces_the_qualitative_result(tmp_path, mode):
     assert f'({mode if mode == "two processes" else "composed (one process)"}):' in stdout
     rows = list(csv.DictReader(open(tmp_path / 'paper_experiment.csv')))
     final = {}
-    for potential in ('quadratic', 'tanh'):
+    for potential in ('quadratic', 'tanh', 'tanh_extended'):
         run = [r for r in rows if r['potential'] == potential]
         assert len(run) > 1000, f'{potential}: only {len(run)} states recorded'
         assert float(run[0]['error_norm']) > 0.8  # from q(0) = 0 to the errata goal
@@ -54,9 +55,12 @@ def test_paper_experiment_reproduces_the_qualitative_result(tmp_path, mode):
     # the tanh law gets within a few 1e-3.
     assert 0.1 < final['quadratic'] < 0.4, final
     assert final['tanh'] < 0.02, final
+    # Issue 10: the product config (designed gains, extensions) reaches the goal too.
+    assert final['tanh_extended'] < 0.005, final
     assert (tmp_path / 'fig2_error_norm.png').stat().st_size > 10_000
     assert '| quadratic (Eq. 37) |' in stdout and '| tanh (Eq. 38) |' in stdout
-    assert stdout.count('Animation ') == 2 and 'rendered in' in stdout
+    assert stdout.count('Animation ') == 3 and 'rendered in' in stdout  # two + the extended
+    assert '| tanh_extended (Eq. 38 + issue 10' in stdout
 
 
 def test_benchmark_reports_every_figure(tmp_path):
@@ -77,3 +81,20 @@ def test_benchmark_reports_every_figure(tmp_path):
     assert result['baseline']['window_steps'] > 1000  # the minimal pair ran too
     for name, core in result['core'].items():
         assert math.isfinite(core['us_per_tick']) and core['us_per_tick'] > 0.0, name
+
+
+def test_friction_trace_shows_a_steady_torque_at_rest(tmp_path):
+    stdout = run_tool('quat_jt_controller.tools.friction_trace', '--duration', '2.5',
+                      '--plot', str(tmp_path / 'trace.png'))
+    assert 'paper gains, quadratic, exact estimate:' in stdout
+    assert stdout.count('sign changes [0, 0, 0]') == 7
+    assert (tmp_path / 'trace.png').stat().st_size > 10_000
+
+
+def test_design_gains_entry_point_is_installed():
+    """``ros2 run quat_jt_controller design_gains`` runs the console script of setup.py."""
+    script = Path(sys.executable).parent / 'design_gains'  # pip puts it next to python
+    out = subprocess.run([script, '--task', 'orientation'], capture_output=True, text=True,
+                         timeout=120)
+    assert out.returncode == 0, out.stderr
+    assert out.stdout.startswith('# quat_jt_controller: orientation task')

@@ -79,27 +79,33 @@ def spawn_node(executable: str, env: Mapping[str, str], work_dir: Path,
         log.close()
 
 
+PAPER_CONTROLLER_CONFIG = 'config/paper_wrist_controller.yaml'  # the paper's experiment
+PRODUCT_CONTROLLER_CONFIG = 'config/wrist_controller.yaml'  # designed gains, issue-10 terms
+
+
 def spawn_wrist_pair(env: Mapping[str, str], work_dir: Path,
                      sim_params: Optional[Mapping[str, Any]] = None,
                      controller_params: Optional[Mapping[str, Any]] = None,
+                     controller_config: str = PAPER_CONTROLLER_CONFIG,
                      composed: bool = False) -> tuple[subprocess.Popen, subprocess.Popen]:
     """
     Start ``wrist_sim_node`` and ``controller_node`` as the wrist demo does.
 
-    Each reads the package's ``config/wrist_sim.yaml`` / ``config/wrist_controller.yaml`` (the
-    paper's experiment), then the given overrides. Returns ``(sim, controller)``; with
-    ``composed`` both run in one ``composed`` process, returned twice.
+    Each reads the package's ``config/wrist_sim.yaml`` / ``controller_config`` (by default
+    ``config/paper_wrist_controller.yaml``, the paper's experiment), then the given overrides.
+    Returns ``(sim, controller)``; with ``composed`` both run in one ``composed`` process,
+    returned twice.
     """
     if composed:
         both = spawn_node('composed', env, work_dir,
                           params={**(sim_params or {}), **(controller_params or {})},
                           params_files=(share_path('config/wrist_sim.yaml'),
-                                        share_path('config/wrist_controller.yaml')))
+                                        share_path(controller_config)))
         return both, both
     sim = spawn_node('wrist_sim_node', env, work_dir, params=sim_params,
                      params_files=(share_path('config/wrist_sim.yaml'),))
     controller = spawn_node('controller_node', env, work_dir, params=controller_params,
-                            params_files=(share_path('config/wrist_controller.yaml'),))
+                            params_files=(share_path(controller_config),))
     return sim, controller
 
 

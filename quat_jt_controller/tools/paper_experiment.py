@@ -47,6 +47,9 @@ from quat_jt_controller.tools.robot_tf import write_robot_replay
 
 POTENTIALS = ('quadratic', 'tanh')
 EQUATION = {'quadratic': 'Eq. 37', 'tanh': 'Eq. 38'}
+# Issue 10: a third run, the tanh law with the product defaults (designed gains, extensions).
+EXTENDED = 'tanh_extended'
+EQUATION[EXTENDED] = 'Eq. 38 + issue 10, config/wrist_controller.yaml'
 CONTROLLER = 'quat_jt_controller'  # node name; its private topics live under /<name>/
 REACH_THRESHOLD = 0.05
 ANIMATION_FPS = 25.0  # frames per second of simulated time
@@ -134,7 +137,10 @@ def run_once(potential: str, duration_s: float, out_dir: Path, model: RobotModel
     sim, ctrl = local_ros.spawn_wrist_pair(
         env, work, sim_params={'stats_file': str(stats_file), 'publish_clock': lockstep,
                                'max_real_time_factor': max_rtf},
-        controller_params={'potential': potential, 'use_sim_time': lockstep}, composed=composed)
+        controller_params={'potential': 'tanh' if potential == EXTENDED else potential,
+                           'use_sim_time': lockstep},
+        controller_config=(local_ros.PRODUCT_CONTROLLER_CONFIG if potential == EXTENDED
+                           else local_ros.PAPER_CONTROLLER_CONFIG), composed=composed)
     probe = ProbeNode('paper_experiment_recorder', domain_id)
     node, executor = probe.node, probe.executor
     mcap = McapLog(work / f'{potential}.mcap')
@@ -247,7 +253,7 @@ def summarize(run: Run, limits) -> dict:
     return {
         'potential': run.potential,
         'final_error': float(run.error_norm[tail].mean()),
-        'paper_error': paper.FINAL_ERROR[run.potential],
+        'paper_error': paper.FINAL_ERROR.get(run.potential, math.nan),
         'time_to_reach_s': float(run.t_s[reached[0]]) if reached.size else None,
         'peak_torque_nm': peak.tolist(),
         'saturated': bool(np.any(peak >= np.asarray(limits) * (1.0 - 1e-9))),
@@ -317,11 +323,13 @@ def plot(runs: list[Run], ideal: dict, path: Path, model: Optional[RobotModel] =
 
     rows = 1 if model is None else 3
     fig, axes = plt.subplots(rows, 2, figsize=(11, 4.2 * rows), squeeze=False)
-    colors = {'quadratic': 'tab:blue', 'tanh': 'tab:red'}
+    colors = {'quadratic': 'tab:blue', 'tanh': 'tab:red', EXTENDED: 'tab:green'}
     for ax, log in zip(axes[0], (False, True)):
         for r in runs:
             ax.plot(r.t_s, r.error_norm, color=colors[r.potential],
                     label=f'{r.potential} ({EQUATION[r.potential]}), simulated wrist')
+            if r.potential not in ideal:
+                continue
             ax.axhline(paper.FINAL_ERROR[r.potential], color=colors[r.potential], ls=':',
                        lw=1, label=f'paper final {r.potential}')
             t_ref, e_ref = ideal[r.potential]
@@ -399,7 +407,7 @@ def main(argv: Optional[list] = None) -> int:
     model = RobotModel(default_urdf_xml(), 'base_link', 'tool0')
     t_start = time.monotonic()
     runs = [run_once(p, args.duration, args.out, model, args.lockstep, composed=args.composed,
-                     max_rtf=args.max_rtf) for p in POTENTIALS]
+                     max_rtf=args.max_rtf) for p in POTENTIALS + (EXTENDED,)]
     ideal = {}
     for p in POTENTIALS:
         gains = cl.Gains.create(p, paper.KP, paper.KV, paper.LAMBDA, cl.Task.ORIENTATION, 3)

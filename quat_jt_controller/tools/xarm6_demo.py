@@ -30,6 +30,8 @@ import pybullet_data
 
 from quat_jt_controller import control_law as cl
 from quat_jt_controller import quaternion as quat
+from quat_jt_controller import shaping as sh
+from quat_jt_controller.goal_check import goal_configuration
 from quat_jt_controller.model import RobotModel
 from quat_jt_controller.reference_sim import ClosedLoop
 from quat_jt_controller.resources import config_parameters
@@ -65,9 +67,14 @@ def run(potential: str, duration_s: float, urdf_xml: str) -> tuple[PoseRun, Robo
     model = RobotModel(urdf_xml, ctrl['base_link'], ctrl['tip_link'], ctrl['joints'])
     gains = cl.Gains.create(potential, ctrl['kp'], ctrl['kv'], ctrl['lambda'], cl.Task.POSE,
                             model.n, ctrl['gravity_compensation'])
+    shaping = sh.from_parameters(ctrl, model.n)  # the config's extensions, as the node runs
     p_d, R_d = model.forward_kinematics(Q_GOAL_RAD)
     q_d = quat.from_rotation_matrix(R_d)
-    loop = ClosedLoop(model, gains, cl.Task.POSE, q_d, p_d)
+    # q*, as the node's goal-check worker gives it (docs/lyapunov.md, section 5).
+    q_star = (goal_configuration(model, simp['initial_positions'], q_d, p_d, cl.Task.POSE,
+                                 shaping.joint_limit_margin_rad)
+              if shaping.configuration_on else None)
+    loop = ClosedLoop(model, gains, cl.Task.POSE, q_d, p_d, shaping=shaping, q_star=q_star)
     steps = int(round(duration_s * simp['rate_hz']))
     t = np.empty(steps + 1)
     q, qdot, tau = (np.empty((steps + 1, model.n)) for _ in range(3))

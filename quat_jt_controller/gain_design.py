@@ -1,0 +1,607 @@
+"""
+Gains from the robot, by rules: the paper's open problem (docs/gain_design.md).
+
+Section 5 of the paper regrets "the lack of a procedure for tuning their gains", and Section 6
+leaves gain tuning open.
+
+From the URDF (kinematics, inertias, effort and velocity limits), the task, the control rate
+and the Coulomb friction estimates, :func:`design` computes K_p, K_v and Lambda (one set that
+serves both potentials, so ``potential`` can be switched live) and the issue-10 extensions
+(``shaping.Shaping``): joint-limit band, goal-configuration term, cubic damping, friction
+compensation. In short:
+
+1. budget per joint: a share of the effort limit left after gravity and friction compensation;
+2. K_p from the tanh law's a-priori bound |tau_j| <= ||J_p[:, j]|| ||k_p|| + 1/2 ||k_o||
+   (|Q| <= 1/2 on the orientation rows; a revolute column of J_o is a unit vector), kept
+   within the part of the budget left to the task potential;
+3. Lambda from where the tanh force should saturate; K_v for critical damping of the
+   linearised loop at the geometric mean of the two potentials' stiffnesses, from M(q) at
+   representative configurations;
+4. the sampled loop with one tick of delay (and any other delays asked for) linearised at
+   those configurations must have spectral radius < 1, for both potentials; the stiffness of
+   the limit band, of the goal-configuration ramp and the slope of the cubic damping are
+   checked the same way, per joint.
+
+ROS-free. ``python -m quat_jt_controller.gain_design --help`` (``ros2 run quat_jt_controller
+design_gains`` under colcon) writes a parameter file in the format of config/*_controller.yaml.
+"""
+import argparse
+from dataclasses import dataclass, field
+from math import pi, sqrt
+from pathlib import Path
+import shlex
+import sys
+import textwrap
+from typing import Optional, Sequence
+
+import numpy as np
+
+from quat_jt_controller import control_law as cl
+from quat_jt_controller.joints import DEFAULT_MAX_STATE_AGE_S, DEFAULT_STATE_TIMEOUT_S
+from quat_jt_controller.model import RobotModel
+from quat_jt_controller.shaping import FULL_TURN_RAD, Shaping
+
+TORQUE_SHARE = 0.8  # of what gravity and friction compensation leave; the rest: damping
+GUIDE_OVER_TASK = 1.2  # the goal-configuration term must overcome the task term at a stop
+LIMIT_OVER_TASK = 1.5  # the limit band at the stop holds 1.5 x the task term's bound
+LAMBDA_ORIENTATION = 4.0  # tanh(4 ||e||) = 0.96 at ||e|| = 0.5 (60 degrees)
+POSITION_SATURATION_M = 0.1  # tanh(lambda_p 0.1 m) = 0.96
+DAMPING_RATIO = sqrt(0.5)  # of the tanh law's linearised loop (the quadratic's: x sqrt(lambda))
+CRUISE_FRACTION = 0.6  # of the URDF velocity limit: the speed the cubic damping aims at
+DEFAULT_VELOCITY = 2.0 * pi  # rad/s, for a joint whose URDF gives no velocity limit
+DAMPER_SAFETY = 0.5  # of the largest damping the sampled loop tolerates on a joint
+LIMIT_MARGIN_MAX_RAD = 0.25
+LIMIT_MARGIN_FRACTION = 0.1  # of the smallest half range of a limited joint
+GUIDE_RADIUS_RAD = 0.0  # > 0: a dead zone around q* where only the paper's term acts
+GUIDE_RAMP_RAD = 0.25
+FRICTION_VELOCITY_RAD_S = 0.05
+FRICTION_ERROR_BAND = 0.004  # ||e||; a little below the 0.005 the wrist is asked to reach
+FRICTION_POSITION_BAND_M = 0.0005
+SAMPLES = 24  # representative regular configurations for M(q), J(q)
+SURVEY = 400  # random configurations for the largest g(q) and lever ||J_p[:, j]||
+REGULAR_SIGMA_MIN = 0.1
+SHRINK = 0.8  # gains are scaled by this until the sampled loop is stable
+QO = 0.5  # |Q| on the orientation rows (Eq. 15)
+
+
+def _dynamics_matrix(M: np.ndarray, K: np.ndarray, D: np.ndarray, delay_ticks: int,
+                     dt_s: float) -> np.ndarray:
+    """State matrix of M qddot = -K q - D qdot, sampled, torque from ``delay_ticks`` ago."""
+    n = M.shape[0]
+    Minv = np.linalg.inv(M)
+    size = 2 * n * (delay_ticks + 1)  # [q_k, v_k, q_k-1, v_k-1, ..., q_k-d, v_k-d]
+    A = np.zeros((size, size))
+    old = 2 * n * delay_ticks
+    A[n:2 * n, n:2 * n] = np.eye(n)
+    A[n:2 * n, old:old + n] -= dt_s * Minv @ K
+    A[n:2 * n, old + n:old + 2 * n] -= dt_s * Minv @ D
+    A[:n, :n] = np.eye(n)
+    A[:n, :] += dt_s * A[n:2 * n, :]  # q_k+1 = q_k + dt v_k+1 (semi-implicit Euler)
+    for j in range(1, delay_ticks + 1):
+        A[2 * n * j:2 * n * (j + 1), 2 * n * (j - 1):2 * n * j] = np.eye(2 * n)
+    return A
+
+
+def spectral_radius(M: np.ndarray, K: np.ndarray, D: np.ndarray, delay_ticks: int = 1,
+                    dt_s: float = 1e-3) -> float:
+    """
+    Spectral radius of the sampled, delayed loop M qddot = -K q - D qdot (zero-order hold).
+
+    The plant is integrated with semi-implicit Euler (as PyBullet does) at ``dt_s``; the
+    torque applied in step k is computed from the state of step k - ``delay_ticks``. Below 1:
+    locally stable; the slowest mode decays with the time constant -dt / ln(rho).
+    """
+    A = _dynamics_matrix(np.atleast_2d(M), np.atleast_2d(K), np.atleast_2d(D), delay_ticks,
+                         dt_s)
+    return float(np.abs(np.linalg.eigvals(A)).max())
+
+
+def joint_stiffness(jacobian: np.ndarray, slope: Sequence[float]) -> np.ndarray:
+    """
+    K_q = J^T Q^T diag(slope) Q J at the goal (eta_e = 1, e = 0): Q = diag(I, I/2) (Eq. 15).
+
+    ``slope`` is k_p (quadratic, Eq. 23) or k_p lambda (log-cosh, Eq. 31), one per task row;
+    ``jacobian`` has one row per task coordinate (J_o, or J_G = [J_p; J_o]).
+    """
+    J = np.asarray(jacobian, dtype=float)
+    q_diag = np.ones(J.shape[0])
+    q_diag[-3:] = QO
+    QJ = q_diag[:, None] * J
+    return QJ.T @ np.diag(np.asarray(slope, dtype=float)) @ QJ
+
+
+def linearized_spectral_radius(model: RobotModel, q_goal_rad: Sequence[float], gains: cl.Gains,
+                               delay_ticks: int = 1, dt_s: float = 1e-3,
+                               mass_matrix: Optional[np.ndarray] = None,
+                               task: cl.Task = cl.Task.POSE,
+                               shaping: Optional[Shaping] = None) -> float:
+    """
+    Spectral radius of the regulator's loop linearised at a goal, sampled and delayed.
+
+    At y_tilde = 0 (eta_e = 1) Eq. (24) / (32) minus g(q) is tau = -K_q dq - K_v qdot with
+    K_q of :func:`joint_stiffness`, slopes k_p (quadratic) or k_p lambda (log-cosh). Of the
+    extensions (``shaping``) only the goal-configuration term without a dead zone adds
+    stiffness there (:func:`configuration_stiffness`; q* = the goal); the others are zero
+    near the goal. See :func:`spectral_radius`.
+    """
+    _, _, J = model.kinematics(list(q_goal_rad))
+    rows = np.array(J)[3:] if cl.Task(task) is cl.Task.ORIENTATION else np.array(J)
+    slope = np.array(gains.kp)
+    if gains.potential is cl.Potential.TANH:
+        slope = slope * np.array(gains.lam)
+    M = model.mass_matrix(list(q_goal_rad)) if mass_matrix is None else mass_matrix
+    K = joint_stiffness(rows, slope)
+    if shaping is not None and shaping.configuration_on:
+        K = K + np.diag(configuration_stiffness(shaping))
+    return spectral_radius(M, K, np.diag(gains.kv), delay_ticks, dt_s)
+
+
+def time_constant_s(rho: float, dt_s: float = 1e-3) -> float:
+    """Time constant of a discrete mode of modulus ``rho`` (inf if not decaying)."""
+    return -dt_s / np.log(rho) if rho < 1.0 else float('inf')
+
+
+@dataclass
+class Design:
+    """The designed gains and extensions, with the figures behind them (docs/gain_design.md)."""
+
+    task: cl.Task
+    joints: tuple[str, ...]
+    base_link: str
+    tip_link: str
+    rate_hz: float
+    kp: tuple[float, ...]
+    kv: tuple[float, ...]
+    lam: tuple[float, ...]
+    shaping: Shaping
+    figures: dict = field(default_factory=dict)
+
+    def gains(self, potential: str = 'tanh') -> cl.Gains:
+        """Return the K_p, K_v, Lambda of the design as validated Gains for ``potential``."""
+        return cl.Gains.create(potential, self.kp, self.kv, self.lam, self.task,
+                               len(self.joints))
+
+    def parameters(self, potential: str = 'tanh') -> dict:
+        """Return the controller's live parameters of the design, by ROS parameter name."""
+        s = self.shaping
+        return {
+            'potential': potential, 'kp': list(self.kp), 'kv': list(self.kv),
+            'lambda': list(self.lam), 'gravity_compensation': True,
+            'joint_limit_margin': s.joint_limit_margin_rad,
+            'joint_limit_gain': list(s.joint_limit_gain),
+            'large_error_gain': s.large_error_gain,
+            'friction_compensation': list(s.friction_compensation_nm),
+            'friction_velocity': s.friction_velocity_rad_s,
+            'friction_error_band': s.friction_error_band,
+            'friction_position_band': s.friction_position_band_m,
+            'configuration_gain': list(s.configuration_gain),
+            'configuration_radius': s.configuration_radius_rad,
+            'configuration_ramp': s.configuration_ramp_rad,
+            'damping_speed': s.damping_speed_rad_s,
+        }
+
+
+def _sample(model: RobotModel, rng: np.random.Generator, fraction: float) -> np.ndarray:
+    lower = np.maximum(np.array(model.position_lower), -pi)
+    upper = np.minimum(np.array(model.position_upper), pi)
+    mid, half = 0.5 * (lower + upper), 0.5 * (upper - lower)
+    return rng.uniform(mid - fraction * half, mid + fraction * half)
+
+
+def _sigma_min(rows: np.ndarray) -> float:
+    return float(np.linalg.svd(rows, compute_uv=False)[-1])
+
+
+def survey(model: RobotModel, task: cl.Task, seed: int = 0) -> dict:
+    """
+    Return what the rules need from the robot, measured on seeded random configurations.
+
+    ``gravity_max`` and ``lever_max`` (the largest ||J_p[:, j]||, m) over SURVEY
+    configurations within the limits; ``configurations``: SAMPLES regular ones (sigma_min of
+    the task Jacobian >= REGULAR_SIGMA_MIN) within 90% of the ranges, with their task
+    Jacobians and M(q); ``inertia_min`` the smallest M_jj over all of them.
+    """
+    rng = np.random.default_rng(seed)
+    n = model.n
+    g_max, lever, inertia_min = np.zeros(n), np.zeros(n), np.full(n, np.inf)
+    for _ in range(SURVEY):
+        q = _sample(model, rng, 1.0)
+        _, _, J = model.kinematics(q.tolist())
+        g_max = np.maximum(g_max, np.abs(model.gravity(q.tolist())))
+        lever = np.maximum(lever, np.linalg.norm(np.array(J)[:3], axis=0))
+        inertia_min = np.minimum(inertia_min, np.diag(model.mass_matrix(q.tolist())))
+    configs = []
+    while len(configs) < SAMPLES:
+        q = _sample(model, rng, 0.9)
+        _, _, J = model.kinematics(q.tolist())
+        rows = np.array(J)[3:] if task is cl.Task.ORIENTATION else np.array(J)
+        if _sigma_min(rows) < REGULAR_SIGMA_MIN:
+            continue
+        M = model.mass_matrix(q.tolist())
+        inertia_min = np.minimum(inertia_min, np.diag(M))
+        configs.append((q, rows, M))
+    return {'gravity_max': g_max, 'lever_max': lever, 'inertia_min': inertia_min,
+            'configurations': configs}
+
+
+def task_torque_bound(lever_max: np.ndarray, kp: Sequence[float], task: cl.Task,
+                      large_error_gain: float = 0.0) -> np.ndarray:
+    """
+    A-priori bound of the tanh law's potential torque per joint (docs/gain_design.md, 2).
+
+    |tau_j| <= ||J_p[:, j]|| ||k_p||_2 + 1/2 (||k_o||_2 + k_L): |tanh| <= 1 per row,
+    ||Q_o^T w|| <= ||w|| / 2, a revolute column of J_o has norm 1. The quadratic law obeys the
+    same bound on the orientation rows (||e|| <= 1) and on the position rows while
+    ||p_d - p|| <= sqrt(3) m.
+    """
+    kp = np.asarray(kp, dtype=float)
+    k_o = float(np.linalg.norm(kp[-3:]))
+    bound = np.full(lever_max.size, QO * (k_o + large_error_gain))
+    if task is cl.Task.POSE:
+        bound = bound + lever_max * float(np.linalg.norm(kp[:3]))
+    return bound
+
+
+def _damping(configs, kp: np.ndarray, lam: np.ndarray, extra: np.ndarray) -> np.ndarray:
+    """
+    K_v per joint: damping ratio DAMPING_RATIO for the tanh law's stiffness (median).
+
+    ``extra`` is the joint stiffness the goal-configuration term adds at the goal (N m/rad).
+    """
+    values = []
+    for _, rows, M in configs:
+        k_t = np.diag(joint_stiffness(rows, kp * lam)) + extra
+        values.append(2.0 * DAMPING_RATIO * np.sqrt(np.diag(M) * k_t))
+    return np.median(values, axis=0)
+
+
+def _worst_rho(configs, kp, kv, lam, extra, delays, dt_s) -> dict:
+    worst = {}
+    for potential, slope in (('quadratic', kp), ('tanh', kp * lam)):
+        rho = 0.0
+        for _, rows, M in configs:
+            K = joint_stiffness(rows, slope) + np.diag(extra)
+            for d in delays:
+                rho = max(rho, spectral_radius(M, K, np.diag(kv), d, dt_s))
+        worst[potential] = rho
+    return worst
+
+
+def configuration_stiffness(shaping: Shaping) -> np.ndarray:
+    """Joint stiffness (N m/rad) of the goal-configuration term at q* (0 with a dead zone)."""
+    if shaping.configuration_radius_rad > 0.0 or not shaping.configuration_gain:
+        return np.zeros(len(shaping.configuration_gain))
+    return np.array(shaping.configuration_gain) / shaping.configuration_ramp_rad
+
+
+def _joint_stable(inertia: float, stiffness: float, damping: float, delays, dt_s) -> float:
+    return max(spectral_radius(np.array([[inertia]]), np.array([[stiffness]]),
+                               np.array([[damping]]), d, dt_s) for d in delays)
+
+
+def _largest_stable_damping(inertia: float, delays, dt_s) -> float:
+    """Return the largest D with v_k+1 = v_k - dt D / I v_k-d stable for every delay."""
+    lo, hi = 0.0, 2.0 * inertia / dt_s
+    for _ in range(50):
+        mid = 0.5 * (lo + hi)
+        lo, hi = (mid, hi) if _damper_stable(inertia, mid, delays, dt_s) < 1.0 else (lo, mid)
+    return lo
+
+
+def _damper_stable(inertia: float, damping: float, delays, dt_s) -> float:
+    """Spectral radius of v_k+1 = v_k - dt D / I v_k-d: a joint's speed under damping alone."""
+    worst = 0.0
+    for d in delays:
+        A = np.zeros((d + 1, d + 1))
+        A[0, 0] = 1.0
+        A[0, d] -= dt_s * damping / inertia
+        for i in range(1, d + 1):
+            A[i, i - 1] = 1.0
+        worst = max(worst, float(np.abs(np.linalg.eigvals(A)).max()))
+    return worst
+
+
+def design(model: RobotModel, task: cl.Task, rate_hz: float = 1000.0,
+           effort_limits_nm: Optional[Sequence[float]] = None,
+           friction_nm: Optional[Sequence[float]] = None, delays: Sequence[int] = (1,),
+           seed: int = 0) -> Design:
+    """
+    Compute gains and extensions for ``model`` and ``task`` (docs/gain_design.md).
+
+    ``effort_limits_nm`` default the URDF's; ``friction_nm`` are the Coulomb estimates per
+    joint (default zeros: no friction compensation); ``delays`` the ticks of delay the
+    sampled loop must be stable with. Raises ValueError if a joint has no torque left.
+    """
+    task = cl.Task(task)
+    n = model.n
+    dt_s = 1.0 / rate_hz
+    effort = np.array(model.effort_limits if effort_limits_nm is None else effort_limits_nm,
+                      dtype=float)
+    friction = np.zeros(n) if friction_nm is None else np.array(friction_nm, dtype=float)
+    if effort.size != n or friction.size != n:
+        raise ValueError(f'expected {n} effort limits and friction values')
+    data = survey(model, task, seed)
+    configs = data['configurations']
+    lever = data['lever_max'] if task is cl.Task.POSE else np.zeros(n)
+    budget = TORQUE_SHARE * (effort - data['gravity_max'] - friction)
+    if np.any(budget <= 0.0):
+        raise ValueError(f'no torque left for the potential on joints '
+                         f'{[model.joint_names[j] for j in np.flatnonzero(budget <= 0.0)]}: '
+                         f'effort {effort.tolist()}, gravity up to '
+                         f'{np.round(data["gravity_max"], 3).tolist()}')
+    # Speed rule: never ask a joint for more than its damping can hold at its velocity limit
+    # (the largest damping the sampled loop tolerates on its smallest inertia, halved).
+    inertia = data['inertia_min']
+    velocity = np.array(model.velocity_limits, dtype=float)
+    velocity = np.where(np.isfinite(velocity) & (velocity > 0), velocity, DEFAULT_VELOCITY)
+    b_max = np.array([DAMPER_SAFETY * _largest_stable_damping(inertia[j], delays, dt_s)
+                      for j in range(n)])
+    push_max = np.minimum(budget, b_max * velocity)
+    cap = push_max / (1.0 + GUIDE_OVER_TASK)  # what the task potential may ask of a joint
+
+    # K_p: the largest gains within the a-priori bound (pose: the largest k_p k_o).
+    unit_o = QO * sqrt(3.0)  # bound per unit isotropic k_o
+    if task is cl.Task.ORIENTATION:
+        k_o, k_p = float(np.min(cap) / unit_o), 0.0
+    else:
+        unit_p = lever * sqrt(3.0)
+        best = (0.0, 0.0, 0.0)
+        for k_o_try in np.linspace(0.0, float(np.min(cap)) / unit_o, 2001)[1:]:
+            room = cap - unit_o * k_o_try
+            if np.any(room < 0.0):
+                break
+            k_p_try = float(np.min(room[unit_p > 0] / unit_p[unit_p > 0]))
+            if k_o_try * k_p_try > best[0]:
+                best = (k_o_try * k_p_try, k_o_try, k_p_try)
+        k_o, k_p = best[1], best[2]
+    lam_o = LAMBDA_ORIENTATION
+    lam_p = 4.0 / POSITION_SATURATION_M
+    kp = np.array(([k_p] * 3 if task is cl.Task.POSE else []) + [k_o] * 3)
+    lam = np.array(([lam_p] * 3 if task is cl.Task.POSE else []) + [lam_o] * 3)
+
+    # The goal-configuration term (GUIDE_OVER_TASK x the task bound, over a ramp) adds joint
+    # stiffness at q*; K_v damps the sum. The sampled-loop check: shrink Lambda (down to 1),
+    # then K_p, until every representative configuration is stable with every delay, for
+    # both potentials; a joint whose own mass-spring-damper (smallest inertia) is unstable
+    # gets a smaller goal-configuration gain.
+    for _ in range(80):
+        bound = task_torque_bound(lever, kp, task)
+        guide = GUIDE_OVER_TASK * bound
+        kv = np.minimum(_damping(configs, kp, lam, guide / GUIDE_RAMP_RAD), b_max)
+        for j in range(n):
+            while _joint_stable(inertia[j], guide[j] / GUIDE_RAMP_RAD, kv[j], delays,
+                                dt_s) >= 1.0:
+                guide[j] *= SHRINK
+        extra = guide / GUIDE_RAMP_RAD
+        kv = np.minimum(_damping(configs, kp, lam, extra), b_max)
+        rho = _worst_rho(configs, kp, kv, lam, extra, delays, dt_s)
+        if max(rho.values()) < 1.0:
+            break
+        if lam.min() > 1.0:
+            lam = np.maximum(lam * SHRINK, 1.0)
+        else:
+            kp = kp * SHRINK
+    else:
+        raise ValueError(f'no stable gains found (spectral radius {rho})')
+
+    # Joint-limit band and goal-configuration term, checked per joint on its smallest inertia.
+    lower, upper = np.array(model.position_lower), np.array(model.position_upper)
+    limited = np.isfinite(lower) & np.isfinite(upper) & (upper - lower < FULL_TURN_RAD)
+    margin = 0.0
+    limit_gain = np.zeros(n)
+    if np.any(limited):
+        half = 0.5 * float(np.min((upper - lower)[limited]))
+        margin = round(min(LIMIT_MARGIN_MAX_RAD, LIMIT_MARGIN_FRACTION * half), 3)
+        for j in np.flatnonzero(limited):
+            k = min(LIMIT_OVER_TASK * bound[j], effort[j] - data['gravity_max'][j]) / margin
+            while _joint_stable(inertia[j], k, kv[j], delays, dt_s) >= 1.0:
+                k *= SHRINK
+            limit_gain[j] = k
+
+    # Cubic damping: linear near rest, it holds the cruising speed far from the goal; its
+    # slope k_v (1 + 3 v^2 / v_c^2) must not exceed b_max up to the velocity limit.
+    cruise = CRUISE_FRACTION * velocity
+    push = bound + guide  # the most the potentials ask of a joint, far from the goal
+    damping_speed = np.zeros(n)
+    for j in range(n):
+        if push[j] / kv[j] <= cruise[j] or b_max[j] <= kv[j]:
+            continue  # linear damping alone keeps it slow enough, or nothing more is stable
+        v_c = sqrt(cruise[j] ** 3 / (push[j] / kv[j] - cruise[j]))
+        damping_speed[j] = max(v_c, velocity[j] * sqrt(3.0 * kv[j] / (b_max[j] - kv[j])))
+    terminal = []
+    for j in range(n):  # v (1 + v^2 / v_c^2) = push / k_v, by bisection
+        lo_v, hi_v = 0.0, push[j] / kv[j]
+        for _ in range(60):
+            v = 0.5 * (lo_v + hi_v)
+            f = v * (1.0 + (v / damping_speed[j]) ** 2 if damping_speed[j] > 0 else 1.0)
+            lo_v, hi_v = (v, hi_v) if f < push[j] / kv[j] else (lo_v, v)
+        terminal.append(0.5 * (lo_v + hi_v))
+    shaping = Shaping.create(
+        n, joint_limit_margin=margin, joint_limit_gain=limit_gain.round(3).tolist(),
+        friction_compensation=friction.tolist(), friction_velocity=FRICTION_VELOCITY_RAD_S,
+        friction_error_band=FRICTION_ERROR_BAND,
+        friction_position_band=FRICTION_POSITION_BAND_M,
+        configuration_gain=guide.round(3).tolist(), configuration_radius=GUIDE_RADIUS_RAD,
+        configuration_ramp=GUIDE_RAMP_RAD, damping_speed=damping_speed.round(3).tolist())
+    kp_r = tuple(float(f'{v:.4g}') for v in kp)
+    kv_r = tuple(float(f'{v:.4g}') for v in kv)
+    lam_r = tuple(float(f'{v:.4g}') for v in lam)
+    extra = configuration_stiffness(shaping)
+    final = _worst_rho(configs, np.array(kp_r), np.array(kv_r), np.array(lam_r), extra,
+                       delays, dt_s)
+    ratios = {}
+    for potential, slope in (('quadratic', np.array(kp_r)), ('tanh', np.array(kp_r) *
+                                                             np.array(lam_r))):
+        zeta = [np.array(kv_r) / (2.0 * np.sqrt(np.diag(M) * (np.diag(joint_stiffness(
+            rows, slope)) + extra))) for _, rows, M in configs]
+        ratios[potential] = np.median(zeta, axis=0)
+    figures = {
+        'effort_limits_nm': effort, 'gravity_max_nm': data['gravity_max'],
+        'friction_nm': friction, 'budget_nm': budget, 'task_bound_nm': bound,
+        'guide_nm': guide, 'limit_at_stop_nm': limit_gain * margin,
+        'lever_max_m': data['lever_max'], 'inertia_min': inertia,
+        'spectral_radius': final, 'delays': tuple(delays),
+        'damping_ratio': ratios, 'terminal_speed_rad_s': np.array(terminal),
+        'velocity_limits_rad_s': velocity,
+    }
+    return Design(task, model.joint_names, model.base_link, model.tip_link, rate_hz, kp_r,
+                  kv_r, lam_r, shaping, figures)
+
+
+def _float(value: float) -> str:
+    """Four significant digits, always with a decimal point (ROS parameters are typed)."""
+    if abs(value) < 1e-9:
+        return '0.0'
+    return np.format_float_positional(float(value), precision=4, unique=True,
+                                      fractional=False, trim='0')
+
+
+def _fmt(values) -> str:
+    return '[' + ', '.join(_float(v) for v in values) + ']'
+
+
+def to_yaml(d: Design, potential: str = 'tanh', command: str = '',
+            robot_description_note: str = '') -> str:
+    """
+    Return a parameter file for controller_node in the format of config/*_controller.yaml.
+
+    Keyed ``/**:`` + ``ros__parameters:`` so it applies to any node name and namespace. The
+    comments give the rule behind each value and the design's own figures.
+    """
+    f = d.figures
+    s = d.shaping
+    pose = d.task is cl.Task.POSE
+    axes = 'x, y, z (N/m), rx, ry, rz (N m)' if pose else 'rx, ry, rz (N m)'
+    rho = f['spectral_radius']
+    zeta = f['damping_ratio']
+    header = [
+        f'quat_jt_controller: {d.task.value} task, {d.base_link} -> {d.tip_link}, joints '
+        f'{", ".join(d.joints)}.',
+        'Generated by quat_jt_controller.gain_design (docs/gain_design.md gives each rule):',
+        f'  {command or "python -m quat_jt_controller.gain_design ..."}',
+        'Live parameters (ros2 param set): potential, kp, kv, lambda, gravity_compensation and '
+        'the issue-10 extensions (joint_limit_*, large_error_gain, friction_*, '
+        'configuration_*, damping_speed; docs/lyapunov.md). The rest is read-only.',
+        'The design, per joint (N m unless said):',
+        f'  effort limits {_fmt(f["effort_limits_nm"])}, largest |g(q)| '
+        f'{_fmt(np.round(f["gravity_max_nm"], 4))}, friction estimates '
+        f'{_fmt(f["friction_nm"])};',
+        f'  budget {TORQUE_SHARE:g} x (effort - gravity - friction) = '
+        f'{_fmt(f["budget_nm"])}, of which the task potential may ask at most (a-priori '
+        f'bound of the tanh law) {_fmt(f["task_bound_nm"])} and the goal-configuration term '
+        f'{_fmt(f["guide_nm"])};',
+        f'  joint-limit band torque at a stop {_fmt(f["limit_at_stop_nm"])};',
+        f'  sampled loop at {d.rate_hz:g} Hz with {"/".join(str(x) for x in f["delays"])} '
+        f'tick(s) of delay, linearised at {SAMPLES} regular configurations: worst spectral '
+        f'radius {rho["tanh"]:.6f} (tanh), {rho["quadratic"]:.6f} (quadratic) < 1; median '
+        f'damping ratios tanh {_fmt(zeta["tanh"])}, quadratic {_fmt(zeta["quadratic"])};',
+        f'  cruising speeds far from the goal {_fmt(f["terminal_speed_rad_s"])} rad/s '
+        f'(velocity limits {_fmt(f["velocity_limits_rad_s"])}).',
+    ]
+    lines = []
+    for entry in header:
+        indent = '#   ' if entry.startswith('  ') else '# '
+        lines += textwrap.wrap(entry.strip(), width=99, initial_indent=indent,
+                               subsequent_indent=indent + '  ', break_on_hyphens=False,
+                               break_long_words=False)
+    lines += [
+        '/**:  # any node name and namespace',
+        '  ros__parameters:',
+        f'    task: {d.task.value}              # read-only',
+        f"    potential: {potential}              # 'tanh' (Eq. 32/38) or 'quadratic' "
+        '(Eq. 24/37); one set serves both',
+        f'    kp: {_fmt(d.kp)}  # K_p, {axes}: a-priori torque bound within the budget',
+        f'    kv: {_fmt(d.kv)}  # K_v, N m s/rad: damping ratio {DAMPING_RATIO:.2f} (tanh), '
+        'from M(q)',
+        f'    lambda: {_fmt(d.lam)}  # Lambda: tanh saturates at 60 deg'
+        + (f' / {POSITION_SATURATION_M:g} m' if pose else ''),
+        '    gravity_compensation: true   # + g(q) from the URDF',
+        f'    joint_limit_margin: {_float(s.joint_limit_margin_rad)}   # rad, band inside each '
+        'limit (joints with less than a full turn)',
+        f'    joint_limit_gain: {_fmt(s.joint_limit_gain)}  # N m/rad: '
+        f'{LIMIT_OVER_TASK:g} x the task bound at the stop',
+        f'    large_error_gain: {_float(s.large_error_gain)}   # N m; 0: the goal-configuration '
+        'term carries large errors',
+        f'    friction_compensation: {_fmt(s.friction_compensation_nm)}  # N m, the Coulomb '
+        'estimates (0 = off)',
+        f'    friction_velocity: {_float(s.friction_velocity_rad_s)}   # rad/s, v_eps of '
+        'f tanh(qdot / v_eps)',
+        f'    friction_error_band: {_float(s.friction_error_band)}   # ||e|| where the at-rest '
+        'compensation fades out',
+        f'    friction_position_band: {_float(s.friction_position_band_m)}   # m, the same for '
+        '||p_d - p||',
+        f'    configuration_gain: {_fmt(s.configuration_gain)}  # N m: '
+        f'{GUIDE_OVER_TASK:g} x the task bound',
+        f'    configuration_radius: {_float(s.configuration_radius_rad)}   # rad, dead zone '
+        'around q*',
+        f'    configuration_ramp: {_float(s.configuration_ramp_rad)}   # rad, the torque rises '
+        'over this',
+        f'    damping_speed: {_fmt(s.damping_speed_rad_s)}  # rad/s, v_c of the cubic '
+        'damping (0 = none)',
+        f'    joints: [{", ".join(d.joints)}]',
+        f'    base_link: {d.base_link}',
+        f'    tip_link: {d.tip_link}',
+        "    robot_description: ''        # URDF XML; '' = the bundled wrist"
+        + (f' ({robot_description_note})' if robot_description_note else ''),
+        f'    state_timeout: {DEFAULT_STATE_TIMEOUT_S}           # s without valid joint_states '
+        '-> zero torque (once)',
+        f'    max_state_age: {DEFAULT_MAX_STATE_AGE_S}           # s; older, future or unstamped '
+        'states are rejected; 0 = off',
+        f'    publish_rate_divider: {max(1, int(round(d.rate_hz / 100.0)))}     # feedback '
+        'topics at 100 Hz',
+    ]
+    return '\n'.join(lines) + '\n'
+
+
+def main(argv: Optional[list] = None) -> int:
+    """``ros2 run quat_jt_controller design_gains`` / ``python -m ...gain_design``."""
+    from quat_jt_controller.resources import default_urdf_xml
+
+    parser = argparse.ArgumentParser(
+        prog='design_gains', description='Compute K_p, K_v, Lambda and the issue-10 '
+        'extensions of the regulator from the robot (docs/gain_design.md).')
+    parser.add_argument('--urdf', type=Path, help='URDF file (default: the bundled wrist)')
+    parser.add_argument('--base-link', default='base_link')
+    parser.add_argument('--tip-link', default='tool0')
+    parser.add_argument('--joints', nargs='+', help='controlled joints (default: all movable)')
+    parser.add_argument('--task', choices=[t.value for t in cl.Task], default='orientation')
+    parser.add_argument('--effort-limits', type=float, nargs='+',
+                        help='N m per joint (default: the URDF effort limits)')
+    parser.add_argument('--rate', type=float, default=1000.0, help='control rate, Hz')
+    parser.add_argument('--friction', type=float, nargs='+',
+                        help='Coulomb friction estimates, N m per joint (default: none)')
+    parser.add_argument('--delays', type=int, nargs='+', default=[1],
+                        help='ticks of delay the sampled loop must be stable with')
+    parser.add_argument('--potential', choices=[p.value for p in cl.Potential],
+                        default='tanh', help='the potential the file selects')
+    parser.add_argument('--robot-note', default='',
+                        help='a note on robot_description for the file')
+    parser.add_argument('--out', type=Path, help='write here (default: stdout)')
+    args = parser.parse_args(argv)
+    urdf = args.urdf.read_text() if args.urdf else default_urdf_xml()
+    model = RobotModel(urdf, args.base_link, args.tip_link, args.joints)
+    result = design(model, cl.Task(args.task), args.rate, args.effort_limits, args.friction,
+                    tuple(args.delays))
+    command = shlex.join(['python', '-m', 'quat_jt_controller.gain_design']
+                         + _public_argv(sys.argv[1:] if argv is None else argv))
+    text = to_yaml(result, args.potential, command, args.robot_note)
+    if args.out:
+        args.out.write_text(text)
+        print(f'wrote {args.out}', file=sys.stderr)
+    else:
+        sys.stdout.write(text)
+    return 0
+
+
+def _public_argv(argv: Sequence[str]) -> list[str]:
+    """Return ``argv`` with the pybullet_data folder written as <pybullet_data>."""
+    try:
+        import pybullet_data
+        folder = pybullet_data.getDataPath()
+    except ImportError:  # pragma: no cover - pybullet is in the core extra
+        folder = None
+    return [a.replace(folder, '<pybullet_data>') if folder else a for a in argv]
+
+
+if __name__ == '__main__':
+    sys.exit(main())

@@ -1,0 +1,369 @@
+"""
+Issue 10: extensions of the regulator that stay in the energy-shaping frame (docs/lyapunov.md).
+
+The law of Eq. (22) becomes
+
+    tau = J^T Q(eta_e, e)^T grad U_a(y_tilde) - grad U_lim(q) - grad U_c(q) - K_v qdot + g(q)
+          + tau_fc
+
+* ``U_lim``, the joint-limit potential (docs/lyapunov.md, section 2): zero away from the limits,
+  ``1/2 k_j x^2`` at a depth ``x`` into a band of width ``margin`` inside each limit of a joint
+  whose range is less than a full turn. C1; its gradient pushes the joint out of the band.
+* ``U_c``, the goal-configuration potential (section 5): once a goal configuration ``q*``
+  within the limits is known (the goal check's inverse kinematics, in a worker process), a
+  joint-space term that is zero within ``radius`` of ``q*`` in every joint and pulls towards
+  ``q*`` outside, with at most ``T_j`` N m (Huber profile). The joint box is convex, so this
+  leads the long way round a joint's stop instead of into it. Within the radius only the
+  paper's transpose-Jacobian term acts; with radius 0 both share their minimum at ``q*``.
+* The cubic damping (section 6): ``-k_v qdot min(qdot^2, v_m^2) / v_c^2`` on top of ``K_v``.
+* The large-error term of ``U_a`` (section 3): ``k_L B(||e||)`` with
+  ``B'(s) = s^2 / sqrt(1 + delta^2 - s^2)``, so that ``Q^T grad`` keeps its size up to a few
+  degrees from 180 degrees instead of fading like ``eta_e``; computed in ``control_law``.
+* ``tau_fc``, Coulomb friction compensation (section 4): per joint
+  ``f_j [t_v + (1 - |t_v|) phi(y_tilde) t_p]``, ``t_v = tanh(qdot_j / v_eps)`` while moving,
+  ``t_p = tanh(tau_p,j / (0.001 f_j))`` in the direction of the potential torque ``tau_p`` at
+  rest, faded by ``phi`` to zero inside a small error band. Its size never exceeds ``f_j``,
+  which is what keeps dV/dt <= -qdot^T K_v qdot against a Coulomb friction of at least ``f_j``.
+
+All are off by default (:class:`Shaping` ()), which gives the paper's law exactly. Plain
+floats: the functions here run in the 1 kHz tick.
+"""
+from dataclasses import dataclass
+from functools import cached_property
+from math import isfinite, pi, sqrt, tanh
+from typing import Optional, Sequence
+
+# A joint whose URDF range is at least this long turns freely: it gets no limit term.
+FULL_TURN_RAD = 2.0 * pi - 1e-6
+# t_p = tanh(tau_p / (TORQUE_BAND_FRACTION f)): the breakaway reaches 76% of f when the
+# potential torque is 0.1% of f, and changes sign smoothly (C-infinity) through tau_p = 0.
+TORQUE_BAND_FRACTION = 0.001
+# Width of the fade of the large-error term at 180 degrees, in eta_e (docs/lyapunov.md, 3).
+LARGE_ERROR_DELTA = 0.1
+# The cubic damping turns linear above the URDF velocity limit, or above this without one.
+DEFAULT_SPEED_CAP_RAD_S = 2.0 * pi
+
+
+class ShapingError(ValueError):
+    """An invalid extension parameter; the message names the parameter and the value."""
+
+
+def _nonnegative(name: str, value: float) -> float:
+    try:
+        v = float(value)
+    except (TypeError, ValueError):
+        raise ShapingError(f'{name} must be a number, got {value!r}') from None
+    if not isfinite(v) or v < 0.0:
+        raise ShapingError(f'{name} must be finite and >= 0, got {v}')
+    return v
+
+
+def _positive(name: str, value: float) -> float:
+    v = _nonnegative(name, value)
+    if v <= 0.0:
+        raise ShapingError(f'{name} must be finite and > 0, got {v}')
+    return v
+
+
+def _per_joint(name: str, values: Optional[Sequence[float]], n: int) -> tuple[float, ...]:
+    if values is None:
+        return (0.0,) * n
+    try:
+        vals = tuple(float(v) for v in values)
+    except (TypeError, ValueError):
+        raise ShapingError(f'{name} must be a list of numbers, got {values!r}') from None
+    if len(vals) != n:
+        raise ShapingError(f'{name} must have {n} values (one per joint), got {len(vals)}: '
+                           f'{list(vals)}')
+    for i, v in enumerate(vals):
+        if not isfinite(v) or v < 0.0:
+            raise ShapingError(f'{name}[{i}] must be finite and >= 0, got {v}')
+    return vals
+
+
+@dataclass(frozen=True)
+class Shaping:
+    """
+    The issue-10 extensions, validated and immutable; part of the Gains snapshot.
+
+    Units: ``joint_limit_margin_rad`` rad (band width inside each limit), ``joint_limit_gain``
+    N m/rad per joint (stiffness in the band; 0 = no limit term for that joint),
+    ``large_error_gain`` N m (``k_L``; 0 = off), ``friction_compensation_nm`` N m per joint
+    (Coulomb estimates; 0 = off), ``friction_velocity_rad_s`` rad/s (``v_eps``),
+    ``friction_error_band`` (``||e||`` below which the breakaway fades out) and
+    ``friction_position_band_m`` m (the same for ``||p_d - p||``, pose task).
+    ``configuration_gain`` N m per joint (``T_j``, the most the goal-configuration term asks
+    of joint j; 0 = off) and ``configuration_radius_rad`` rad (its dead zone, also the width of
+    its ramp). Empty per-joint tuples mean zeros.
+    """
+
+    joint_limit_margin_rad: float = 0.0
+    joint_limit_gain: tuple[float, ...] = ()
+    large_error_gain: float = 0.0
+    friction_compensation_nm: tuple[float, ...] = ()
+    friction_velocity_rad_s: float = 0.05
+    friction_error_band: float = 0.004
+    friction_position_band_m: float = 0.0005
+    configuration_gain: tuple[float, ...] = ()
+    configuration_radius_rad: float = 0.05
+    configuration_ramp_rad: float = 0.25
+    damping_speed_rad_s: tuple[float, ...] = ()
+
+    @classmethod
+    def create(cls, n_joints: int, joint_limit_margin: float = 0.0,
+               joint_limit_gain: Optional[Sequence[float]] = None,
+               large_error_gain: float = 0.0,
+               friction_compensation: Optional[Sequence[float]] = None,
+               friction_velocity: float = 0.05, friction_error_band: float = 0.004,
+               friction_position_band: float = 0.0005,
+               configuration_gain: Optional[Sequence[float]] = None,
+               configuration_radius: float = 0.05, configuration_ramp: float = 0.25,
+               damping_speed: Optional[Sequence[float]] = None) -> 'Shaping':
+        """Validate and build; raise ShapingError naming the bad value."""
+        return cls(
+            joint_limit_margin_rad=_nonnegative('joint_limit_margin', joint_limit_margin),
+            joint_limit_gain=_per_joint('joint_limit_gain', joint_limit_gain, n_joints),
+            large_error_gain=_nonnegative('large_error_gain', large_error_gain),
+            friction_compensation_nm=_per_joint('friction_compensation', friction_compensation,
+                                                n_joints),
+            friction_velocity_rad_s=_positive('friction_velocity', friction_velocity),
+            friction_error_band=_positive('friction_error_band', friction_error_band),
+            friction_position_band_m=_positive('friction_position_band',
+                                               friction_position_band),
+            configuration_gain=_per_joint('configuration_gain', configuration_gain, n_joints),
+            configuration_radius_rad=_nonnegative('configuration_radius', configuration_radius),
+            configuration_ramp_rad=_positive('configuration_ramp', configuration_ramp),
+            damping_speed_rad_s=_per_joint('damping_speed', damping_speed, n_joints))
+
+    def check_size(self, n_joints: int) -> 'Shaping':
+        """Return self if the per-joint vectors fit ``n_joints`` (or are empty); else raise."""
+        for name, values in (('joint_limit_gain', self.joint_limit_gain),
+                             ('friction_compensation', self.friction_compensation_nm),
+                             ('configuration_gain', self.configuration_gain),
+                             ('damping_speed', self.damping_speed_rad_s)):
+            if values and len(values) != n_joints:
+                raise ShapingError(f'{name} must have {n_joints} values (one per joint), got '
+                                   f'{len(values)}')
+        return self
+
+    @cached_property  # read every tick: computed once per snapshot
+    def friction_on(self) -> bool:
+        """Return True if any joint has a friction estimate."""
+        return any(f > 0.0 for f in self.friction_compensation_nm)
+
+    @cached_property  # read every tick: computed once per snapshot
+    def speed_damping_on(self) -> bool:
+        """Return True if some joint has the cubic damping term."""
+        return any(v > 0.0 for v in self.damping_speed_rad_s)
+
+    @cached_property  # read every tick: computed once per snapshot
+    def configuration_on(self) -> bool:
+        """Return True if the goal-configuration term can act (some gain > 0)."""
+        return any(t > 0.0 for t in self.configuration_gain)
+
+    @cached_property  # read every tick: computed once per snapshot
+    def limits_on(self) -> bool:
+        """Return True if the joint-limit potential can act (margin and some gain > 0)."""
+        return self.joint_limit_margin_rad > 0.0 and any(k > 0.0 for k in self.joint_limit_gain)
+
+
+@dataclass(frozen=True)
+class LimitBand:
+    """
+    The joint-limit potential of one robot, ready for the tick (docs/lyapunov.md, section 2).
+
+    ``lower_rad``/``upper_rad`` are the inner edges of the bands (the URDF limit moved inwards
+    by the margin), ``gain`` the stiffness per joint; joints without a term have gain 0.
+    """
+
+    lower_rad: tuple[float, ...]
+    upper_rad: tuple[float, ...]
+    gain: tuple[float, ...]
+    joints: tuple[int, ...]  # indices with a term
+    margin_rad: float
+
+    @classmethod
+    def create(cls, position_lower: Sequence[float], position_upper: Sequence[float],
+               shaping: Shaping) -> Optional['LimitBand']:
+        """
+        Build the band of a robot with these URDF limits; None if no joint gets a term.
+
+        A joint gets a term if its range is finite and shorter than a full turn and its gain is
+        > 0. Raises ShapingError if the margin does not fit inside such a joint's range.
+        """
+        if not shaping.limits_on:
+            return None
+        m = shaping.joint_limit_margin_rad
+        lo, hi, gain, joints = [], [], [], []
+        for j, (low, up) in enumerate(zip(position_lower, position_upper)):
+            k = shaping.joint_limit_gain[j]
+            limited = isfinite(low) and isfinite(up) and up > low and up - low < FULL_TURN_RAD
+            if limited and k > 0.0:
+                if 2.0 * m >= up - low:
+                    raise ShapingError(
+                        f'joint_limit_margin {m} rad leaves no room inside the range '
+                        f'[{low}, {up}] of joint {j} (it must be < {0.5 * (up - low):.4g})')
+                joints.append(j)
+            else:
+                k = 0.0
+            lo.append(low + m if k > 0.0 else -float('inf'))
+            hi.append(up - m if k > 0.0 else float('inf'))
+            gain.append(k)
+        if not joints:
+            return None
+        return cls(tuple(lo), tuple(hi), tuple(gain), tuple(joints), m)
+
+    def add_torque(self, q: Sequence[float], tau: list[float]) -> None:
+        """Add -grad U_lim(q) to ``tau`` in place: k x out of the band, 0 outside it."""
+        for j in self.joints:
+            qj = q[j]
+            if qj < self.lower_rad[j]:
+                tau[j] += self.gain[j] * (self.lower_rad[j] - qj)
+            elif qj > self.upper_rad[j]:
+                tau[j] -= self.gain[j] * (qj - self.upper_rad[j])
+
+    def energy(self, q: Sequence[float]) -> float:
+        """U_lim(q) = sum 1/2 k_j x_j^2 (J), x_j the depth into the band."""
+        total = 0.0
+        for j in self.joints:
+            x = max(self.lower_rad[j] - q[j], q[j] - self.upper_rad[j], 0.0)
+            total += 0.5 * self.gain[j] * x * x
+        return total
+
+    def depth(self, q: Sequence[float]) -> list[float]:
+        """Depth into each joint's band as a fraction of the margin (0 outside, 1 at a stop)."""
+        out = [0.0] * len(q)
+        for j in self.joints:
+            x = max(self.lower_rad[j] - q[j], q[j] - self.upper_rad[j], 0.0)
+            out[j] = x / self.margin_rad
+        return out
+
+
+def fade(y_tilde: Sequence[float], shaping: Shaping) -> float:
+    """
+    phi(y_tilde): 1 outside the error band, 0 well inside it, C1 in between.
+
+    ``r = max(||e|| / friction_error_band, ||p_d - p|| / friction_position_band)``; phi is 0
+    for r <= 1/2, 1 for r >= 1 and the cubic smoothstep in between.
+    """
+    e = y_tilde[-3:]
+    r = sqrt(e[0] * e[0] + e[1] * e[1] + e[2] * e[2]) / shaping.friction_error_band
+    if len(y_tilde) == 6:
+        p = sqrt(y_tilde[0] ** 2 + y_tilde[1] ** 2 + y_tilde[2] ** 2)
+        r = max(r, p / shaping.friction_position_band_m)
+    x = 2.0 * r - 1.0
+    if x <= 0.0:
+        return 0.0
+    if x >= 1.0:
+        return 1.0
+    return x * x * (3.0 - 2.0 * x)
+
+
+def friction_compensation(tau_potential: Sequence[float], qdot: Sequence[float], phi: float,
+                          shaping: Shaping) -> list[float]:
+    """
+    tau_fc per joint: f [t_v + (1 - |t_v|) phi t_p], never larger than f in size.
+
+    ``t_v = tanh(qdot / v_eps)`` compensates the friction of a moving joint; at rest
+    ``t_p = tanh(tau_p / (0.001 f))`` adds f in the direction of the potential torque
+    ``tau_potential`` (breakaway), faded out by ``phi`` near the goal (:func:`fade`).
+    """
+    v_eps = shaping.friction_velocity_rad_s
+    out = []
+    for f, tp_nm, v in zip(shaping.friction_compensation_nm, tau_potential, qdot):
+        if f <= 0.0:
+            out.append(0.0)
+            continue
+        tv = tanh(v / v_eps)
+        tp = tanh(tp_nm / (TORQUE_BAND_FRACTION * f)) if phi > 0.0 else 0.0
+        out.append(f * (tv + (1.0 - abs(tv)) * phi * tp))
+    return out
+
+
+def add_configuration_torque(q: Sequence[float], q_star: Sequence[float], shaping: Shaping,
+                             tau: list[float]) -> None:
+    """
+    Add -grad U_c(q) to ``tau`` in place (docs/lyapunov.md, section 5).
+
+    Per joint, ``x = max(0, |q - q*| - r)``; the torque is ``-sign(q - q*) T min(x / w, 1)``
+    (``r`` the radius, ``w`` the ramp).
+    """
+    r = shaping.configuration_radius_rad
+    w = shaping.configuration_ramp_rad
+    for j, t in enumerate(shaping.configuration_gain):
+        if t <= 0.0:
+            continue
+        d = q[j] - q_star[j]
+        x = abs(d) - r
+        if x > 0.0:
+            push = t if x >= w else t * x / w
+            tau[j] += -push if d > 0.0 else push
+
+
+def configuration_energy(q: Sequence[float], q_star: Sequence[float], shaping: Shaping) -> float:
+    """U_c(q) = sum T_j h(x_j), h(x) = x^2 / (2 w) up to x = w, then x - w / 2 (J)."""
+    r = shaping.configuration_radius_rad
+    w = shaping.configuration_ramp_rad
+    total = 0.0
+    for j, t in enumerate(shaping.configuration_gain):
+        x = abs(q[j] - q_star[j]) - r
+        if t > 0.0 and x > 0.0:
+            total += t * (x * x / (2.0 * w) if x <= w else x - 0.5 * w)
+    return total
+
+
+def add_speed_damping(qdot: Sequence[float], kv: Sequence[float], shaping: Shaping,
+                      tau: list[float], speed_cap_rad_s: Sequence[float]) -> None:
+    """
+    Add the cubic part of the damping, -K_v qdot min(qdot^2, v_m^2) / v_c^2, to ``tau``.
+
+    In place. It makes the dissipation function of Eq. (16) F = sum k_v (qdot^2 / 2 +
+    qdot^4 / (4 v_c^2)) up to the speed ``v_m`` (``speed_cap_rad_s``, the URDF velocity limit),
+    and linear beyond it, so the slope of the damping, which the sampled loop must tolerate,
+    stays bounded (docs/lyapunov.md, section 6). Linear near rest, it caps the cruising speed.
+    ``v_c`` per joint; 0 = no cubic term on that joint.
+    """
+    for j, v_c in enumerate(shaping.damping_speed_rad_s):
+        if v_c > 0.0:
+            v = qdot[j]
+            s = min(v * v, speed_cap_rad_s[j] * speed_cap_rad_s[j])
+            tau[j] -= kv[j] * v * s / (v_c * v_c)
+
+
+def from_parameters(values: dict, n_joints: int) -> Shaping:
+    """
+    Build a Shaping from controller parameters keyed by their ROS names (a config file's).
+
+    Missing names keep their defaults (off). Raises ShapingError naming a bad value.
+    """
+    d = Shaping()
+    return Shaping.create(
+        n_joints, joint_limit_margin=values.get('joint_limit_margin', 0.0),
+        joint_limit_gain=values.get('joint_limit_gain'),
+        large_error_gain=values.get('large_error_gain', 0.0),
+        friction_compensation=values.get('friction_compensation'),
+        friction_velocity=values.get('friction_velocity', d.friction_velocity_rad_s),
+        friction_error_band=values.get('friction_error_band', d.friction_error_band),
+        friction_position_band=values.get('friction_position_band',
+                                          d.friction_position_band_m),
+        configuration_gain=values.get('configuration_gain'),
+        configuration_radius=values.get('configuration_radius', d.configuration_radius_rad),
+        configuration_ramp=values.get('configuration_ramp', d.configuration_ramp_rad),
+        damping_speed=values.get('damping_speed'))
+
+
+def describe(shaping: Shaping) -> str:
+    """Return one line saying which extensions are on, for the node's log."""
+    parts = []
+    if shaping.limits_on:
+        parts.append(f'joint-limit band {shaping.joint_limit_margin_rad:g} rad, stiffness '
+                     f'{list(shaping.joint_limit_gain)} N m/rad')
+    if shaping.large_error_gain > 0.0:
+        parts.append(f'large-error term {shaping.large_error_gain:g} N m')
+    if shaping.configuration_on:
+        parts.append(f'goal-configuration term {list(shaping.configuration_gain)} N m')
+    if shaping.speed_damping_on:
+        parts.append(f'cubic damping v_c {list(shaping.damping_speed_rad_s)} rad/s')
+    if shaping.friction_on:
+        parts.append(f'friction compensation {list(shaping.friction_compensation_nm)} N m')
+    return '; '.join(parts) if parts else "off (the paper's law)"

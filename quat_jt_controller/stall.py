@@ -1,0 +1,128 @@
+"""
+Stall detection for /diagnostics (issue 10): at rest, away from the goal, and why.
+
+The regulator's Lyapunov function only decreases (docs/lyapunov.md), so the robot can come to
+rest before the goal: against a joint limit, where the potential's torque is below the
+friction, near a singular configuration, or near a 180-degree orientation error (where the
+paper's torque fades). :class:`StallDetector` is fed every tick with the tick's output
+(``TickOutput``) and q/qdot, but evaluates only every ``period_s`` (10 Hz: no SVD per tick). If
+the joints are at rest and the error is above tolerance for more than ``hold_s`` it reports a
+WARN naming the likely causes. ROS-free.
+"""
+from math import isfinite, nan
+from typing import Optional, Sequence
+
+import numpy as np
+
+from quat_jt_controller import control_law as cl
+from quat_jt_controller.regulator import Regulator, TickOutput
+
+OK, WARN = 0, 1  # diagnostic_msgs/DiagnosticStatus levels
+PERIOD_S = 0.1  # evaluation period (10 Hz)
+HOLD_S = 0.5  # at rest and off the goal for longer than this: a stall
+REST_SPEED_RAD_S = 0.02  # max |qdot| below this: at rest
+ORIENTATION_TOLERANCE = 0.01  # ||e|| above this: off the goal
+POSITION_TOLERANCE_M = 0.001  # ||p_d - p|| above this: off the goal (pose task)
+NEAR_LIMIT_RAD = 0.05  # a joint this close to a URDF limit (or inside the band) is at a limit
+SINGULAR_SIGMA_MIN = 0.05  # sigma_min of the task Jacobian below this: near-singular
+NEAR_180_ETA_E = 0.1  # |eta_e| below this: within ~11.5 degrees of a half turn
+
+Status = tuple[int, str, list[tuple[str, str]]]
+
+
+class StallDetector:
+    """
+    Watch the ticks of one :class:`Regulator` for a stall; report it as a diagnostic status.
+
+    Call :meth:`feed` on every tick (cheap: it returns at once between evaluations) and
+    :meth:`status` when publishing diagnostics.
+    """
+
+    def __init__(self, regulator: Regulator, period_s: float = PERIOD_S,
+                 hold_s: float = HOLD_S) -> None:
+        self.regulator = regulator
+        self.period_s = period_s
+        self.hold_s = hold_s
+        self._next_s = -float('inf')
+        self._since_s: Optional[float] = None
+        self.stalled_for_s = 0.0
+        self.causes: list[str] = []
+        self.error_norm = nan
+        self.position_error_m = nan
+        self.sigma_min = nan
+
+    def feed(self, t_s: float, q: Sequence[float], qdot: Sequence[float],
+             out: TickOutput) -> None:
+        """Take one tick (``t_s`` any monotonic clock, s); evaluate every ``period_s``."""
+        if t_s < self._next_s:
+            return
+        self._next_s = t_s + self.period_s
+        self.error_norm = out.orientation_error_norm
+        self.position_error_m = out.position_error_norm_m
+        at_rest = max(abs(v) for v in qdot) < REST_SPEED_RAD_S
+        off_goal = (self.error_norm > ORIENTATION_TOLERANCE
+                    or self.position_error_m > POSITION_TOLERANCE_M)
+        if not (at_rest and off_goal and out.finite):
+            self._since_s = None
+            self.stalled_for_s = 0.0
+            self.causes = []
+            return
+        if self._since_s is None:
+            self._since_s = t_s
+        self.stalled_for_s = t_s - self._since_s
+        self.causes = self.diagnose(q, out) if self.stalled else []
+
+    @property
+    def stalled(self) -> bool:
+        """Return True while at rest off the goal for longer than ``hold_s``."""
+        return self._since_s is not None and self.stalled_for_s > self.hold_s
+
+    def diagnose(self, q: Sequence[float], out: TickOutput) -> list[str]:
+        """Return the likely causes of a stall at ``q`` (one SVD; called at most at 10 Hz)."""
+        reg = self.regulator
+        model, shaping = reg.model, reg.shaping
+        causes = []
+        near = max(NEAR_LIMIT_RAD, shaping.joint_limit_margin_rad)
+        for j, name in enumerate(model.joint_names):
+            lo, hi = model.position_lower[j], model.position_upper[j]
+            for side, limit, gap in (('lower', lo, q[j] - lo), ('upper', hi, hi - q[j])):
+                if isfinite(limit) and gap < near:
+                    causes.append(f'{name} at {q[j]:.3f} rad is {max(gap, 0.0):.3f} rad from '
+                                  f'its {side} limit {limit:g} rad')
+        friction = shaping.friction_compensation_nm
+        tau_p = out.tau_potential_nm
+        if friction and tau_p:
+            weak = [f'{name} |tau| {abs(t):.3g} N m <= {f:g} N m'
+                    for name, t, f in zip(model.joint_names, tau_p, friction)
+                    if f > 0.0 and abs(t) <= f]
+            if weak:
+                causes.append('potential torque below the friction estimate ('
+                              + ', '.join(weak) + ')')
+        _, _, J = model.kinematics(list(q))
+        rows = np.array(J)[3:] if reg.task is cl.Task.ORIENTATION else np.array(J)
+        self.sigma_min = float(np.linalg.svd(rows, compute_uv=False)[-1])
+        if self.sigma_min < SINGULAR_SIGMA_MIN:
+            causes.append(f'near-singular: sigma_min(J) = {self.sigma_min:.3g} < '
+                          f'{SINGULAR_SIGMA_MIN}')
+        if abs(out.eta_e) < NEAR_180_ETA_E:
+            causes.append(f'orientation error near 180 degrees (eta_e = {out.eta_e:.3f})')
+        if not causes:
+            causes.append('no known cause (a local minimum of the potential)')
+        return causes
+
+    def status(self) -> Status:
+        """Return ``(level, message, values)`` for /diagnostics."""
+        values = [('stalled', str(self.stalled)),
+                  ('stalled_for_s', f'{self.stalled_for_s:.2f}'),
+                  ('error_norm', f'{self.error_norm:.6g}'),
+                  ('sigma_min', f'{self.sigma_min:.4g}'),
+                  ('causes', '; '.join(self.causes))]
+        if self.regulator.task is cl.Task.POSE:
+            values.insert(3, ('position_error_m', f'{self.position_error_m:.6g}'))
+        if not self.stalled:
+            return OK, 'not stalled', values
+        where = f'||e|| = {self.error_norm:.4g}'
+        if self.regulator.task is cl.Task.POSE:
+            where += f', ||p_d - p|| = {self.position_error_m * 1e3:.2f} mm'
+        return (WARN, f'stalled for {self.stalled_for_s:.1f} s at rest, {where}: '
+                + '; '.join(self.causes), values)

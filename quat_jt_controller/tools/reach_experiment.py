@@ -1,0 +1,360 @@
+"""
+Reach any reachable goal from any start (issue 10): the figures, from the package's configs.
+
+For random (start, goal) pairs, seeded, the regulator of ``config/wrist_controller.yaml`` or
+``config/xarm6_controller.yaml`` runs as the nodes run it: on the PyBullet simulator core, with
+the friction of ``config/*_sim.yaml``, sampled at 1 kHz, one tick of delay, clamped to the
+effort limits (``reference_sim.run_sampled``). The goal configuration q* reaches the regulator
+``--q-star-after`` seconds after the goal, as from the node's goal-check worker.
+
+* wrist (orientation): start and goal joint angles within 90% of the URDF ranges, |q2| >= 0.3
+  at the goal; reached if ||e|| < 0.005 over the last 0.1 s of 4 s;
+* xArm6 (pose): start and goal within 80% of the ranges (about their middle), the goal away
+  from singularities (sigma_min(J_G) >= 0.1); reached if ||p_d - p|| < 1 mm and ||e|| < 0.01
+  over the last 0.1 s of 5 s.
+
+A stop is touched if a joint comes within 1e-3 rad of a URDF limit. Failures are listed with
+their likely cause (``stall.StallDetector.diagnose`` at the final state).
+
+    python -m quat_jt_controller.tools.reach_experiment [--robot wrist xarm6]
+        [--potential tanh quadratic] [--cases N] [--seed S] [--dds K]
+        [--without configuration|friction|limits]
+
+``--dds K`` also runs the first K wrist cases over DDS with the real nodes (``local_ros``).
+"""
+import argparse
+import contextlib
+import dataclasses
+from dataclasses import dataclass
+import math
+import os
+from pathlib import Path
+import shutil
+import sys
+import tempfile
+import time
+from typing import Optional
+
+import numpy as np
+
+from quat_jt_controller import control_law as cl
+from quat_jt_controller import quaternion as quat
+from quat_jt_controller import shaping as sh
+from quat_jt_controller.goal_check import goal_configuration
+from quat_jt_controller.model import RobotModel
+from quat_jt_controller.reference_sim import ClosedLoop, run_sampled
+from quat_jt_controller.regulator import Regulator
+from quat_jt_controller.resources import config_parameters, default_urdf_xml
+from quat_jt_controller.stall import StallDetector
+
+TOUCH_RAD = 1e-3  # closer than this to a URDF limit: the stop was touched
+FINAL_WINDOW_S = 0.1
+Q_STAR_AFTER_S = 0.1  # the goal-check worker's answer arrives after the goal (10-50 ms)
+
+
+@dataclass(frozen=True)
+class Robot:
+    """One robot of the experiment: its files, its case generator and its targets."""
+
+    name: str
+    controller_config: str
+    sim_config: str
+    task: cl.Task
+    fraction: float  # of the half range around the middle, for starts and goals
+    duration_s: float
+    orientation_tol: float
+    position_tol_m: float
+
+
+ROBOTS = {
+    'wrist': Robot('wrist', 'wrist_controller.yaml', 'wrist_sim.yaml',
+                   cl.Task.ORIENTATION, 0.9, 4.0, 0.005, math.inf),
+    'xarm6': Robot('xarm6', 'xarm6_controller.yaml', 'xarm6_sim.yaml',
+                   cl.Task.POSE, 0.8, 5.0, 0.01, 1e-3),
+}
+
+
+def robot_urdf(robot: Robot) -> str:
+    """Return the URDF XML of ``robot`` (the xArm6's ships inside pybullet_data)."""
+    if robot.name == 'wrist':
+        return default_urdf_xml()
+    import pybullet_data
+    return (Path(pybullet_data.getDataPath()) / 'xarm' / 'xarm6_robot.urdf').read_text()
+
+
+def load_controller(robot: Robot, potential: Optional[str] = None):
+    """Return ``(model, gains, shaping)`` of the robot's controller config."""
+    p = config_parameters(robot.controller_config)
+    model = RobotModel(robot_urdf(robot), p['base_link'], p['tip_link'], p['joints'])
+    gains = cl.Gains.create(potential or p['potential'], p['kp'], p['kv'], p['lambda'],
+                            cl.Task(p['task']), model.n, p.get('gravity_compensation', True))
+    return model, gains, sh.from_parameters(p, model.n)
+
+
+def cases(model: RobotModel, robot: Robot, count: int, seed: int) -> list:
+    """Return ``count`` seeded (start, goal) joint configurations, as the targets define them."""
+    rng = np.random.default_rng(seed)
+    lower, upper = np.array(model.position_lower), np.array(model.position_upper)
+    mid, half = 0.5 * (lower + upper), 0.5 * (upper - lower)
+    lo, hi = mid - robot.fraction * half, mid + robot.fraction * half
+    out = []
+    while len(out) < count:
+        q0, qg = rng.uniform(lo, hi), rng.uniform(lo, hi)
+        if robot.task is cl.Task.ORIENTATION and abs(qg[1]) < 0.3:
+            continue
+        if robot.task is cl.Task.POSE:
+            _, _, J = model.kinematics(qg.tolist())
+            if np.linalg.svd(np.array(J), compute_uv=False)[-1] < 0.1:
+                continue
+        out.append((q0, qg))
+    return out
+
+
+@contextlib.contextmanager
+def quiet():
+    """Silence PyBullet's C-level prints (connection banner, inertia warnings)."""
+    sys.stdout.flush()
+    saved = os.dup(1), os.dup(2)
+    with open(os.devnull, 'w') as null:
+        os.dup2(null.fileno(), 1)
+        os.dup2(null.fileno(), 2)
+        try:
+            yield
+        finally:
+            os.dup2(saved[0], 1)
+            os.dup2(saved[1], 2)
+            os.close(saved[0])
+            os.close(saved[1])
+
+
+@dataclass
+class Outcome:
+    """One case: reached?, the final errors, and what went wrong if anything."""
+
+    index: int
+    reached: bool
+    touched: bool
+    position_error_m: float
+    orientation_error: float
+    settled_s: float
+    max_speed_rad_s: float
+    saturated_ticks: int
+    q_start: np.ndarray
+    q_goal: np.ndarray
+    q_final: np.ndarray
+    cause: str = ''
+
+
+def run_case(robot: Robot, model: RobotModel, gains: cl.Gains, shaping: sh.Shaping,
+             sim_params: dict, index: int, q0: np.ndarray, qg: np.ndarray,
+             delay_ticks: int = 1, q_star_after_s: float = Q_STAR_AFTER_S) -> Outcome:
+    """Run one case on the PyBullet core; classify it."""
+    from wrist_sim.simulator import WristSimulator
+
+    p_d, R_d = model.forward_kinematics(qg.tolist())
+    q_d = quat.from_rotation_matrix(R_d)
+    q_star = (goal_configuration(model, q0, q_d, p_d, robot.task,
+                                 shaping.joint_limit_margin_rad)
+              if shaping.configuration_on else None)
+    loop = ClosedLoop(model, gains, robot.task, q_d, p_d, shaping=shaping)
+    with quiet():
+        sim = WristSimulator(robot_urdf(robot), model.joint_names, initial_positions_rad=q0,
+                             viscous_nm_s_per_rad=sim_params.get('viscous_friction'),
+                             coulomb_nm=sim_params.get('coulomb_friction'))
+    try:
+        run = run_sampled(loop, sim, robot.duration_s, delay_ticks, q_star, q_star_after_s)
+    finally:
+        sim.close()
+    lower, upper = np.array(model.position_lower), np.array(model.position_upper)
+    gap = float(np.minimum(run.q_rad - lower, upper - run.q_rad).min())
+    position, orientation = run.final(FINAL_WINDOW_S)
+    reached = (run.all_finite and orientation < robot.orientation_tol
+               and position < robot.position_tol_m)
+    speed = float(np.abs(np.diff(run.q_rad, axis=0)).max() / (run.t_s[1] - run.t_s[0]))
+    settle_tol = (robot.position_tol_m if math.isfinite(robot.position_tol_m) else math.inf)
+    outcome = Outcome(index, reached, gap < TOUCH_RAD, position, orientation,
+                      run.settled_at_s(settle_tol, robot.orientation_tol), speed,
+                      run.saturated_ticks, q0, qg, run.q_rad[-1].copy())
+    if not reached:
+        outcome.cause = classify(model, loop, shaping, q_star, run)
+    return outcome
+
+
+def classify(model: RobotModel, loop: ClosedLoop, shaping: sh.Shaping, q_star,
+             run) -> str:
+    """Name the likely cause of a failed case, as the stall detector would."""
+    causes = []
+    if shaping.configuration_on and q_star is None:
+        causes.append('no goal configuration found (IK)')
+    speed = np.abs(np.diff(run.q_rad[-100:], axis=0)).max() / (run.t_s[1] - run.t_s[0])
+    if speed > 0.02:
+        causes.append(f'still moving at the end (up to {speed:.3f} rad/s): too slow')
+    else:
+        reg = Regulator(model, loop.task, loop.gains, None, loop.goal, shaping)
+        out = reg.update(run.q_rad[-1].tolist(), [0.0] * model.n)
+        found = StallDetector(reg).diagnose(run.q_rad[-1].tolist(), out)
+        causes += ['stalled: ' + c for c in found]
+    return '; '.join(causes)
+
+
+def report(robot: Robot, potential: str, outcomes: list, elapsed_s: float) -> str:
+    """Return the summary lines of one robot and potential."""
+    n = len(outcomes)
+    ok = sum(o.reached for o in outcomes)
+    touched = sum(o.touched for o in outcomes)
+    settled = np.array([o.settled_s for o in outcomes if o.reached])
+    pos = np.array([o.position_error_m for o in outcomes])
+    ori = np.array([o.orientation_error for o in outcomes])
+    target = (f'||e|| < {robot.orientation_tol:g}' if robot.task is cl.Task.ORIENTATION
+              else f'< {robot.position_tol_m * 1e3:g} mm and ||e|| < {robot.orientation_tol:g}')
+    lines = [
+        f'{robot.name}, {potential}: {ok}/{n} reached ({100.0 * ok / max(n, 1):.1f}%) '
+        f'{target} within {robot.duration_s:g} s; stops touched in {touched} cases; '
+        f'{sum(o.saturated_ticks > 0 for o in outcomes)} cases with saturated ticks',
+    ]
+    if settled.size:
+        lines.append(f'  time to stay within tolerance: median {np.median(settled):.2f} s, '
+                     f'90% {np.percentile(settled, 90):.2f} s, max {settled.max():.2f} s; '
+                     f'fastest joint speed up to '
+                     f'{max(o.max_speed_rad_s for o in outcomes):.2f} rad/s')
+    lines.append(f'  final ||e||: median {np.median(ori):.2e}, max {ori.max():.2e}'
+                 + (f'; final ||p_d - p||: median {np.median(pos) * 1e3:.3f} mm, max '
+                    f'{pos.max() * 1e3:.3f} mm' if robot.task is cl.Task.POSE else '')
+                 + f' ({elapsed_s:.0f} s)')
+    for o in outcomes:
+        if not o.reached or o.touched:
+            lines.append(
+                f'  case {o.index}: start {np.round(o.q_start, 2).tolist()} goal '
+                f'{np.round(o.q_goal, 2).tolist()} end {np.round(o.q_final, 2).tolist()}: '
+                f'||e|| {o.orientation_error:.3g}'
+                + (f', {o.position_error_m * 1e3:.2f} mm' if robot.task is cl.Task.POSE
+                   else '')
+                + (', TOUCHED A STOP' if o.touched else '')
+                + (f'; {o.cause}' if o.cause else ''))
+    return '\n'.join(lines)
+
+
+ABLATIONS = {  # --without: turn one extension off to see what it does
+    'configuration': {'configuration_gain': ()},
+    'friction': {'friction_compensation_nm': ()},
+    'limits': {'joint_limit_gain': ()},
+}
+
+
+def run_robot(robot: Robot, potential: str, count: int, seed: int, delay_ticks: int = 1,
+              progress=print, without: Optional[str] = None) -> list:
+    """Run ``count`` cases of ``robot`` with ``potential``; return their outcomes."""
+    model, gains, shaping = load_controller(robot, potential)
+    if without:
+        shaping = dataclasses.replace(shaping, **ABLATIONS[without])
+    sim_params = config_parameters(robot.sim_config)
+    outcomes = []
+    for i, (q0, qg) in enumerate(cases(model, robot, count, seed)):
+        outcomes.append(run_case(robot, model, gains, shaping, sim_params, i, q0, qg,
+                                 delay_ticks))
+        if progress and (i + 1) % 25 == 0:
+            done = sum(o.reached for o in outcomes)
+            progress(f'  [{robot.name} {potential}] {i + 1}/{count} cases, {done} reached',
+                     flush=True)
+    return outcomes
+
+
+def run_dds(count: int, seed: int, progress=print) -> str:
+    """Run the first ``count`` wrist cases over DDS (real nodes, lockstep); return a report."""
+    from geometry_msgs.msg import PoseStamped
+    from sensor_msgs.msg import JointState
+
+    from quat_jt_controller.tools import local_ros
+    from quat_jt_controller.tools.probe import ProbeNode
+
+    robot = ROBOTS['wrist']
+    model, _, _ = load_controller(robot)
+    lines = []
+    for i, (q0, qg) in enumerate(cases(model, robot, count, seed)):
+        _, R_d = model.forward_kinematics(qg.tolist())
+        q_d = quat.from_rotation_matrix(R_d)
+        work = Path(tempfile.mkdtemp(prefix='reach_dds_'))
+        domain = 50 + (os.getpid() + i) % 40
+        env = local_ros.isolated_env(work, domain)
+        sim, ctrl = local_ros.spawn_wrist_pair(
+            env, work, sim_params={'initial_positions': q0.tolist(), 'publish_clock': True},
+            controller_params={'use_sim_time': True},
+            controller_config=local_ros.PRODUCT_CONTROLLER_CONFIG)
+        probe = ProbeNode('reach_probe', domain)
+        states: list = []
+        probe.node.create_subscription(JointState, '/joint_states', states.append, 100)
+        pub = probe.node.create_publisher(PoseStamped, '/quat_jt_controller/target_pose', 10)
+
+        def spin_until(condition, timeout_s: float) -> bool:
+            deadline = time.monotonic() + timeout_s
+            while not condition():
+                if time.monotonic() > deadline or sim.poll() is not None or \
+                        ctrl.poll() is not None:
+                    return False
+                probe.executor.spin_once(timeout_sec=0.05)
+            return True
+        try:
+            ok = spin_until(lambda: len(states) > 50, 60.0)
+            msg = PoseStamped()
+            msg.header.frame_id = 'base_link'
+            o = msg.pose.orientation
+            o.x, o.y, o.z, o.w = quat.to_xyzw(q_d)
+            t0 = states[-1].header.stamp.sec + 1e-9 * states[-1].header.stamp.nanosec
+            pub.publish(msg)
+
+            def sim_time() -> float:
+                s = states[-1].header.stamp
+                return s.sec + 1e-9 * s.nanosec - t0
+            ok = ok and spin_until(lambda: sim_time() >= robot.duration_s, 120.0)
+            q_end = [states[-1].position[states[-1].name.index(n)] for n in model.joint_names]
+            p, R = model.forward_kinematics(q_end)
+            _, e = quat.orientation_error(quat.from_rotation_matrix(R), q_d)
+            err = math.sqrt(sum(c * c for c in e))
+            verdict = 'reached' if ok and err < robot.orientation_tol else 'NOT reached'
+            if verdict == 'reached':
+                shutil.rmtree(work, ignore_errors=True)  # else keep the nodes' logs
+            lines.append(f'  DDS case {i}: ||e|| after {robot.duration_s:g} s (simulated) = '
+                         f'{err:.3g} -> {verdict}' + ('' if verdict == 'reached'
+                                                      else f' (logs in {work})'))
+            progress(lines[-1], flush=True)
+        finally:
+            for proc in (sim, ctrl):
+                local_ros.stop_node(proc)
+            probe.close()
+    return '\n'.join(lines)
+
+
+def main(argv: Optional[list] = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split('\n')[1])
+    parser.add_argument('--robot', nargs='+', choices=list(ROBOTS), default=list(ROBOTS))
+    parser.add_argument('--potential', nargs='+', choices=[p.value for p in cl.Potential],
+                        default=['tanh', 'quadratic'])
+    parser.add_argument('--cases', type=int, help='cases per robot and potential (default: '
+                        '200 wrist, 100 xArm6)')
+    parser.add_argument('--seed', type=int, default=10)
+    parser.add_argument('--delay', type=int, default=1, help='ticks of delay')
+    parser.add_argument('--dds', type=int, default=0,
+                        help='also run this many wrist cases over DDS (real nodes)')
+    parser.add_argument('--without', choices=list(ABLATIONS),
+                        help='turn this extension off (to see what it does)')
+    args = parser.parse_args(argv)
+    default_cases = {'wrist': 200, 'xarm6': 100}
+    text = []
+    for name in args.robot:
+        robot = ROBOTS[name]
+        for potential in args.potential:
+            t0 = time.monotonic()
+            outcomes = run_robot(robot, potential, args.cases or default_cases[name],
+                                 args.seed, args.delay, without=args.without)
+            label = potential + (f' without {args.without}' if args.without else '')
+            text.append(report(robot, label, outcomes, time.monotonic() - t0))
+            print(text[-1], flush=True)
+    if args.dds:
+        text.append('wrist over DDS (nodes in lockstep, tanh, config/wrist_controller.yaml):\n'
+                    + run_dds(args.dds, args.seed))
+    print('\n' + '\n'.join(text))
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())

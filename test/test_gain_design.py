@@ -1,0 +1,146 @@
+"""
+Gain design from the robot (quat_jt_controller.gain_design, docs/gain_design.md), ROS-free.
+
+The rules hold for the wrist and the xArm6: the tanh law's torque stays under its a-priori
+bound, which stays within the budget; the goal-configuration term out-pulls the task term;
+the sampled loop is stable; the package's configs are exactly what the tool writes; the
+command runs from pip (``python -m``) and writes a parameter file the tests can load.
+"""
+import math
+from pathlib import Path
+import subprocess
+import sys
+
+import numpy as np
+import pybullet_data
+import pytest
+from quat_jt_controller import control_law as cl
+from quat_jt_controller import gain_design as gd
+from quat_jt_controller import quaternion as quat
+from quat_jt_controller import shaping as sh
+from robots import random_q, wrist_model, xarm6_model
+import yaml
+
+pytestmark = pytest.mark.unit
+
+REPO = Path(__file__).resolve().parent.parent
+# The command lines that wrote config/wrist_controller.yaml and config/xarm6_controller.yaml.
+WRIST_ARGS = ['--task', 'orientation', '--friction', '1.8', '0.72', '0.45', '--delays', '1',
+              '2', '3']
+XARM6_ARGS = ['--urdf', str(Path(pybullet_data.getDataPath()) / 'xarm' / 'xarm6_robot.urdf'),
+              '--base-link', 'link_base', '--tip-link', 'link6', '--task', 'pose',
+              '--friction', '0.009', '0.009', '0.0045', '0.0018', '0.0018', '0.00045',
+              '--delays', '1', '2', '3']
+
+
+@pytest.fixture(scope='module')
+def designs():
+    return {
+        'wrist': (wrist_model(), gd.design(wrist_model(), cl.Task.ORIENTATION,
+                                           friction_nm=(1.8, 0.72, 0.45), delays=(1, 2, 3))),
+        'xarm6': (xarm6_model(), gd.design(xarm6_model(), cl.Task.POSE,
+                                           friction_nm=(0.009, 0.009, 0.0045, 0.0018, 0.0018,
+                                                        0.00045), delays=(1, 2, 3))),
+    }
+
+
+def params_of(text: str) -> dict:
+    data = yaml.safe_load(text)
+    assert list(data) == ['/**']
+    return data['/**']['ros__parameters']
+
+
+@pytest.mark.parametrize('robot', ['wrist', 'xarm6'])
+def test_the_budget_holds_the_bound_and_the_bound_holds_the_torque(designs, robot):
+    model, d = designs[robot]
+    f = d.figures
+    assert np.all(f['budget_nm'] > 0.0)
+    # task term + goal-configuration term within the budget, which leaves room for damping
+    assert np.all(f['task_bound_nm'] + f['guide_nm'] <= f['budget_nm'] + 1e-9)
+    assert np.all(f['budget_nm'] + f['gravity_max_nm'] + f['friction_nm']
+                  < f['effort_limits_nm'])
+    # the goal-configuration term out-pulls the task term where the design allows it
+    assert np.all(f['guide_nm'] >= gd.GUIDE_OVER_TASK * f['task_bound_nm'] * 0.5)
+    rng = np.random.default_rng(5)
+    for potential in ('tanh', 'quadratic'):
+        gains = d.gains(potential)
+        for _ in range(200):  # the tanh law's torque obeys the a-priori bound anywhere
+            q, q_goal = random_q(model, rng, 0.0), random_q(model, rng, 0.0)
+            p_d, R_d = model.forward_kinematics(q_goal.tolist())
+            p, R, J = model.kinematics(q.tolist())
+            y, eta_e = cl.output_error(p, R, p_d, quat.from_rotation_matrix(R_d), d.task)
+            if potential == 'quadratic' and np.linalg.norm(y[:-3]) > math.sqrt(3.0):
+                continue  # the bound covers the quadratic law up to sqrt(3) m
+            rows = np.array(J)[3:] if d.task is cl.Task.ORIENTATION else np.array(J)
+            tau = np.abs(cl.potential_torque(rows.tolist(), y, eta_e, gains))
+            assert np.all(tau <= f['task_bound_nm'] * (1 + 1e-9) + 1e-12), (potential, tau)
+
+
+@pytest.mark.parametrize('robot', ['wrist', 'xarm6'])
+def test_the_sampled_loop_is_stable_with_the_delays_designed_for(designs, robot):
+    model, d = designs[robot]
+    data = gd.survey(model, d.task)
+    for potential in ('tanh', 'quadratic'):
+        gains = d.gains(potential)
+        for q, _, _ in data['configurations'][:6]:
+            for delay in (1, 3):
+                rho = gd.linearized_spectral_radius(model, q, gains, delay, task=d.task,
+                                                    shaping=d.shaping)
+                assert rho < 1.0
+                assert gd.time_constant_s(rho) < 1.0
+    assert max(d.figures['spectral_radius'].values()) < 1.0
+    # near-critical damping for the tanh law, as designed (less where the sampled loop caps
+    # the damping: the xArm6's joint 1, folded, has 0.026 kg m^2)
+    zeta = d.figures['damping_ratio']['tanh']
+    assert np.all(zeta < 1.1 * gd.DAMPING_RATIO) and np.all(zeta > 0.5), zeta
+
+
+def test_spectral_radius_of_a_sampled_mass_spring_damper():
+    """1 kg, 1 ms: stable with one tick of delay for modest gains, unstable when too stiff."""
+    m, k, c = np.array([[1.0]]), np.array([[100.0]]), np.array([[2.0 * 10.0]])
+    rho = gd.spectral_radius(m, k, c, 1)
+    assert rho < 1.0 and gd.time_constant_s(rho) == pytest.approx(0.1, rel=0.2)
+    assert gd.spectral_radius(m, np.array([[4e6]]), np.array([[0.0]]), 1) > 1.0
+    assert gd._largest_stable_damping(1.0, (1,), 1e-3) == pytest.approx(1000.0, rel=1e-3)
+
+
+@pytest.mark.parametrize('name, args', [('wrist_controller.yaml', WRIST_ARGS),
+                                        ('xarm6_controller.yaml', XARM6_ARGS)])
+def test_the_configs_are_what_the_tool_writes(tmp_path, name, args):
+    out = tmp_path / name
+    result = subprocess.run([sys.executable, '-m', 'quat_jt_controller.gain_design', *args,
+                             '--out', str(out)], capture_output=True, text=True, timeout=120)
+    assert result.returncode == 0, result.stderr
+    written = params_of(out.read_text())
+    shipped = params_of((REPO / 'config' / name).read_text())
+    assert written == shipped
+    text = (REPO / 'config' / name).read_text()
+    assert 'python -m quat_jt_controller.gain_design' in text  # how to reproduce it
+    # the extensions are on in the product configs
+    s = sh.from_parameters(shipped, len(shipped['joints']))
+    assert s.limits_on and s.friction_on and s.configuration_on and s.speed_damping_on
+
+
+def test_the_paper_config_is_the_paper_experiment():
+    p = params_of((REPO / 'config' / 'paper_wrist_controller.yaml').read_text())
+    assert tuple(p['kp']) == (4.5, 20.5, 17.5) and tuple(p['lambda']) == (30.0, 30.0, 30.0)
+    assert tuple(p['kv']) == (1.0, 1.0, 1.0)
+    assert sh.from_parameters(p, 3) == sh.Shaping.create(3)  # no extension on
+
+
+def test_the_command_prints_a_loadable_file_and_the_design_parameters_match():
+    result = subprocess.run([sys.executable, '-m', 'quat_jt_controller.gain_design',
+                             '--potential', 'quadratic'], capture_output=True, text=True,
+                            timeout=120)
+    assert result.returncode == 0, result.stderr
+    p = params_of(result.stdout)
+    assert p['potential'] == 'quadratic' and p['task'] == 'orientation'
+    gains = cl.Gains.create(p['potential'], p['kp'], p['kv'], p['lambda'], cl.Task(p['task']),
+                            3)
+    assert len(gains.kv) == 3
+    for key, value in p.items():  # strictly typed: floats are written as floats
+        values = value if isinstance(value, list) else [value]
+        if key in ('joints', 'publish_rate_divider', 'gravity_compensation', 'task',
+                   'potential', 'base_link', 'tip_link', 'robot_description'):
+            continue
+        assert all(isinstance(v, float) for v in values), (key, value)

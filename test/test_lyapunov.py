@@ -1,0 +1,112 @@
+"""
+The Lyapunov argument of docs/lyapunov.md, checked in the ideal loop and at rest in PyBullet.
+
+* Ideal loop (reference_sim.ClosedLoop, RK4) with every issue-10 term on: the joint-limit band
+  (entered), the large-error term, the goal-configuration term, the cubic damping and the
+  velocity part of the friction compensation against a smooth plant friction at least as
+  large. V, whose potential is every term's (Regulator.lyapunov), never increases.
+* Without plant friction the compensation is an energy source: V does increase (why the
+  estimate must not exceed the friction).
+* On the PyBullet core (stiction), sampled with a tick of delay: with compensation the
+  quadratic law's friction stall of the paper's experiment vanishes, and at rest the torque is
+  steady, with no sign flips (no chattering, no limit cycle).
+"""
+import dataclasses
+import math
+
+import numpy as np
+import pytest
+from quat_jt_controller import control_law as cl
+from quat_jt_controller import paper
+from quat_jt_controller import quaternion as quat
+from quat_jt_controller import shaping as sh
+from quat_jt_controller.reference_sim import ClosedLoop, run_sampled
+from quat_jt_controller.resources import default_urdf_xml
+from robots import wrist_model
+from wrist_sim.simulator import WristSimulator
+
+pytestmark = pytest.mark.unit
+
+ORI = cl.Task.ORIENTATION
+FRICTION = (2.0, 0.8, 0.5)  # config/wrist_sim.yaml
+EVERYTHING = {'joint_limit_margin': 0.3, 'joint_limit_gain': (40.0, 30.0, 20.0),
+              'large_error_gain': 5.0, 'configuration_gain': (6.0, 6.0, 6.0),
+              'configuration_radius': 0.0, 'configuration_ramp': 0.25,
+              'damping_speed': (3.0, 3.0, 3.0),
+              # the velocity part only: the at-rest part (phi > 0) needs stiction, which a
+              # smooth friction model does not have (docs/lyapunov.md, section 4)
+              'friction_compensation': tuple(0.9 * f for f in FRICTION),
+              'friction_velocity': 0.05, 'friction_error_band': 100.0}
+
+
+@pytest.mark.parametrize('potential', ['quadratic', 'tanh'])
+def test_lyapunov_never_increases_with_every_term_on(potential):
+    model = wrist_model()
+    gains = cl.Gains.create(potential, (8.0, 8.0, 8.0), (1.5, 1.2, 0.8), (4.0, 4.0, 4.0), ORI,
+                            3)
+    q_goal = (0.5, 1.2, -0.4)
+    _, R = model.forward_kinematics(list(q_goal))
+    loop = ClosedLoop(model, gains, ORI, quat.from_rotation_matrix(R),
+                      coulomb_nm=FRICTION, coulomb_velocity_rad_s=0.02,
+                      shaping=sh.Shaping.create(3, **EVERYTHING), q_star=q_goal)
+    # start moving towards joint 2's upper stop, 0.2 rad from it: the band is entered
+    q0 = (2.5, model.position_upper[1] - 0.2, 2.8)
+    traj = loop.run(q0, 3.0, dt_s=5e-4, qdot0=(2.0, 3.0, -2.0))
+    band_edge = model.position_upper[1] - 0.3
+    assert traj.q_rad[:, 1].max() > band_edge + 0.05, 'the test must enter the band'
+    assert traj.q_rad[:, 1].max() < model.position_upper[1]  # and never reach the stop
+    dV = np.diff(traj.lyapunov)
+    assert dV.max() <= 1e-9 * traj.lyapunov[0], f'V increased by {dV.max()}'
+    # the smooth friction (slope f / v_s near rest) leaves a slow crawl to the goal
+    assert traj.error_norm[-1] < 0.01 < traj.error_norm[0]
+    assert traj.lyapunov[-1] < 1e-3 * traj.lyapunov[0]
+
+
+def test_compensation_without_friction_to_cancel_feeds_energy_in():
+    """What an over-estimate does: the same loop without plant friction, V increases."""
+    model = wrist_model()
+    gains = cl.Gains.create('tanh', (8.0, 8.0, 8.0), (1.5, 1.2, 0.8), (4.0, 4.0, 4.0), ORI, 3)
+    shaping = sh.Shaping.create(3, friction_compensation=FRICTION, friction_error_band=100.0)
+    loop = ClosedLoop(model, gains, ORI, paper.Q_DESIRED, shaping=shaping)
+    traj = loop.run((0.0, 0.5, 0.0), 0.5, qdot0=(1.0, 1.0, 1.0))
+    assert np.diff(traj.lyapunov).max() > 1e-4
+
+
+def rest_trace(potential, compensation, duration_s=6.0):
+    """Run the paper's experiment on the PyBullet core (stiction), one tick of delay."""
+    model = wrist_model()
+    gains = cl.Gains.create(potential, paper.KP, paper.KV, paper.LAMBDA, ORI, 3)
+    shaping = sh.Shaping.create(3, friction_compensation=compensation)
+    loop = ClosedLoop(model, gains, ORI, paper.Q_DESIRED, shaping=shaping)
+    with WristSimulator(default_urdf_xml(), model.joint_names, coulomb_nm=FRICTION) as sim:
+        return run_sampled(loop, sim, duration_s, delay_ticks=1)
+
+
+def test_friction_compensation_removes_the_quadratic_stall_without_chattering():
+    stalled = rest_trace('quadratic', None)
+    assert stalled.orientation_error[-1] > 0.15  # the paper's friction stall (0.2043)
+    run = rest_trace('quadratic', FRICTION)
+    assert run.orientation_error[-1] < 0.005
+    band = sh.Shaping().friction_error_band
+    assert run.orientation_error[-1] > 0.5 * band * 0.5  # it stops in the fade band
+    last = run.tau_nm[-1000:]  # the last second, at rest
+    assert np.all(last.max(axis=0) - last.min(axis=0) < 1e-9), 'torque not steady at rest'
+    signs = np.sign(last)
+    assert np.all((signs == signs[0]) | (np.abs(last) < 1e-12)), 'torque flips sign'
+    moved = np.abs(run.q_rad[-1000:] - run.q_rad[-1]).max()
+    assert moved < 1e-6, 'still moving: a limit cycle'
+
+
+def test_at_rest_with_compensation_on_the_goal_the_torque_is_gravity_alone():
+    """Within half the band the at-rest part is off: nothing left to chatter."""
+    model = wrist_model()
+    gains = cl.Gains.create('tanh', paper.KP, paper.KV, paper.LAMBDA, ORI, 3)
+    shaping = sh.Shaping.create(3, friction_compensation=FRICTION)
+    loop = ClosedLoop(model, gains, ORI, paper.Q_DESIRED, shaping=shaping)
+    q = list(paper.Q_JOINT_DESIRED_RAD)
+    out = loop.clamped.update(q, [0.0, 0.0, 0.0])
+    assert out.orientation_error_norm < 0.5 * shaping.friction_error_band
+    expected = np.array(model.gravity(q)) + np.array(out.tau_potential_nm)
+    np.testing.assert_allclose(out.tau_nm, expected, atol=1e-12)
+    assert math.isclose(sh.fade(out.y_tilde, shaping), 0.0)
+    assert dataclasses.replace(shaping, friction_error_band=1e-6).friction_on

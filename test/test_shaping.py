@@ -1,0 +1,237 @@
+"""
+The issue-10 terms of the law (quat_jt_controller.shaping, docs/lyapunov.md), ROS-free.
+
+Each potential term's torque is minus the gradient of its energy (finite differences) through
+the one tick, ``Regulator.update``; the joint-limit term is C1 and zero away from the limits;
+the large-error term keeps the torque where the paper's fades; the friction compensation
+never exceeds its estimate and acts in the direction of the potential torque at rest.
+"""
+import dataclasses
+import math
+
+from hypothesis import given, settings
+from hypothesis import strategies as st
+import numpy as np
+import pytest
+from quat_jt_controller import control_law as cl
+from quat_jt_controller import paper
+from quat_jt_controller import quaternion as quat
+from quat_jt_controller import shaping as sh
+from quat_jt_controller.regulator import Goal, Regulator
+from robots import random_q, wrist_model, xarm6_model
+
+pytestmark = pytest.mark.unit
+
+ORI, POSE = cl.Task.ORIENTATION, cl.Task.POSE
+ALL_ON = {'joint_limit_margin': 0.3, 'joint_limit_gain': (40.0, 30.0, 20.0),
+          'large_error_gain': 5.0, 'configuration_gain': (6.0, 5.0, 4.0),
+          'configuration_radius': 0.05, 'configuration_ramp': 0.3}
+
+
+def wrist_regulator(shaping: sh.Shaping, potential: str = 'tanh') -> Regulator:
+    gains = cl.Gains.create(potential, (8.0, 8.0, 8.0), (1.0, 1.0, 1.0), (4.0, 4.0, 4.0),
+                            ORI, 3)
+    return Regulator(wrist_model(), ORI, gains, [math.inf] * 3, Goal(paper.Q_DESIRED),
+                     shaping)
+
+
+def numeric_gradient(f, q, h=1e-6):
+    q = np.asarray(q, float)
+    return np.array([(f(q + h * np.eye(q.size)[i]) - f(q - h * np.eye(q.size)[i])) / (2 * h)
+                     for i in range(q.size)])
+
+
+@pytest.mark.parametrize('potential', ['quadratic', 'tanh'])
+@pytest.mark.parametrize('seed', range(4))
+def test_wrist_torque_is_minus_the_gradient_of_the_whole_potential(potential, seed):
+    """Eq. (21)-(22) with U = U_a + k_L B + U_lim + U_c: tau(qdot = 0) - g = -grad U."""
+    rng = np.random.default_rng(seed)
+    reg = wrist_regulator(sh.Shaping.create(3, **ALL_ON), potential)
+    q_star = random_q(reg.model, rng)
+    assert reg.set_goal_configuration(reg.goal, q_star)
+    # joint 1 inside its band, the others anywhere: every term contributes somewhere
+    q = random_q(reg.model, rng, margin=0.0)
+    q[0] = math.pi - 0.1
+    tau = np.array(reg.update(q.tolist(), [0.0] * 3).tau_nm) - reg.model.gravity(q.tolist())
+    grad = numeric_gradient(lambda x: reg.potential_energy(x.tolist()), q)
+    np.testing.assert_allclose(tau, -grad, atol=2e-5 * max(1.0, np.abs(grad).max()))
+
+
+def test_xarm6_pose_torque_is_minus_the_gradient_of_the_whole_potential():
+    model = xarm6_model()
+    rng = np.random.default_rng(3)
+    gains = cl.Gains.create('tanh', (30.0,) * 3 + (2.0,) * 3, (1.0,) * 6, (20.0,) * 3 + (4.0,) * 3,
+                            POSE, 6)
+    shaping = sh.Shaping.create(6, joint_limit_margin=0.3, joint_limit_gain=(10.0,) * 6,
+                                large_error_gain=1.0, configuration_gain=(2.0,) * 6,
+                                configuration_radius=0.0, configuration_ramp=0.5)
+    q_goal = random_q(model, rng)
+    p, R = model.forward_kinematics(q_goal.tolist())
+    reg = Regulator(model, POSE, gains, [math.inf] * 6,
+                    Goal(quat.from_rotation_matrix(R), tuple(p)), shaping)
+    reg.set_goal_configuration(reg.goal, q_goal)
+    q = random_q(model, rng, margin=0.0)
+    q[2] = model.position_upper[2] - 0.1  # joint 3 in its band
+    assert reg.limit_band is not None and 2 in reg.limit_band.joints
+    assert 0 not in reg.limit_band.joints  # joint 1 turns through 4 pi: no limit term
+    tau = np.array(reg.update(q.tolist(), [0.0] * 6).tau_nm) - model.gravity(q.tolist())
+    grad = numeric_gradient(lambda x: reg.potential_energy(x.tolist()), q)
+    np.testing.assert_allclose(tau, -grad, atol=2e-5 * max(1.0, np.abs(grad).max()))
+
+
+def test_joint_limit_potential_is_c1_zero_outside_the_band_and_pushes_out():
+    model = wrist_model()
+    band = sh.LimitBand.create(model.position_lower, model.position_upper,
+                               sh.Shaping.create(3, joint_limit_margin=0.25,
+                                                 joint_limit_gain=(40.0, 30.0, 20.0)))
+    edge = model.position_upper[1] - 0.25
+    for q2 in (0.0, edge - 1e-9, edge):
+        tau = [0.0] * 3
+        band.add_torque([0.0, q2, 0.0], tau)
+        assert tau == [0.0, 0.0, 0.0] and band.energy([0.0, q2, 0.0]) == 0.0
+    for depth in (1e-6, 1e-3, 0.1, 0.25):  # continuous torque from zero at the edge: C1
+        tau = [0.0] * 3
+        band.add_torque([0.0, edge + depth, 0.0], tau)
+        assert tau[1] == pytest.approx(-30.0 * depth) and tau[0] == tau[2] == 0.0
+        assert band.energy([0.0, edge + depth, 0.0]) == pytest.approx(15.0 * depth ** 2)
+    tau = [0.0] * 3
+    band.add_torque([model.position_lower[0] + 0.05, 0.0, 0.0], tau)
+    assert tau[0] == pytest.approx(40.0 * 0.2)  # lower band: pushes up
+    assert band.depth([0.0, model.position_upper[1], 0.0])[1] == pytest.approx(1.0)
+
+
+def test_joint_limit_margin_must_fit_the_range():
+    model = wrist_model()
+    with pytest.raises(sh.ShapingError, match='leaves no room'):
+        sh.LimitBand.create(model.position_lower, model.position_upper,
+                            sh.Shaping.create(3, joint_limit_margin=2.7,
+                                              joint_limit_gain=(1.0, 1.0, 1.0)))
+    assert sh.LimitBand.create(model.position_lower, model.position_upper,
+                               sh.Shaping.create(3, joint_limit_margin=0.3)) is None
+
+
+@pytest.mark.parametrize('name, kwargs, words', [
+    ('negative gain', {'joint_limit_gain': (1.0, -1.0, 1.0)}, 'joint_limit_gain[1]'),
+    ('wrong size', {'friction_compensation': (1.0, 1.0)}, 'must have 3 values'),
+    ('nan', {'large_error_gain': math.nan}, 'large_error_gain must be finite'),
+    ('zero band', {'friction_error_band': 0.0}, 'friction_error_band must be finite and > 0'),
+])
+def test_invalid_extensions_are_refused_with_their_name(name, kwargs, words):
+    with pytest.raises(sh.ShapingError, match=words.replace('[', r'\[').replace(']', r'\]')):
+        sh.Shaping.create(3, **kwargs)
+
+
+def test_large_error_term_keeps_the_torque_where_the_papers_fades():
+    """Near a half turn Q^T K_p e fades like eta_e; with k_L B it stays near k_L / 2."""
+    k, k_l = 10.0, 10.0
+    paper_only = cl.Gains.create('quadratic', (k,) * 3, (1.0,) * 3, (1.0,) * 3, ORI, 3)
+    for theta_deg in (90.0, 150.0, 165.0):
+        half = math.radians(theta_deg) / 2.0
+        e = (0.0, 0.0, math.sin(half))
+        eta_e = math.cos(half)
+        base = np.linalg.norm(cl.task_force(e, eta_e, paper_only))
+        extended = np.linalg.norm(cl.task_force(e, eta_e, paper_only, k_l))
+        assert base == pytest.approx(0.5 * k * eta_e * math.sin(half))
+        assert extended - base > 0.8 * 0.5 * k_l * math.sin(half) ** 2 * eta_e / math.sqrt(
+            eta_e ** 2 + sh.LARGE_ERROR_DELTA ** 2) - 1e-12
+        if theta_deg >= 150.0:
+            assert extended > 3.0 * base
+    # it fades to zero at the half turn itself (continuous torque) and is flat at the goal
+    assert np.linalg.norm(cl.task_force((0.0, 0.0, 1.0), 0.0, paper_only, k_l)) < 1e-12
+    assert cl.large_error_energy(1e-3, k_l) < 1e-8
+    h = 1e-6
+    for x in (0.1, 0.5, 0.9, 0.999):  # B' = s^2 / sqrt(a^2 - s^2) = (gradient scale) s
+        slope = (cl.large_error_energy(x + h, k_l) - cl.large_error_energy(x - h, k_l)) / (2 * h)
+        assert slope == pytest.approx(cl.large_error_gradient_scale(x * x, k_l) * x, rel=1e-5)
+
+
+@settings(max_examples=200, deadline=None)
+@given(tau_p=st.lists(st.floats(-50, 50), min_size=3, max_size=3),
+       qdot=st.lists(st.floats(-5, 5), min_size=3, max_size=3),
+       error=st.floats(0.0, 1.0))
+def test_friction_compensation_never_exceeds_its_estimate(tau_p, qdot, error):
+    shaping = sh.Shaping.create(3, friction_compensation=(2.0, 0.8, 0.5))
+    y = (error, 0.0, 0.0)
+    fc = sh.friction_compensation(tau_p, qdot, sh.fade(y, shaping), shaping)
+    for value, f in zip(fc, shaping.friction_compensation_nm):
+        assert abs(value) <= f * (1.0 + 1e-12)
+
+
+def test_friction_compensation_at_rest_pushes_with_the_potential_and_fades_at_the_goal():
+    shaping = sh.Shaping.create(3, friction_compensation=(2.0, 0.8, 0.5),
+                                friction_error_band=0.004)
+    at_rest = [0.0, 0.0, 0.0]
+    far = sh.fade((0.1, 0.0, 0.0), shaping)
+    assert far == 1.0
+    fc = sh.friction_compensation([0.3, -0.2, 0.0], at_rest, far, shaping)
+    assert fc[0] == pytest.approx(2.0) and fc[1] == pytest.approx(-0.8) and fc[2] == 0.0
+    assert sh.fade((0.0019, 0.0, 0.0), shaping) == 0.0  # below half the band: off
+    assert 0.0 < sh.fade((0.003, 0.0, 0.0), shaping) < 1.0
+    moving = sh.friction_compensation([0.0, 0.0, 0.0], [1.0, -1.0, 0.0], 0.0, shaping)
+    assert moving[0] == pytest.approx(2.0) and moving[1] == pytest.approx(-0.8)
+    pose = sh.fade((0.002, 0.0, 0.0, 0.0, 0.0, 0.0), shaping)  # 2 mm, band 0.5 mm
+    assert pose == 1.0
+
+
+def test_goal_configuration_term_is_a_huber_spring_with_a_dead_zone():
+    shaping = sh.Shaping.create(2, configuration_gain=(4.0, 0.0), configuration_radius=0.1,
+                                configuration_ramp=0.2)
+    q_star = (1.0, 1.0)
+    for q0, want in ((1.05, 0.0), (1.2, -2.0), (0.8, 2.0), (1.5, -4.0), (-3.0, 4.0)):
+        tau = [0.0, 0.0]
+        sh.add_configuration_torque((q0, 5.0), q_star, shaping, tau)
+        assert tau == [pytest.approx(want), 0.0]
+    q = np.array([1.25, 0.0])
+    grad = numeric_gradient(lambda x: sh.configuration_energy(x, q_star, shaping), q)
+    tau = [0.0, 0.0]
+    sh.add_configuration_torque(q, q_star, shaping, tau)
+    np.testing.assert_allclose(tau, -grad, atol=1e-6)
+
+
+def test_cubic_damping_only_dissipates_and_is_linear_near_rest():
+    shaping = sh.Shaping.create(3, damping_speed=(2.0, 0.0, 1.0))
+    kv = (1.0, 1.0, 0.5)
+    cap = (3.0, 3.0, 3.0)
+    for qdot in ([0.01, 0.01, 0.01], [3.0, -2.0, -4.0], [50.0, 1.0, -50.0]):
+        tau = [0.0] * 3
+        sh.add_speed_damping(qdot, kv, shaping, tau, cap)
+        assert sum(t * v for t, v in zip(tau, qdot)) <= 0.0
+    # above the cap it is linear: the slope the sampled loop must tolerate stays bounded
+    a, b = [0.0] * 3, [0.0] * 3
+    sh.add_speed_damping([10.0, 0.0, 0.0], kv, shaping, a, cap)
+    sh.add_speed_damping([20.0, 0.0, 0.0], kv, shaping, b, cap)
+    assert b[0] == pytest.approx(2.0 * a[0]) and a[0] == pytest.approx(-10.0 * 9.0 / 4.0)
+    tau = [0.0] * 3
+    sh.add_speed_damping([0.01, 0.01, 0.01], kv, shaping, tau, cap)
+    assert max(abs(t) for t in tau) < 1e-6  # qdot^3 / v_c^2: negligible near rest
+    assert tau[1] == 0.0
+
+
+def test_the_paper_law_is_unchanged_with_the_extensions_off():
+    """Shaping() is the paper's law exactly; the node's default."""
+    model = wrist_model()
+    rng = np.random.default_rng(0)
+    gains = cl.Gains.create('tanh', paper.KP, paper.KV, paper.LAMBDA, ORI, 3)
+    plain = Regulator(model, ORI, gains, goal=Goal(paper.Q_DESIRED))
+    off = Regulator(model, ORI, gains, goal=Goal(paper.Q_DESIRED), shaping=sh.Shaping())
+    for _ in range(5):
+        q, qdot = random_q(model, rng).tolist(), rng.normal(size=3).tolist()
+        assert plain.update(q, qdot).tau_nm == off.update(q, qdot).tau_nm
+
+
+def test_shaping_swaps_whole_and_q_star_only_for_the_goal_in_force():
+    reg = wrist_regulator(sh.Shaping())
+    new = sh.Shaping.create(3, **ALL_ON)
+    reg.set_shaping(new)
+    assert reg.shaping is new and reg.limit_band is not None
+    old_goal = reg.goal
+    reg.set_goal(Goal((1.0, 0.0, 0.0, 0.0)))
+    assert not reg.set_goal_configuration(old_goal, (0.0, 0.5, 0.0))  # too late: replaced
+    assert reg.goal_configuration is None
+    assert reg.set_goal_configuration(reg.goal, (0.0, 0.5, 0.0))
+    assert reg.goal_configuration == (0.0, 0.5, 0.0)
+    with pytest.raises(sh.ShapingError, match='must have 3 values'):
+        reg.set_shaping(dataclasses.replace(new, configuration_gain=(1.0,)))
+    assert reg.shaping is new
+    held = reg.hold([0.1, 0.2, 0.3])
+    assert reg.goal is held and reg.goal_configuration == (0.1, 0.2, 0.3)

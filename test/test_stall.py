@@ -1,0 +1,97 @@
+"""
+Stall detection (quat_jt_controller.stall), ROS-free: fed from the tick, at 10 Hz.
+
+At rest off the goal for more than 0.5 s it warns and names the cause: a joint at a limit,
+the potential's torque below the friction estimate, a near-singular configuration, a
+near-180-degree error. Moving, or at the goal, it stays OK. The SVD runs at most at 10 Hz.
+"""
+import math
+
+import numpy as np
+import pytest
+from quat_jt_controller import control_law as cl
+from quat_jt_controller import paper
+from quat_jt_controller import quaternion as quat
+from quat_jt_controller import shaping as sh
+from quat_jt_controller import stall
+from quat_jt_controller.regulator import Goal, Regulator
+from robots import wrist_model
+
+pytestmark = pytest.mark.unit
+
+REST = [0.0, 0.0, 0.0]
+
+
+def regulator(friction=(0.0, 0.0, 0.0), potential='tanh', kp=paper.KP) -> Regulator:
+    gains = cl.Gains.create(potential, kp, paper.KV, paper.LAMBDA, cl.Task.ORIENTATION, 3)
+    return Regulator(wrist_model(), cl.Task.ORIENTATION, gains, goal=Goal(paper.Q_DESIRED),
+                     shaping=sh.Shaping.create(3, friction_compensation=friction))
+
+
+def feed_for(detector, reg, q, qdot, seconds, t0=0.0, dt=1e-3):
+    t = t0
+    while t < t0 + seconds:
+        detector.feed(t, q, qdot, reg.update(q, qdot))
+        t += dt
+    return t
+
+
+def test_a_stall_against_a_joint_limit_is_warned_with_its_cause():
+    reg = regulator()
+    det = stall.StallDetector(reg)
+    q = [math.pi - 0.01, 0.8, 0.3]  # joint 1 at its upper stop
+    feed_for(det, reg, q, REST, 0.45)
+    assert not det.stalled and det.status()[0] == stall.OK  # not yet 0.5 s
+    feed_for(det, reg, q, REST, 0.2, t0=0.45)
+    level, message, values = det.status()
+    assert det.stalled and level == stall.WARN
+    assert 'joint1' in message and 'upper limit' in message
+    assert dict(values)['stalled'] == 'True'
+
+
+def test_moving_or_at_the_goal_is_not_a_stall():
+    reg = regulator()
+    det = stall.StallDetector(reg)
+    feed_for(det, reg, [0.2, 0.8, 0.3], [0.5, 0.0, 0.0], 1.0)  # moving
+    assert not det.stalled and det.status()[0] == stall.OK
+    feed_for(det, reg, list(paper.Q_JOINT_DESIRED_RAD), REST, 1.0, t0=1.0)  # at the goal
+    assert not det.stalled and det.status()[1] == 'not stalled'
+
+
+def test_torque_below_the_friction_estimate_is_named():
+    """The quadratic law with the paper's gains stalls ~0.2 away, as in the paper."""
+    reg = regulator(friction=(2.0, 0.8, 0.5), potential='quadratic')
+    det = stall.StallDetector(reg)
+    q = [0.75, 0.75, 0.75]
+    assert reg.update(q, REST).orientation_error_norm > 0.05
+    feed_for(det, reg, q, REST, 0.7)
+    assert det.stalled
+    assert 'below the friction estimate' in det.status()[1]
+
+
+def test_near_singular_and_near_180_degrees_are_named():
+    reg = regulator()
+    det = stall.StallDetector(reg)
+    feed_for(det, reg, [0.0, 0.0, 0.0], REST, 0.7)  # q2 = 0: J_o has rank 2
+    assert det.stalled and 'near-singular' in det.status()[1]
+    assert det.sigma_min < 1e-9
+    here = quat.from_rotation_matrix(reg.model.forward_kinematics([0.0, 1.0, 0.0])[1])
+    reg.set_goal(Goal(quat.multiply((0.0, 1.0, 0.0, 0.0), here)))  # a half turn about x away
+    det = stall.StallDetector(reg)
+    feed_for(det, reg, [0.0, 1.0, 0.0], REST, 0.7)
+    assert det.stalled and '180 degrees' in det.status()[1]
+
+
+def test_the_detector_is_cheap_svd_at_most_at_10_hz(monkeypatch):
+    reg = regulator()
+    det = stall.StallDetector(reg)
+    calls = []
+    real = np.linalg.svd
+
+    def counting(*args, **kwargs):
+        calls.append(1)
+        return real(*args, **kwargs)
+    monkeypatch.setattr(stall.np.linalg, 'svd', counting)
+    feed_for(det, reg, [math.pi - 0.01, 0.8, 0.3], REST, 2.0)  # 2000 ticks, stalled
+    assert det.stalled
+    assert 10 <= len(calls) <= 21  # once per evaluation while stalled, never per tick
