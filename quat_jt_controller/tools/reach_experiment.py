@@ -160,7 +160,9 @@ def run_case(robot: Robot, model: RobotModel, gains: cl.Gains, shaping: sh.Shapi
     with quiet():
         sim = WristSimulator(robot_urdf(robot), model.joint_names, initial_positions_rad=q0,
                              viscous_nm_s_per_rad=sim_params.get('viscous_friction'),
-                             coulomb_nm=sim_params.get('coulomb_friction'))
+                             coulomb_nm=sim_params.get('coulomb_friction'),
+                             enforce_velocity_limits=sim_params.get('enforce_velocity_limits',
+                                                                    True))
     try:
         run = run_sampled(loop, sim, robot.duration_s, delay_ticks, q_star, q_star_after_s)
     finally:
