@@ -433,9 +433,11 @@ def main(argv: Optional[list] = None) -> int:
         print(f'{r.potential}: {args.duration:g} s {"simulated" if args.lockstep else "real"} '
               f'time recorded in {r.recording_wall_s:.2f} s of wall time ({mode}): '
               f'{args.duration / r.recording_wall_s:.2f}x real time'
-              + (f'; RECORDING INCOMPLETE: {r.missing_states} states missing (this process '
-                 'fell behind; rerun with --max-rtf)' if r.missing_states else
-                 '; recording complete'))
+              + ('; recording complete' if not r.missing_states else
+                 f'; RECORDING INCOMPLETE: {r.missing_states} states missing (this process '
+                 'fell behind; rerun with --max-rtf)' if args.lockstep else
+                 f'; {r.missing_states} ticks missing (late ticks the real-time loop skipped, '
+                 'or states this process missed)'))
     print(f'\nFigure {args.out / "fig2_error_norm.png"}, CSV {args.out / "paper_experiment.csv"}, '
           f'MCAP {", ".join(str(r.mcap_path) for r in runs)}')
     if not args.no_animation:  # after the runs, from the recorded joint states

@@ -1,7 +1,8 @@
 """
 Soak: both nodes for a long run, with the figures that show a leak, a drift or a fault.
 
-Starts ``wrist_sim_node`` and ``controller_node`` (the package's wrist configs, real time) on a
+Starts ``wrist_sim_node`` and ``controller_node`` (``config/wrist_sim.yaml`` and the product
+``config/wrist_controller.yaml``, real time) on a
 private loopback graph, then alternates two reachable goals every 30 s.
 Every ``--report`` seconds (one minute by default; before a goal change due then) it prints
 each process's resident memory, the joint-state and command rates seen here, the controller's
@@ -79,7 +80,9 @@ def soak(duration_s: float, out: Path, load: int = 0, report_s: float = 60.0,
                                        daemon=True) for _ in range(load)]
     for b in burners:
         b.start()
-    sim, ctrl = local_ros.spawn_wrist_pair(env, out, sim_params={'stats_file': str(stats_file)})
+    sim, ctrl = local_ros.spawn_wrist_pair(  # the product defaults, as a user runs them
+        env, out, sim_params={'stats_file': str(stats_file)},
+        controller_config=local_ros.PRODUCT_CONTROLLER_CONFIG)
     probe = ProbeNode('soak_probe', domain_id)
     model = RobotModel(default_urdf_xml(), 'base_link', 'tool0')
     _, R2 = model.forward_kinematics(SECOND_GOAL_Q_RAD)
