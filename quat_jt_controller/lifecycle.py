@@ -15,7 +15,7 @@ from rclpy.signals import SignalHandlerOptions
 
 
 class StopFlag:
-    """Set by SIGINT / SIGTERM (and by :meth:`request_stop`); the spin loop ends then."""
+    """Set by SIGINT / SIGTERM; the spin loop ends then."""
 
     def __init__(self) -> None:
         self.is_set = False
@@ -23,9 +23,6 @@ class StopFlag:
             signal.signal(sig, self._on_signal)
 
     def _on_signal(self, signum: int, frame: object) -> None:
-        self.is_set = True
-
-    def request_stop(self) -> None:
         self.is_set = True
 
     def __call__(self) -> bool:
