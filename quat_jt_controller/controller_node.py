@@ -20,7 +20,8 @@ from quat_jt_controller.goal_check import GoalCheckWorker, ModelSpec
 from quat_jt_controller.joints import stamp_problem, StateLayout
 from quat_jt_controller.loop_stats import TickStats
 from quat_jt_controller.model import ModelError, RobotModel
-from quat_jt_controller.parameters import declare_gains, declare_shaping, declare_structural
+from quat_jt_controller.parameters import declare_cpu_affinity, declare_gains, declare_shaping
+from quat_jt_controller.parameters import declare_structural
 from quat_jt_controller.parameters import history_qos
 from quat_jt_controller.regulator import Goal, Regulator, TickOutput
 from quat_jt_controller.resources import bundled_urdf_hint
@@ -34,6 +35,8 @@ from std_msgs.msg import Float64MultiArray
 NODE_NAME = 'quat_jt_controller'
 THROTTLE_S = 1.0  # rejected goals and states: at most one log line per second and cause
 GOAL_LOG_PERIOD_S = 0.2  # accepted distinct goals: one line each, at most 5 a second
+# /diagnostics wait for the next tick while states come at least this often (else: at once)
+DIAGNOSTICS_WAIT_NS = 20_000_000
 
 
 class QuatJtController(Node):
@@ -42,6 +45,7 @@ class QuatJtController(Node):
     def __init__(self, **kwargs) -> None:
         super().__init__(NODE_NAME, **kwargs)
         cfg = self.config = declare_structural(self)
+        self.cpu_affinity = declare_cpu_affinity(self)  # pinned by lifecycle.run_node
         try:
             model = RobotModel(cfg.robot_description, cfg.base_link, cfg.tip_link, cfg.joints)
         except ModelError as exc:
@@ -92,7 +96,8 @@ class QuatJtController(Node):
         self.create_subscription(PoseStamped, '~/target_pose', self._on_target_pose, 10)
         self.create_timer(min(0.05, cfg.state_timeout_s / 4.0), self._on_watchdog)
         self.create_timer(0.05, self._on_goal_checks)
-        self.create_timer(1.0, self._on_diagnostics)
+        self._diagnostics_due = False
+        self.create_timer(1.0, self._on_diagnostics_timer)
         # /diagnostics is one topic for the whole graph: statuses carry the full node name.
         self._diag_name = self.get_fully_qualified_name().lstrip('/')
         g = self.regulator.gains
@@ -161,6 +166,9 @@ class QuatJtController(Node):
         if self._decimation >= self.config.publish_rate_divider:
             self._decimation = 0
             self._publish_feedback(stamp, out)
+        if self._diagnostics_due:  # now: the command is out, the next state ~1 period away
+            self._diagnostics_due = False
+            self._publish_diagnostics()
 
     def _hold(self, q: list[float]) -> None:
         """Until the first goal: hold the pose measured on the first joint state."""
@@ -252,8 +260,21 @@ class QuatJtController(Node):
                                            f'warning: {verdict}')
 
     # --------------------------------------------------------------------------- diagnostics
-    def _on_diagnostics(self) -> None:
-        """1 Hz: the loop's figures and the goal's state, from the ROS-free builders."""
+    def _on_diagnostics_timer(self) -> None:
+        """
+        1 Hz: publish /diagnostics right after the next command, or now if states have stopped.
+
+        Building them takes a few hundred us; done just after a command goes out, it never
+        holds up the answer to a state (a timer could fire just before one arrives).
+        """
+        if self._last_state_ns and time.monotonic_ns() - self._last_state_ns < DIAGNOSTICS_WAIT_NS:
+            self._diagnostics_due = True
+        else:
+            self._diagnostics_due = False
+            self._publish_diagnostics()
+
+    def _publish_diagnostics(self) -> None:
+        """Publish the loop's figures and the goal's state, from the ROS-free builders."""
         now = time.monotonic_ns()
         figures = self.stats.window((now - self._window_start_ns) * 1e-9)
         self._window_start_ns = now

@@ -10,6 +10,7 @@ import gc
 import signal
 from typing import Callable, Optional
 
+from quat_jt_controller import realtime
 import rclpy
 from rclpy.signals import SignalHandlerOptions
 
@@ -43,6 +44,18 @@ def spin(executor, context: rclpy.Context, keep_running: Callable[[], bool],
         executor.spin_once(timeout_sec=period_s)
 
 
+def pin(nodes: list) -> None:
+    """
+    Pin the process to the CPUs its nodes ask for (``cpu_affinity``), once all are built.
+
+    Composed nodes share the process: it is pinned to the union of their CPUs.
+    """
+    cpus = sorted({c for node in nodes for c in getattr(node, 'cpu_affinity', ())})
+    if cpus:
+        pinned = realtime.pin_process(cpus)
+        nodes[0].get_logger().info(f'process pinned to CPUs {list(pinned)} (cpu_affinity)')
+
+
 def run_node(make_node: Callable[[], object], name: str, startup_errors: tuple,
              run: Callable[[object, object, Callable[[], bool]], None],
              args: Optional[list[str]] = None) -> None:
@@ -50,8 +63,9 @@ def run_node(make_node: Callable[[], object], name: str, startup_errors: tuple,
     Run a node of this package: its ``main()``, the Jazzy way.
 
     Build the node, or a tuple of nodes sharing the process (``startup_errors`` exit with
-    status 1 and a FATAL line saying why), add it to one EventsExecutor, freeze what is built
-    so far from the garbage collector, then ``run(node, executor, keep_running)``. On the way
+    status 1 and a FATAL line saying why), add it to one EventsExecutor, pin the process to the
+    nodes' ``cpu_affinity`` (if set), freeze what is built so far from the garbage collector,
+    then ``run(node, executor, keep_running)``. On the way
     out (Ctrl-C, SIGTERM, an external shutdown) the nodes are destroyed, last built first,
     before the context is shut down.
     """
@@ -70,6 +84,7 @@ def run_node(make_node: Callable[[], object], name: str, startup_errors: tuple,
         executor = EventsExecutor(context=nodes[0].context)
         for each in nodes:
             executor.add_node(each)
+        pin(nodes)
         # What is built so far lives as long as the node: keep the cyclic garbage collector
         # from rescanning it during the 1 kHz loop.
         gc.collect()

@@ -65,20 +65,29 @@ def test_paper_experiment_reproduces_the_qualitative_result(tmp_path, mode):
 
 def test_benchmark_reports_every_figure(tmp_path):
     stdout = run_tool('quat_jt_controller.tools.benchmark', '--out', str(tmp_path),
-                      '--duration', '3', '--warmup', '1')
-    assert '| figure | two processes | composed (one process) | minimal pair' in stdout
+                      '--duration', '3', '--composed-duration', '3', '--warmup', '1')
+    assert ('| figure | two processes, pinned | minimal pair, pinned | two processes, not '
+            'pinned | minimal pair, not pinned | composed (3 s) | target |') in stdout
     for row in ('state rate (Hz)', 'command rate (Hz)', 'missed ticks: steps without a fresh',
-                'latency p50 / p99 / max (ms)', 'controller compute p50 / p99 (us)',
+                'late publications', 'latency p50 / p99 / max (ms)',
+                'controller compute p50 / p99 (us)',
                 'CPU % (sim / controller, or the one process)',
                 'paper experiment in lockstep (x real time)', 'host CPU steal during the run (%)',
                 'core tick Regulator.update, xArm6 6-DOF pose'):
         assert f'| {row}' in stdout, row
     result = json.loads((tmp_path / 'bench.json').read_text())
-    for mode in ('two processes', 'composed'):  # the loop ran; figures are not asserted
+    for mode in ('two processes, pinned', 'two processes, not pinned', 'composed'):
+        # the loop ran; figures are not asserted
         assert result['loops'][mode]['sim']['window_steps'] > 1000, mode
         assert result['loops'][mode]['command_rate_hz'] > 100.0, mode
+    for mode in ('two processes', 'composed'):
         assert result['lockstep'][mode]['real_time_factor'] > 0.0, mode
-    assert result['baseline']['window_steps'] > 1000  # the minimal pair ran too
+    for mode in ('two processes, pinned', 'two processes, not pinned'):
+        assert result['baselines'][mode]['window_steps'] > 1000  # the minimal pair ran too
+    # Pinned means pinned: each node said so in its log.
+    for log in ('wrist_sim_node.log', 'controller_node.log'):
+        assert 'process pinned to CPUs' in (
+            tmp_path / 'two_processes_pinned' / log).read_text(), log
     for name, core in result['core'].items():
         assert math.isfinite(core['us_per_tick']) and core['us_per_tick'] > 0.0, name
 

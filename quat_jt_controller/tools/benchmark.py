@@ -3,11 +3,14 @@ Benchmark of the 1 kHz loop: the two nodes over DDS in separate processes, and t
 
 Loop: ``wrist_sim_node`` (real-time pacing at 1 kHz) and ``controller_node`` (tanh law, paper
 gains, regulating to the paper's goal) on a private loopback ROS graph, warmed up, then measured
-for ``--duration`` seconds. Figures and where they come from:
+for ``--duration`` seconds, three ways: two processes pinned to a CPU each (``cpu_affinity``:
+the simulator on the first CPU, the controller on the second), two processes not pinned, and
+both nodes composed in one process (not pinned; ``--composed-duration``, 60 s). Figures and
+where they come from:
 
 * state rate, period jitter, missed deadlines, stale ticks (a step that applied no command
   computed from the previous state), state-to-command latency (state publish -> arrival of the
-  command computed from it): the simulator's own loop statistics over the last 30 s
+  command computed from it): the simulator's own loop statistics over the measured interval
   (``stats_file``);
 * command rate and compute time per tick (JointState callback to command ready): the
   controller's ``/diagnostics``, one window per second; p50 is the median of the windows' p50,
@@ -18,14 +21,16 @@ for ``--duration`` seconds. Figures and where they come from:
   figure with it.
 
 Baseline: the same loop figures for a minimal rclpy pair with nothing to compute
-(``tools/minimal_pair.py``), run just before, for the same duration: the floor this machine
-sets at that moment. What the real nodes show beyond it is theirs.
+(``tools/minimal_pair.py``), run just before each two-process run, pinned the same way, for the
+same duration: the floor this machine sets at that moment. What the real nodes show beyond it
+is theirs.
 
 Core: ticks per second of the node's own tick, ``Regulator.update`` (kinematics, Jacobian, g(q),
-error, law, finite check, clamp), for
-the wrist (3-DOF, orientation task) and the xArm6 (6-DOF, pose task), in one process.
+error, law, finite check, clamp), for the wrist (3-DOF, orientation task) and the xArm6 (6-DOF,
+pose task), in one process.
 
-    python -m quat_jt_controller.tools.benchmark [--duration 30] [--out results/bench]
+    python -m quat_jt_controller.tools.benchmark [--duration 30] [--composed-duration 60]
+        [--out results/bench]
 """
 import argparse
 import json
@@ -40,6 +45,7 @@ from typing import Optional
 from quat_jt_controller import control_law as cl
 from quat_jt_controller import paper
 from quat_jt_controller import quaternion as quat
+from quat_jt_controller import realtime
 from quat_jt_controller.model import RobotModel
 from quat_jt_controller.regulator import Goal, Regulator
 from quat_jt_controller.resources import default_urdf_xml
@@ -47,7 +53,7 @@ from quat_jt_controller.tools import local_ros
 
 CONTROLLER = 'quat_jt_controller'
 TARGETS = {'command rate (Hz)': '>= 995', 'missed ticks (%)': 'two: floor + 0.1 pt; composed: 0',
-           'latency p99 (ms)': '<= 1.0', 'compute p50 (us)': '<= 25',
+           'latency p99 (ms)': '<= 1.0', 'compute p50 (us)': '<= 25 (two processes)',
            'CPU per node (%)': '<= 30 per node', 'lockstep (x real time)': '>= 3 / >= 6'}
 
 
@@ -94,18 +100,25 @@ def _cpu_times() -> list[int]:
     return [int(v) for v in Path('/proc/stat').read_text().split('\n', 1)[0].split()[1:9]]
 
 
-def baseline_benchmark(duration_s: float, warmup_s: float, out: Path) -> dict:
-    """Run the minimal pair; return its loop statistics (LoopStats.summary of its sim)."""
-    out = out / 'baseline'
+def baseline_benchmark(duration_s: float, warmup_s: float, out: Path,
+                       cpus: tuple[tuple[int, ...], tuple[int, ...]] = ((), ())) -> dict:
+    """
+    Run the minimal pair; return its loop statistics (LoopStats.summary of its sim).
+
+    ``cpus``: the CPUs of its sim and its controller, as for :func:`loop_benchmark`.
+    """
+    out = out / ('baseline_pinned' if any(cpus) else 'baseline')
     out.mkdir(parents=True, exist_ok=True)
     env = local_ros.isolated_env(out, random.randint(1, 100))
     stats_file = out / 'minimal_pair_stats.json'
     stats_file.unlink(missing_ok=True)
+    sim_cpus, ctrl_cpus = (tuple(a for c in each for a in ('--cpu', str(c))) for each in cpus)
     ctrl = local_ros.spawn_node('minimal_pair', env, out, name='minimal_controller',
-                                args=('--role', 'controller'))
+                                args=('--role', 'controller', *ctrl_cpus))
     sim = local_ros.spawn_node('minimal_pair', env, out, name='minimal_sim',
                                args=('--role', 'sim', '--duration', str(duration_s),
-                                     '--warmup', str(warmup_s), '--stats', str(stats_file)))
+                                     '--warmup', str(warmup_s), '--stats', str(stats_file),
+                                     *sim_cpus))
     host0 = _cpu_times()
     try:
         sim.wait(timeout=duration_s + warmup_s + 60.0)
@@ -119,21 +132,35 @@ def baseline_benchmark(duration_s: float, warmup_s: float, out: Path) -> dict:
             'host_steal_percent': 100.0 * host[7] / max(sum(host), 1)}
 
 
-def loop_benchmark(duration_s: float, warmup_s: float, out: Path, composed: bool = False) -> dict:
-    """Measure the real-time loop of the two nodes: two processes, or composed in one."""
+def loop_benchmark(duration_s: float, warmup_s: float, out: Path, composed: bool = False,
+                   cpus: tuple[tuple[int, ...], tuple[int, ...]] = ((), ())) -> dict:
+    """
+    Measure the real-time loop of the two nodes: two processes, or composed in one.
+
+    ``cpus``: the simulator's and the controller's ``cpu_affinity`` (composed: the process is
+    pinned to both); empty = not pinned.
+    """
     from diagnostic_msgs.msg import DiagnosticArray
     from quat_jt_controller.tools.probe import ProbeNode
     from geometry_msgs.msg import PoseStamped
 
-    out = out / ('composed' if composed else 'two_processes')
+    out = out / ('composed' if composed else
+                 'two_processes_pinned' if any(cpus) else 'two_processes')
     out.mkdir(parents=True, exist_ok=True)
     domain_id = random.randint(1, 100)
     env = local_ros.isolated_env(out, domain_id)
     stats_file = out / 'sim_stats.json'
     stats_file.unlink(missing_ok=True)
-    sim, ctrl = local_ros.spawn_wrist_pair(
-        env, out, sim_params={'stats_file': str(stats_file), 'coulomb_friction': [0.0] * 3},
-        controller_params={'potential': 'tanh'}, composed=composed)
+    # The simulator's statistics cover the measured interval: it is stopped right after it.
+    sim_params = {'stats_file': str(stats_file), 'coulomb_friction': [0.0] * 3,
+                  'stats_window': int(duration_s * 1000)}
+    controller_params = {'potential': 'tanh'}
+    for params, cpu_affinity in zip((sim_params, controller_params), cpus):
+        if cpu_affinity:
+            params['cpu_affinity'] = list(cpu_affinity)
+    sim, ctrl = local_ros.spawn_wrist_pair(env, out, sim_params=sim_params,
+                                           controller_params=controller_params,
+                                           composed=composed)
     procs = {sim.pid: sim, ctrl.pid: ctrl}  # one entry when composed
     probe = ProbeNode('benchmark_probe', domain_id)
     node, executor = probe.node, probe.executor
@@ -157,7 +184,9 @@ def loop_benchmark(duration_s: float, warmup_s: float, out: Path, composed: bool
             executor.spin_once(timeout_sec=min(0.1, max(end - time.monotonic(), 0.0)))
 
     try:
-        print(f'loop ({"composed" if composed else "two processes"}): starting the nodes '
+        mode = ('composed' if composed else
+                'two processes, pinned' if any(cpus) else 'two processes')
+        print(f'loop ({mode}): starting the nodes '
               f'(domain {domain_id}), warm-up {warmup_s} s')
         goal = PoseStamped()
         goal.header.frame_id = 'base_link'
@@ -221,73 +250,120 @@ def lockstep_benchmark(out: Path, duration_s: float = 6.0) -> dict:
     return factors
 
 
-def report(loops: dict, core: dict, baseline: dict, lockstep: dict) -> str:
-    """Return the figures as a markdown table: both modes and the minimal pair, side by side."""
-    two, comp = loops['two processes'], loops['composed']
-    cells = {mode: _loop_rows(loop['sim']) for mode, loop in loops.items()}
-    floor = _loop_rows(baseline)
+PINNED = 'two processes, pinned'
+UNPINNED = 'two processes, not pinned'
+COMPOSED = 'composed'
 
-    def both(fmt) -> tuple[str, str]:
-        return fmt(two), fmt(comp)
+
+def pinned_layout() -> tuple[tuple[int, ...], tuple[int, ...]]:
+    """Return the CPUs of the simulator (the first this process may use) and the controller."""
+    cpus = sorted(realtime.allowed_cpus())
+    return ((cpus[0],), (cpus[1],)) if len(cpus) >= 2 else ((), ())
+
+
+def report(loops: dict, baselines: dict, core: dict, lockstep: dict,
+           layout: tuple[tuple[int, ...], tuple[int, ...]]) -> str:
+    """
+    Return the figures as a markdown table: each mode beside the minimal pair run the same way.
+
+    ``loops`` and ``baselines`` are keyed by mode (PINNED, UNPINNED; loops also COMPOSED).
+    """
+    modes = [m for m in (PINNED, UNPINNED) if m in loops]
+    columns = [(loops[m], baselines[m]) for m in modes] + [(loops[COMPOSED], None)]
+    header = []
+    for m in modes:
+        header += [m, f'minimal pair, {"pinned" if m == PINNED else "not pinned"}']
+    header.append(f'composed ({loops[COMPOSED]["duration_s"]:.0f} s)')
+
+    def cells(ours, floor=None, node=None) -> list[str]:
+        """One row: ``ours(loop)`` per mode, ``floor(baseline)`` beside it ('' if None)."""
+        out = []
+        for loop, base in columns:
+            out.append(ours(loop))
+            if base is not None:
+                out.append(floor(base) if floor else '')
+        return out
+
+    def cpu(loop: dict) -> str:
+        c = loop['cpu_percent']
+        return (f'{c["composed"]:.0f}' if 'composed' in c else
+                f'{c["wrist_sim_node"]:.0f} / {c["controller_node"]:.0f}')
+
+    def lock(mode: str) -> str:
+        f = lockstep[mode]
+        return f'{f["real_time_factor"]:.2f}' + (
+            f' ({f["missing_states"]} states lost)' if f['missing_states'] else '')
 
     rows = [
-        ('state rate (Hz)', *both(lambda r: f'{r["sim"]["window_rate_hz"]:.1f}'),
-         f'{baseline["window_rate_hz"]:.1f}', ''),
-        ('command rate (Hz)', *both(lambda r: f'{r["command_rate_hz"]:.1f}'), '',
+        ('state rate (Hz)', *cells(lambda r: f'{r["sim"]["window_rate_hz"]:.1f}',
+                                   lambda b: f'{b["window_rate_hz"]:.1f}'), ''),
+        ('command rate (Hz)', *cells(lambda r: f'{r["command_rate_hz"]:.1f}'),
          TARGETS['command rate (Hz)']),
-        ('missed ticks: steps without a fresh command (%)', cells['two processes'][0],
-         cells['composed'][0], floor[0], TARGETS['missed ticks (%)']),
-        ('late deadlines (total, incl. start-up)',
-         *both(lambda r: str(r['sim']['missed_deadlines'])),
-         str(baseline['missed_deadlines']), ''),
-        ('period jitter p50 / p99 / max (us)', cells['two processes'][1], cells['composed'][1],
-         floor[1], ''),
-        ('latency p50 / p99 / max (ms)', cells['two processes'][2], cells['composed'][2],
-         floor[2], TARGETS['latency p99 (ms)']),
+        ('missed ticks: steps without a fresh command (%)',
+         *cells(lambda r: _loop_rows(r['sim'])[0], lambda b: _loop_rows(b)[0]),
+         TARGETS['missed ticks (%)']),
+        ('late publications (> half a period; in the window)',
+         *cells(lambda r: str(r['sim']['window_late_steps']),
+                lambda b: str(b['window_late_steps'])), ''),
+        ('period jitter p50 / p99 / max (us)',
+         *cells(lambda r: _loop_rows(r['sim'])[1], lambda b: _loop_rows(b)[1]), ''),
+        ('latency p50 / p99 / max (ms)',
+         *cells(lambda r: _loop_rows(r['sim'])[2], lambda b: _loop_rows(b)[2]),
+         TARGETS['latency p99 (ms)']),
         ('controller compute p50 / p99 (us)',
-         *both(lambda r: f'{r["compute_us_p50"]:.1f} / {r["compute_us_p99"]:.1f}'), '',
+         *cells(lambda r: f'{r["compute_us_p50"]:.1f} / {r["compute_us_p99"]:.1f}'),
          TARGETS['compute p50 (us)']),
         ('sim step + publish p50 / p99 (us)',
-         *both(lambda r: f'{r["sim"]["step_compute_us_p50"]:.1f} / '
-                         f'{r["sim"]["step_compute_us_p99"]:.1f}'), '', ''),
-        ('CPU % (sim / controller, or the one process)',
-         f'{two["cpu_percent"]["wrist_sim_node"]:.0f} / '
-         f'{two["cpu_percent"]["controller_node"]:.0f}',
-         f'{comp["cpu_percent"]["composed"]:.0f}', '', TARGETS['CPU per node (%)']),
-        ('paper experiment in lockstep (x real time)',
-         *(f'{lockstep[m]["real_time_factor"]:.2f}'
-           + (f' ({lockstep[m]["missing_states"]} states lost)'
-              if lockstep[m]['missing_states'] else '') for m in ('two processes', 'composed')),
-         '', TARGETS['lockstep (x real time)']),
-        ('host CPU steal during the run (%)', *both(lambda r: f'{r["host_steal_percent"]:.1f}'),
-         f'{baseline["host_steal_percent"]:.1f}', ''),
+         *cells(lambda r: f'{r["sim"]["step_compute_us_p50"]:.1f} / '
+                          f'{r["sim"]["step_compute_us_p99"]:.1f}'), ''),
+        ('CPU % (sim / controller, or the one process)', *cells(cpu),
+         TARGETS['CPU per node (%)']),
+        ('host CPU steal during the run (%)',
+         *cells(lambda r: f'{r["host_steal_percent"]:.1f}',
+                lambda b: f'{b["host_steal_percent"]:.1f}'), ''),
     ]
+    lines = ['| figure | ' + ' | '.join(header) + ' | target |',
+             '|---' * (len(header) + 2) + '|']
+    lines += ['| ' + ' | '.join(row) + ' |' for row in rows]
+    lines += ['', f'Pinned: simulator on CPU {list(layout[0])}, controller on CPU '
+              f'{list(layout[1])} (``cpu_affinity``); the minimal pair likewise.', '',
+              '| figure | two processes | composed | target |', '|---|---|---|---|',
+              f'| paper experiment in lockstep (x real time) | {lock("two processes")} | '
+              f'{lock("composed")} | {TARGETS["lockstep (x real time)"]} |']
     for name, c in core.items():
-        rows.append((f'core tick Regulator.update, {name} (us; ticks/s)',
-                     f'{c["us_per_tick"]:.1f}; {c["ticks_per_s"]:,.0f}', '', '', ''))
-    lines = ['| figure | two processes | composed (one process) | minimal pair (host floor) | '
-             'target |', '|---|---|---|---|---|']
-    lines += [f'| {a} | {b} | {c} | {d} | {e} |' for a, b, c, d, e in rows]
+        lines.append(f'| core tick Regulator.update, {name} (us; ticks/s) | '
+                     f'{c["us_per_tick"]:.1f}; {c["ticks_per_s"]:,.0f} | | |')
     return '\n'.join(lines)
 
 
 def main(argv: Optional[list] = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split('\n')[0])
-    parser.add_argument('--duration', type=float, default=30.0, help='measured seconds')
+    parser.add_argument('--duration', type=float, default=30.0,
+                        help='measured seconds of each two-process run and minimal pair')
+    parser.add_argument('--composed-duration', type=float, default=60.0,
+                        help='measured seconds of the composed run')
     parser.add_argument('--warmup', type=float, default=3.0)
     parser.add_argument('--out', type=Path, default=Path('results/bench'))
     args = parser.parse_args(argv)
     args.out.mkdir(parents=True, exist_ok=True)
     print('core: timing the control tick in one process')
     core = core_benchmark()
-    print(f'baseline: a minimal rclpy pair for {args.duration} s')
-    baseline = baseline_benchmark(args.duration, args.warmup, args.out)
-    loops = {mode: loop_benchmark(args.duration, args.warmup, args.out, composed)
-             for mode, composed in (('two processes', False), ('composed', True))}
+    layout = pinned_layout()
+    loops, baselines = {}, {}
+    for mode, cpus in ((PINNED, layout), (UNPINNED, ((), ()))):
+        if mode == PINNED and not any(cpus):
+            print('fewer than 2 CPUs: no pinned run')
+            continue
+        print(f'baseline ({mode}): a minimal rclpy pair for {args.duration} s')
+        baselines[mode] = baseline_benchmark(args.duration, args.warmup, args.out, cpus)
+        loops[mode] = loop_benchmark(args.duration, args.warmup, args.out, cpus=cpus)
+    loops[COMPOSED] = loop_benchmark(args.composed_duration, args.warmup, args.out,
+                                     composed=True)
     lockstep = lockstep_benchmark(args.out)
-    text = report(loops, core, baseline, lockstep)
+    text = report(loops, baselines, core, lockstep, layout)
     (args.out / 'bench.json').write_text(json.dumps(
-        {'loops': loops, 'core': core, 'baseline': baseline, 'lockstep': lockstep}, indent=1))
+        {'loops': loops, 'core': core, 'baselines': baselines, 'lockstep': lockstep,
+         'pinned_layout': layout}, indent=1))
     (args.out / 'bench.md').write_text(text + '\n')
     print()
     print(text)

@@ -2,12 +2,13 @@
 The floor of the host: a minimal rclpy state/command pair, for the benchmark's baseline.
 
 Two processes, like ``wrist_sim_node`` and ``controller_node`` but with nothing to compute:
-``--role sim`` publishes a 3-joint ``JointState`` on each 1 kHz tick (the same deadline loop:
-the executor sleeps until just before the tick, then a busy-wait) and counts how many ticks get
-an answer before the next one; ``--role controller`` answers each state at once with a
-``Float64MultiArray``. The sim's figures use the simulator's own ``LoopStats``, so they compare
-one to one with ``wrist_sim_node``'s: whatever the real nodes add beyond this pair is theirs,
-the rest is the machine.
+``--role sim`` publishes a 3-joint ``JointState`` on each 1 kHz tick, with the simulator's own
+deadline loop pieces (``answer_deadline``, ``await_answer``, the timer slack and busy-wait) and
+counts how many ticks get an answer in time; ``--role controller`` answers each state at once
+with a ``Float64MultiArray``. ``--cpu N`` pins the process, as ``cpu_affinity`` pins a node.
+The sim's figures use the simulator's own ``LoopStats``, so they compare one to one with
+``wrist_sim_node``'s: whatever the real nodes add beyond this pair is theirs, the rest is the
+machine.
 
     python -m quat_jt_controller.tools.minimal_pair --role controller &
     python -m quat_jt_controller.tools.minimal_pair --role sim --duration 30 --stats out.json
@@ -17,14 +18,14 @@ import json
 from pathlib import Path
 import time
 
+from quat_jt_controller import realtime
 from quat_jt_controller.loop_stats import LoopStats
 import rclpy
 from rclpy.executors import ExternalShutdownException
 from rclpy.experimental import EventsExecutor
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
-
-BUSY_WAIT_S = 2.5e-4  # as wrist_sim_node
+from wrist_sim.sim_node import answer_deadline, await_answer, BUSY_WAIT_S
 
 
 def run_controller(node, executor) -> None:
@@ -52,12 +53,27 @@ def run_sim(node, executor, duration_s: float, warmup_s: float, stats_path: Path
     node.create_subscription(Float64MultiArray, 'effort_controller/commands', on_command, 10)
     js = JointState(name=['joint1', 'joint2', 'joint3'], position=[0.0] * 3,
                     velocity=[0.0] * 3, effort=[0.0] * 3)
+
+    def publish() -> None:
+        js.header.stamp = node.get_clock().now().to_msg()
+        state['published'] += 1
+        state['t_pub'] = clock()
+        pub.publish(js)
+
+    realtime.set_timer_slack(1)
     clock = time.perf_counter
     period = 1e-3
     next_t = clock() + period
     measure_from = clock() + warmup_s
     end = measure_from + duration_s
+    publish()
+
+    def answered() -> bool:
+        return state['answered'] == state['published']
     while clock() < end and rclpy.ok(context=node.context):
+        await_answer(executor, answered, answer_deadline(next_t, state['t_pub'], period),
+                     lambda: rclpy.ok(context=node.context))
+        fresh = answered()  # (nothing to step)
         remaining = next_t - clock()
         while remaining > BUSY_WAIT_S:
             executor.spin_once(timeout_sec=remaining - BUSY_WAIT_S)
@@ -65,19 +81,19 @@ def run_sim(node, executor, duration_s: float, warmup_s: float, stats_path: Path
         while clock() < next_t:
             pass
         now = clock()
-        fresh = state['answered'] == state['published']
         if state['measuring']:
             if now - next_t > 0.5 * period:
                 stats.missed_deadlines += 1
             stats.record_step(now, 0.0, now - next_t, fresh)
         state['measuring'] = now >= measure_from
-        js.header.stamp = node.get_clock().now().to_msg()
-        state['published'] += 1
-        state['t_pub'] = clock()
-        pub.publish(js)
+        publish()
         next_t += period
-        if clock() - next_t > period:
-            next_t = clock() + period
+        behind = clock() - next_t
+        if behind > period:  # stalled: skip the ticks we cannot make up, as the simulator does
+            skipped = int(behind / period)
+            if state['measuring']:
+                stats.missed_deadlines += skipped
+            next_t += skipped * period
     stats_path.write_text(json.dumps(stats.summary(), indent=1))
 
 
@@ -87,11 +103,14 @@ def main(argv=None) -> None:
     parser.add_argument('--duration', type=float, default=30.0)
     parser.add_argument('--warmup', type=float, default=3.0)
     parser.add_argument('--stats', type=Path, default=Path('minimal_pair_stats.json'))
+    parser.add_argument('--cpu', type=int, action='append', default=[],
+                        help='pin the process to this CPU (repeat for several)')
     args, ros_args = parser.parse_known_args(argv)
     rclpy.init(args=ros_args)
     node = rclpy.create_node(f'minimal_{args.role}')
     executor = EventsExecutor()
     executor.add_node(node)
+    realtime.pin_process(args.cpu)
     try:
         if args.role == 'sim':
             run_sim(node, executor, args.duration, args.warmup, args.stats)
