@@ -130,7 +130,7 @@ class RobotModel:
     def gravity(self, q: Sequence[float]) -> list[float]:
         """g(q) of Eq. (1), N m, in ``joint_names`` order."""
         g = pin.computeGeneralizedGravity(self.model, self.data, self._set_q(q))
-        return [float(g[i]) for i in self._idx]
+        return g.tolist() if self._identity_order else [float(g[i]) for i in self._idx]
 
     def mass_matrix(self, q: Sequence[float]) -> np.ndarray:
         """M(q) of Eq. (1), in ``joint_names`` order."""

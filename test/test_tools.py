@@ -65,7 +65,8 @@ def test_paper_experiment_reproduces_the_qualitative_result(tmp_path, mode):
 
 def test_benchmark_reports_every_figure(tmp_path):
     stdout = run_tool('quat_jt_controller.tools.benchmark', '--out', str(tmp_path),
-                      '--duration', '3', '--composed-duration', '3', '--warmup', '1')
+                      '--duration', '3', '--composed-duration', '3', '--lockstep-duration', '3',
+                      '--warmup', '1')
     assert ('| figure | two processes, pinned | minimal pair, pinned | two processes, not '
             'pinned | minimal pair, not pinned | composed (3 s) | target |') in stdout
     for row in ('state rate (Hz)', 'command rate (Hz)', 'missed ticks: steps without a fresh',

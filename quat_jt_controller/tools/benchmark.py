@@ -235,7 +235,7 @@ def _loop_rows(s: dict) -> list[str]:
             f'{s["cmd_latency_us_max"] / 1e3:.3f}']
 
 
-def lockstep_benchmark(out: Path, duration_s: float = 6.0) -> dict:
+def lockstep_benchmark(out: Path, duration_s: float = 20.0) -> dict:
     """Run the paper experiment (tanh) in lockstep in both modes: how many times real time."""
     from quat_jt_controller.tools.paper_experiment import run_once
 
@@ -342,6 +342,8 @@ def main(argv: Optional[list] = None) -> int:
                         help='measured seconds of each two-process run and minimal pair')
     parser.add_argument('--composed-duration', type=float, default=60.0,
                         help='measured seconds of the composed run')
+    parser.add_argument('--lockstep-duration', type=float, default=20.0,
+                        help='simulated seconds of each lockstep paper experiment')
     parser.add_argument('--warmup', type=float, default=3.0)
     parser.add_argument('--out', type=Path, default=Path('results/bench'))
     args = parser.parse_args(argv)
@@ -359,7 +361,7 @@ def main(argv: Optional[list] = None) -> int:
         loops[mode] = loop_benchmark(args.duration, args.warmup, args.out, cpus=cpus)
     loops[COMPOSED] = loop_benchmark(args.composed_duration, args.warmup, args.out,
                                      composed=True)
-    lockstep = lockstep_benchmark(args.out)
+    lockstep = lockstep_benchmark(args.out, args.lockstep_duration)
     text = report(loops, baselines, core, lockstep, layout)
     (args.out / 'bench.json').write_text(json.dumps(
         {'loops': loops, 'core': core, 'baselines': baselines, 'lockstep': lockstep,
