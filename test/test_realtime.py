@@ -210,3 +210,37 @@ def test_unavailable_cpu_is_a_clear_start_up_error(tmp_path):
         assert proc.wait(60.0) == 1
         text = (tmp_path / f'bad_{executable}.log').read_text()
         assert f'cpu_affinity [{missing}]' in text and 'not available' in text, text
+
+
+@pytest.mark.node
+def test_the_tools_own_node_discovers_on_loopback_only(monkeypatch, tmp_path):
+    """The recorder/probe of the tools must not discover over the subnet (Jazzy's default)."""
+    from quat_jt_controller.tools.probe import ProbeNode
+    monkeypatch.delenv('ROS_AUTOMATIC_DISCOVERY_RANGE', raising=False)
+    monkeypatch.setenv('ROS_STATIC_PEERS', '192.0.2.1')
+    monkeypatch.setenv('ROS_LOG_DIR', str(tmp_path))
+    probe = ProbeNode('loopback_probe', int(os.environ['ROS_DOMAIN_ID']))
+    try:
+        assert os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] == 'LOCALHOST'
+        assert 'ROS_STATIC_PEERS' not in os.environ
+    finally:
+        probe.close()
+
+
+@pytest.mark.unit
+def test_run_check_asks_the_context_at_most_every_period_and_the_flag_every_time():
+    from quat_jt_controller.lifecycle import CONTEXT_CHECK_S, RunCheck
+    now, asked, running, alive = [100.0], [], [True], [True]
+
+    def context_ok() -> bool:
+        asked.append(now[0])
+        return alive[0]
+    check = RunCheck(lambda: running[0], context_ok, clock=lambda: now[0])
+    assert check() and check() and asked == [100.0]  # asked once in the period
+    alive[0] = False  # an external shutdown
+    assert check()  # not seen yet...
+    now[0] += CONTEXT_CHECK_S
+    assert not check() and len(asked) == 2  # ... seen within one period
+    running[0] = False  # Ctrl-C: seen at once
+    alive[0] = True
+    assert not check()

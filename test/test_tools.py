@@ -93,6 +93,17 @@ def test_benchmark_reports_every_figure(tmp_path):
         assert math.isfinite(core['us_per_tick']) and core['us_per_tick'] > 0.0, name
 
 
+def test_tick_profile_times_every_piece_of_both_ticks():
+    stdout = run_tool('quat_jt_controller.tools.tick_profile', '--calls', '500')
+    rows = [line.split('|') for line in stdout.splitlines() if line.startswith('| ')]
+    pieces = {cells[1].strip(): cells[2].strip() for cells in rows[1:]}
+    pieces.update({cells[3].strip(): cells[4].strip() for cells in rows[1:] if cells[3].strip()})
+    for piece in ('rclpy deserialising the JointState (before the callback)',
+                  'Regulator.update (paper config)', 'publish the command (no subscriber)',
+                  'PyBullet step and read', 'publish JointState (no subscriber)'):
+        assert float(pieces[piece]) > 0.0, (piece, stdout)
+
+
 def test_friction_trace_shows_a_steady_torque_at_rest(tmp_path):
     stdout = run_tool('quat_jt_controller.tools.friction_trace', '--duration', '2.5',
                       '--plot', str(tmp_path / 'trace.png'))

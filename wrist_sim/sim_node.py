@@ -70,7 +70,6 @@ MIN_ANSWER_FRACTION = 0.5
 # this many (composed: the state to the controller, then its command back).
 DRAIN_EVENTS = 4
 LOG_PERIOD_S = 1.0
-CONTEXT_CHECK_S = 0.01  # an external shutdown is noticed within this (wall s)
 THROTTLE_S = 1.0
 
 
@@ -106,33 +105,6 @@ def await_answer(executor: Any, answered: Callable[[], bool], deadline_s: float,
             return False
         executor.spin_once(timeout_sec=remaining)
     return True
-
-
-class _RunCheck:
-    """
-    ``keep_running() and context_ok()``, with the context asked at most every CONTEXT_CHECK_S.
-
-    The loops ask after every event; rclpy's ``Context.ok`` takes a lock and calls into C (it
-    was 6% of a lockstep step). The context only ends on an external shutdown, which is noticed
-    within CONTEXT_CHECK_S; Ctrl-C and SIGTERM set ``keep_running``, checked every time.
-    """
-
-    __slots__ = ('_keep_running', '_context_ok', '_alive', '_next_check_s')
-
-    def __init__(self, keep_running: Callable[[], bool], context_ok: Callable[[], bool]) -> None:
-        self._keep_running = keep_running
-        self._context_ok = context_ok
-        self._alive = True
-        self._next_check_s = 0.0
-
-    def __call__(self) -> bool:
-        if not self._keep_running():
-            return False
-        now = time.perf_counter()
-        if now >= self._next_check_s:
-            self._next_check_s = now + CONTEXT_CHECK_S
-            self._alive = self._context_ok()
-        return self._alive
 
 
 def _float_range(lo: float, hi: float) -> list[FloatingPointRange]:
@@ -405,7 +377,7 @@ class WristSimNode(Node):
 
     def run(self, executor: Any, keep_running: Callable[[], bool] = lambda: True) -> None:
         """Step until ``keep_running()`` is false or the context shuts down."""
-        self._ok = _RunCheck(keep_running, self.context.ok)
+        self._ok = lifecycle.RunCheck(keep_running, self.context.ok)
         self.publish_state()  # the initial state, so a controller can answer it
         self.stats.start_s = time.perf_counter()
         if self.publish_clock:

@@ -12,6 +12,7 @@ import random
 import signal
 import subprocess
 import sys
+import tempfile
 from typing import Any, Mapping, Optional
 
 from quat_jt_controller.resources import share_path
@@ -44,6 +45,19 @@ def isolated_env(work_dir: Path, domain_id: Optional[int] = None,
     })
     env.pop('ROS_STATIC_PEERS', None)
     return env
+
+
+def keep_this_process_local() -> None:
+    """
+    Make this process's own ROS traffic loopback-only, before its ``rclpy.init``.
+
+    The tools' own node (the recorder, the probe) would otherwise discover over the subnet
+    (Jazzy's default range). Its logs go under a temporary folder unless ROS_LOG_DIR is set.
+    """
+    os.environ['ROS_AUTOMATIC_DISCOVERY_RANGE'] = 'LOCALHOST'
+    os.environ.pop('ROS_STATIC_PEERS', None)
+    if 'ROS_LOG_DIR' not in os.environ:
+        os.environ['ROS_LOG_DIR'] = tempfile.mkdtemp(prefix='qjt_tool_log_')
 
 
 def write_params_file(path: Path, params: Mapping[str, Any], node: str = '/**') -> Path:

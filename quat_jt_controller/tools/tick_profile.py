@@ -1,0 +1,122 @@
+"""
+Where a tick's time goes: each piece of the controller's and the simulator's tick, timed hot.
+
+Every piece is the code the nodes run (the node's own objects, built as the nodes build them),
+called in a loop in this one process: best of 5 batches, in microseconds per call. Publishers
+have no subscriber here, so a publish is its local cost only (a cross-process subscriber adds
+the transport). The benchmark gives the same tick in the loop, where caches are cold
+(``make bench``); the difference between the two is the price of running 1000 times a second
+beside another process.
+
+    python -m quat_jt_controller.tools.tick_profile [--calls 20000]
+"""
+import argparse
+import random
+import sys
+import time
+from typing import Callable, Optional
+
+from quat_jt_controller import control_law as cl
+from quat_jt_controller import paper
+from quat_jt_controller.joints import stamp_problem, StateLayout
+from quat_jt_controller.loop_stats import LoopStats, TickStats
+from quat_jt_controller.model import RobotModel
+from quat_jt_controller.regulator import Goal, Regulator
+from quat_jt_controller.resources import default_urdf_xml
+from quat_jt_controller.tools import local_ros
+
+
+def best_us(fn: Callable[[], object], calls: int) -> float:
+    """Return the time of one call of ``fn`` in us: the best of 5 batches."""
+    batch = max(calls // 5, 1)
+    best = float('inf')
+    for _ in range(5):
+        t0 = time.perf_counter()
+        for _ in range(batch):
+            fn()
+        best = min(best, (time.perf_counter() - t0) / batch)
+    return best * 1e6
+
+
+def profile(calls: int) -> dict[str, dict[str, float]]:
+    """Time each piece of both ticks; return ``{'controller': {...}, 'simulator': {...}}``."""
+    from rclpy.serialization import deserialize_message, serialize_message
+    from sensor_msgs.msg import JointState
+    from std_msgs.msg import Float64MultiArray
+    from wrist_sim.simulator import WristSimulator
+
+    from quat_jt_controller.tools.probe import ProbeNode
+
+    urdf = default_urdf_xml()
+    model = RobotModel(urdf, 'base_link', 'tool0')
+    gains = cl.Gains.create('tanh', paper.KP, paper.KV, paper.LAMBDA, cl.Task.ORIENTATION, 3)
+    regulator = Regulator(model, cl.Task.ORIENTATION, gains, goal=Goal(paper.Q_DESIRED))
+    sim = WristSimulator(urdf, model.joint_names)
+    probe = ProbeNode('tick_profile', random.randint(1, 100))  # a private domain
+    try:
+        node = probe.node
+        js_pub = node.create_publisher(JointState, 'tick_profile/joint_states', 10)
+        cmd_pub = node.create_publisher(Float64MultiArray, 'tick_profile/commands', 10)
+        js = JointState()
+        js.name = list(model.joint_names)
+        js.header.stamp.sec, js.header.stamp.nanosec = divmod(time.time_ns(), 1_000_000_000)
+        js.position, js.velocity, js.effort = [0.3, 0.5, -0.2], [0.1, 0.1, 0.1], [0.0] * 3
+        raw = serialize_message(js)
+        layout = StateLayout(model.joint_names)
+        q, qdot = layout.extract(js.name, js.position, js.velocity)
+        stamp_ns = js.header.stamp.sec * 1_000_000_000 + js.header.stamp.nanosec
+        out = regulator.update(q, qdot)
+        cmd = Float64MultiArray(data=[0.0] * 3)
+        tick_stats, loop_stats = TickStats(), LoopStats()
+        tau = [0.1, -0.1, 0.05]
+
+        def set_data() -> None:
+            cmd.data = out.tau_nm
+
+        def fill_state() -> None:
+            js.position = sim.q_rad.tolist()
+            js.velocity = sim.qdot_rad_s.tolist()
+            js.effort = sim.tau_applied_nm.tolist()
+
+        controller = {
+            'rclpy deserialising the JointState (before the callback)':
+                best_us(lambda: deserialize_message(raw, JointState), calls),
+            'picking the joints out of it (StateLayout)':
+                best_us(lambda: layout.extract(js.name, js.position, js.velocity), calls),
+            'stamp check': best_us(lambda: stamp_problem(stamp_ns, time.time_ns(), 500_000_000),
+                                   calls),
+            'Regulator.update (paper config)': best_us(lambda: regulator.update(q, qdot), calls),
+            'command into the message': best_us(set_data, calls),
+            'publish the command (no subscriber)': best_us(lambda: cmd_pub.publish(cmd), calls),
+            'statistics': best_us(lambda: tick_stats.record(1, 2, 3, 4.0, False), calls),
+        }
+        simulator = {
+            'PyBullet step and read': best_us(lambda: sim.step(tau), calls),
+            'filling the JointState': best_us(fill_state, calls),
+            'publish JointState (no subscriber)': best_us(lambda: js_pub.publish(js), calls),
+            'statistics': best_us(lambda: loop_stats.record_step(1.0, 1e-5, 0.0, True), calls),
+        }
+        return {'controller': controller, 'simulator': simulator}
+    finally:
+        probe.close()
+        sim.close()
+
+
+def main(argv: Optional[list] = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split('\n')[1])
+    parser.add_argument('--calls', type=int, default=20000, help='calls per piece')
+    args = parser.parse_args(argv)
+    local_ros.keep_this_process_local()
+    result = profile(args.calls)
+    ctrl, sim = list(result['controller'].items()), list(result['simulator'].items())
+    print('| controller, per state | us | simulator, per step | us |')
+    print('|---|---|---|---|')
+    for k in range(max(len(ctrl), len(sim))):
+        left = f'{ctrl[k][0]} | {ctrl[k][1]:.1f}' if k < len(ctrl) else ' | '
+        right = f'{sim[k][0]} | {sim[k][1]:.1f}' if k < len(sim) else ' | '
+        print(f'| {left} | {right} |')
+    return 0
+
+
+if __name__ == '__main__':
+    sys.exit(main())
