@@ -71,7 +71,7 @@ def test_benchmark_reports_every_figure(tmp_path):
             'pinned | minimal pair, not pinned | composed (3 s) | target |') in stdout
     for row in ('state rate (Hz)', 'command rate (Hz)', 'missed ticks: steps without a fresh',
                 'late publications', 'latency p50 / p99 / max (ms)',
-                'controller compute p50 / p99 (us)',
+                'controller compute p50 (lowest-highest 1 s window) / p99 (us)',
                 'CPU % (sim / controller, or the one process)',
                 'paper experiment in lockstep (x real time)', 'host CPU steal during the run (%)',
                 'core tick Regulator.update, xArm6 6-DOF pose'):
@@ -95,9 +95,12 @@ def test_benchmark_reports_every_figure(tmp_path):
 
 def test_tick_profile_times_every_piece_of_both_ticks():
     stdout = run_tool('quat_jt_controller.tools.tick_profile', '--calls', '500')
-    rows = [line.split('|') for line in stdout.splitlines() if line.startswith('| ')]
-    pieces = {cells[1].strip(): cells[2].strip() for cells in rows[1:]}
-    pieces.update({cells[3].strip(): cells[4].strip() for cells in rows[1:] if cells[3].strip()})
+    pieces_table, sleep_table = stdout[stdout.index('| controller'):].split('\n\n')[:2]
+    rows = [line.split('|') for line in pieces_table.splitlines()[2:]]
+    pieces = {cells[1].strip(): cells[2].strip() for cells in rows}
+    pieces.update({cells[3].strip(): cells[4].strip() for cells in rows if cells[3].strip()})
+    assert len(sleep_table.strip().splitlines()) == 4, sleep_table  # default and 1 ns slack
+    assert '(1 ns)' in sleep_table, sleep_table
     for piece in ('rclpy deserialising the JointState (before the callback)',
                   'Regulator.update (paper config)', 'publish the command (no subscriber)',
                   'PyBullet step and read', 'publish JointState (no subscriber)'):

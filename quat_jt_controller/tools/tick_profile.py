@@ -38,6 +38,37 @@ def best_us(fn: Callable[[], object], calls: int) -> float:
     return best * 1e6
 
 
+def sleep_overshoot(executor, sleeps: int, sleep_s: float = 7e-4) -> dict[str, tuple]:
+    """
+    How late ``executor.spin_once(timeout)`` wakes up, with Linux's default timer slack and 1 ns.
+
+    Run in a thread of its own, whose slack is set for it alone. Returns ``{setting: (p50, p99)}``
+    in us. The simulator sleeps this way before each tick, then busy-waits the rest.
+    """
+    import threading
+
+    from quat_jt_controller import realtime
+    result = {}
+
+    def measure(label: str, slack_ns: Optional[int]) -> None:
+        if slack_ns is not None:
+            realtime.set_timer_slack(slack_ns)
+        late = []
+        for _ in range(sleeps):
+            t0 = time.perf_counter()
+            executor.spin_once(timeout_sec=sleep_s)
+            late.append((time.perf_counter() - t0 - sleep_s) * 1e6)
+        late.sort()
+        result[f'{label} ({realtime.timer_slack_ns()} ns)'] = (
+            late[len(late) // 2], late[min(len(late) - 1, int(0.99 * len(late)))])
+
+    for label, slack in (('default timer slack', None), ('timer slack set', 1)):
+        thread = threading.Thread(target=measure, args=(label, slack))
+        thread.start()
+        thread.join()
+    return result
+
+
 def profile(calls: int) -> dict[str, dict[str, float]]:
     """Time each piece of both ticks; return ``{'controller': {...}, 'simulator': {...}}``."""
     from rclpy.serialization import deserialize_message, serialize_message
@@ -78,6 +109,13 @@ def profile(calls: int) -> dict[str, dict[str, float]]:
             js.velocity = sim.qdot_rad_s.tolist()
             js.effort = sim.tau_applied_nm.tolist()
 
+        def full_window() -> None:
+            for k in range(1000):  # one second of ticks, then its 1 Hz summary
+                tick_stats.record(k, k + 20_000, k + 30_000, 250.0, False)
+            tick_stats.window(1.0)
+        window_us = best_us(full_window, 50) - 1000 * best_us(
+            lambda: tick_stats.record(1, 2, 3, 4.0, False), calls)
+
         controller = {
             'rclpy deserialising the JointState (before the callback)':
                 best_us(lambda: deserialize_message(raw, JointState), calls),
@@ -89,6 +127,7 @@ def profile(calls: int) -> dict[str, dict[str, float]]:
             'command into the message': best_us(set_data, calls),
             'publish the command (no subscriber)': best_us(lambda: cmd_pub.publish(cmd), calls),
             'statistics': best_us(lambda: tick_stats.record(1, 2, 3, 4.0, False), calls),
+            '/diagnostics statistics of a 1 s window (once a second)': window_us,
         }
         simulator = {
             'PyBullet step and read': best_us(lambda: sim.step(tau), calls),
@@ -96,7 +135,8 @@ def profile(calls: int) -> dict[str, dict[str, float]]:
             'publish JointState (no subscriber)': best_us(lambda: js_pub.publish(js), calls),
             'statistics': best_us(lambda: loop_stats.record_step(1.0, 1e-5, 0.0, True), calls),
         }
-        return {'controller': controller, 'simulator': simulator}
+        return {'controller': controller, 'simulator': simulator,
+                'sleep': sleep_overshoot(probe.executor, calls // 10)}
     finally:
         probe.close()
         sim.close()
@@ -115,6 +155,11 @@ def main(argv: Optional[list] = None) -> int:
         left = f'{ctrl[k][0]} | {ctrl[k][1]:.1f}' if k < len(ctrl) else ' | '
         right = f'{sim[k][0]} | {sim[k][1]:.1f}' if k < len(sim) else ' | '
         print(f'| {left} | {right} |')
+    print()
+    print(f'| sleep of {0.7:.1f} ms with spin_once: wakes late by (us) | p50 | p99 |')
+    print('|---|---|---|')
+    for setting, (p50, p99) in result['sleep'].items():
+        print(f'| {setting} | {p50:.0f} | {p99:.0f} |')
     return 0
 
 
