@@ -25,7 +25,7 @@ DEMO_ARGS ?=
 demo: $(STAMP)
 	$(PY) -m quat_jt_controller.tools.paper_experiment $(DEMO_ARGS)
 
-# The 1 kHz loop benchmark (about 7 min): two processes pinned and not pinned, each beside a
+# The 1 kHz loop benchmark (about 5 min): two processes pinned and not pinned, each beside a
 # minimal pair, composed for 60 s, the lockstep experiment in both modes, the core tick.
 bench: $(STAMP)
 	$(PY) -m quat_jt_controller.tools.benchmark

@@ -264,10 +264,14 @@ class QuatJtController(Node):
         """
         1 Hz: publish /diagnostics right after the next command, or now if states have stopped.
 
-        Building them takes a few hundred us; done just after a command goes out, it never
-        holds up the answer to a state (a timer could fire just before one arrives).
+        Building them takes tens of us (more in the loop): done just after a command goes out,
+        the next state is a period away. (Composed, the simulator takes that command after
+        this, within its answer window.) A timer could instead fire just as a state arrives.
+        If the last second's are still owed (no valid tick since), they go out now.
         """
-        if self._last_state_ns and time.monotonic_ns() - self._last_state_ns < DIAGNOSTICS_WAIT_NS:
+        flowing = (self._last_state_ns
+                   and time.monotonic_ns() - self._last_state_ns < DIAGNOSTICS_WAIT_NS)
+        if flowing and not self._diagnostics_due:
             self._diagnostics_due = True
         else:
             self._diagnostics_due = False

@@ -8,14 +8,11 @@ between callbacks, then the node is destroyed and the context shut down, in that
 """
 import gc
 import signal
-import time
 from typing import Callable, Optional
 
 from quat_jt_controller import realtime
 import rclpy
 from rclpy.signals import SignalHandlerOptions
-
-CONTEXT_CHECK_S = 0.01  # an external shutdown is noticed within this (wall s)
 
 
 class StopFlag:
@@ -34,35 +31,6 @@ class StopFlag:
         return not self.is_set
 
 
-class RunCheck:
-    """
-    ``keep_running() and context_ok()``, with the context asked at most every CONTEXT_CHECK_S.
-
-    The loops ask after every event; rclpy's ``Context.ok`` takes a lock and calls into C (it
-    was 6% of a lockstep step). The context only ends on an external shutdown, which is noticed
-    within CONTEXT_CHECK_S; Ctrl-C and SIGTERM set ``keep_running``, checked every time.
-    """
-
-    __slots__ = ('_keep_running', '_context_ok', '_alive', '_next_check_s', '_clock')
-
-    def __init__(self, keep_running: Callable[[], bool], context_ok: Callable[[], bool],
-                 clock: Callable[[], float] = time.perf_counter) -> None:
-        self._keep_running = keep_running
-        self._context_ok = context_ok
-        self._clock = clock
-        self._alive = True
-        self._next_check_s = -float('inf')
-
-    def __call__(self) -> bool:
-        if not self._keep_running():
-            return False
-        now = self._clock()
-        if now >= self._next_check_s:
-            self._next_check_s = now + CONTEXT_CHECK_S
-            self._alive = self._context_ok()
-        return self._alive
-
-
 def init(args: Optional[list[str]] = None) -> StopFlag:
     """``rclpy.init`` without rclpy's signal handlers, and a StopFlag in their place."""
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
@@ -72,7 +40,7 @@ def init(args: Optional[list[str]] = None) -> StopFlag:
 def spin(executor, context: rclpy.Context, keep_running: Callable[[], bool],
          period_s: float = 0.1) -> None:
     """Spin ``executor`` until ``keep_running()`` is false or ``context`` is shut down."""
-    ok = RunCheck(keep_running, context.ok)
+    ok = realtime.RunCheck(keep_running, context.ok)
     while ok():
         executor.spin_once(timeout_sec=period_s)
 
@@ -102,6 +70,7 @@ def run_node(make_node: Callable[[], object], name: str, startup_errors: tuple,
     out (Ctrl-C, SIGTERM, an external shutdown) the nodes are destroyed, last built first,
     before the context is shut down.
     """
+    from rclpy.exceptions import ParameterException
     from rclpy.executors import ExternalShutdownException
     from rclpy.experimental import EventsExecutor
 
@@ -110,7 +79,7 @@ def run_node(make_node: Callable[[], object], name: str, startup_errors: tuple,
     try:
         try:
             node = make_node()
-        except startup_errors as exc:
+        except (*startup_errors, ParameterException) as exc:  # e.g. a parameter's wrong type
             rclpy.logging.get_logger(name).fatal(f'cannot start: {exc}')
             raise SystemExit(1) from None
         nodes = list(node) if isinstance(node, tuple) else [node]

@@ -210,7 +210,7 @@ def declare_cpu_affinity(node: Node) -> tuple[int, ...]:
         'cpu_affinity', Parameter.Type.INTEGER_ARRAY,
         _descriptor('CPUs to pin this process to (all its threads), e.g. [1]; unset = not '
                     'pinned. A 1 kHz node on a CPU of its own keeps its caches warm between '
-                    'ticks (README, Real-time loop).',
+                    'ticks (README, Real-time settings).',
                     ParameterType.PARAMETER_INTEGER_ARRAY, read_only=True))
     return check_cpus(param.value or ())
 

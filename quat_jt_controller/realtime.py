@@ -1,25 +1,44 @@
 """
-Real-time settings of a node's process: CPU affinity and timer slack (Linux).
+The real-time side of a 1 kHz loop: CPU affinity, timer slack, and the loop's waiting rules.
 
-ROS-free. Both are what a real-time deployment of a 1 kHz loop sets (ros2_control's
-controller_manager has a ``cpu_affinity`` parameter for the same reason):
+ROS-free (an executor is any object with ``spin_once(timeout_sec)``). The settings are what a
+real-time deployment of a 1 kHz loop sets (ros2_control's controller_manager has a
+``cpu_affinity`` parameter for the same reason):
 
-* **CPU affinity.** A node pinned to a CPU of its own keeps its caches warm between ticks; on the
-  2-core test machine, pinning the simulator and the controller to different CPUs halved the
-  controller's in-loop compute time (README, 'Real-time loop'). Every thread of the process is
-  pinned (the DDS threads too); threads started later inherit it.
-* **Timer slack.** Linux lets a sleeping thread wake up to 50 us late (the default slack) so that
-  wake-ups can be merged. The simulator's deadline loop sleeps until just before each tick and
-  busy-waits the rest; with 1 ns of slack its sleeps end within the scheduler's latency, so the
+* **CPU affinity.** A node pinned to a CPU of its own keeps its caches warm between ticks. On
+  the 2-core test machine, pinning the simulator and the controller to different CPUs halved
+  the controller's compute time in the loop in a quiet second, but missed more ticks than not
+  pinning in most runs (README, 'Real-time settings' and 'Benchmark'). Every thread of the
+  process is pinned (the DDS threads too); threads started later inherit it. Child processes
+  started before (the controller's goal-check worker) are not.
+* **Timer slack.** Linux lets a sleeping thread wake up to 50 us late (the default slack) so
+  that wake-ups can be merged. The simulator's real-time loop sleeps until just before each
+  tick and busy-waits the rest; with 1 ns of slack its sleeps end closer to the tick, so the
   busy-wait, which costs a core while it lasts, can be short.
+* **Waiting for an answer** (:func:`answer_deadline`, :func:`await_answer`): the simulator's
+  rules, shared with the benchmark's minimal pair so that the two compare one to one.
+* :class:`RunCheck`: the nodes' "keep running?" check, cheap enough to ask after every event.
 """
 import ctypes
 import os
 import sys
-from typing import Iterable
+import time
+from typing import Any, Callable, Iterable
 
 PR_SET_TIMERSLACK = 29  # <linux/prctl.h>
 PR_GET_TIMERSLACK = 30
+# Step with the last command (a stale tick) if no answer came this long before the tick. A
+# step that runs past the tick only delays that state's publication; a stale tick applies an
+# old command, so the answer gets as long as the step leaves...
+STEP_LEAD_S = 1.0e-4
+# ... but at least this fraction of a period after its state went out: a state published late
+# (this process descheduled at its tick) still gets its answer, and the lateness is absorbed
+# by the next tick's wait instead of costing a stale step.
+MIN_ANSWER_FRACTION = 0.5
+# At the deadline, events that arrived while this process was descheduled are still taken, up to
+# this many (composed: the state to the controller, then its command back).
+DRAIN_EVENTS = 4
+CONTEXT_CHECK_S = 0.01  # an external shutdown is noticed within this (wall s)
 
 
 def allowed_cpus() -> set[int]:
@@ -58,15 +77,20 @@ def pin_process(cpus: Iterable[int]) -> tuple[int, ...]:
     wanted = check_cpus(cpus)
     if not wanted:
         return ()
-    try:
-        threads = [int(t) for t in os.listdir('/proc/self/task')]
-    except OSError:  # no /proc: the calling thread only
-        threads = [0]
-    for tid in threads:
+    done: set[int] = set()
+    for _ in range(10):  # again, until no thread started while pinning was missed
         try:
-            os.sched_setaffinity(tid, wanted)
-        except ProcessLookupError:  # the thread ended meanwhile
-            pass
+            threads = {int(t) for t in os.listdir('/proc/self/task')}
+        except OSError:  # no /proc: the calling thread only
+            threads = {0}
+        if threads <= done:
+            break
+        for tid in threads - done:
+            try:
+                os.sched_setaffinity(tid, wanted)
+            except ProcessLookupError:  # the thread ended meanwhile
+                pass
+        done |= threads
     return wanted
 
 
@@ -89,3 +113,68 @@ def set_timer_slack(slack_ns: int = 1) -> bool:
 def timer_slack_ns() -> int:
     """Return the calling thread's timer slack in ns (-1 if it cannot be read)."""
     return _prctl(PR_GET_TIMERSLACK)
+
+
+# ---------------------------------------- the pieces of a 1 kHz loop (ROS-free)
+def answer_deadline(next_tick_s: float, published_s: float, period_s: float) -> float:
+    """
+    Return when to stop waiting for the answer to the state published at ``published_s``.
+
+    ``STEP_LEAD_S`` before the next tick, but at least ``MIN_ANSWER_FRACTION`` of a period
+    after the state went out. Times from ``time.perf_counter``, in s.
+    """
+    return max(next_tick_s - STEP_LEAD_S, published_s + MIN_ANSWER_FRACTION * period_s)
+
+
+def await_answer(executor: Any, answered: Callable[[], bool], deadline_s: float,
+                 ok: Callable[[], bool]) -> bool:
+    """
+    Spin ``executor`` until ``answered()`` or ``deadline_s`` (perf_counter s); return answered().
+
+    At the deadline, what has already arrived is taken (up to ``DRAIN_EVENTS`` queued events):
+    a command that came while this process was descheduled is in the queue, as it would be in
+    a driver's command buffer, and is not a missed tick.
+    """
+    clock = time.perf_counter
+    while not answered():
+        if not ok():
+            return False
+        remaining = deadline_s - clock()
+        if remaining <= 0.0:
+            for _ in range(DRAIN_EVENTS):
+                executor.spin_once(timeout_sec=0.0)
+                if answered():
+                    return True
+            return False
+        executor.spin_once(timeout_sec=remaining)
+    return True
+
+
+class RunCheck:
+    """
+    ``keep_running() and context_ok()``, with the context asked at most every CONTEXT_CHECK_S.
+
+    The nodes' loops ask after every event; rclpy's ``Context.ok`` takes a lock and calls into C
+    (it was 6% of a lockstep step). The context only ends on an external shutdown, which is noticed
+    within CONTEXT_CHECK_S; Ctrl-C and SIGTERM set ``keep_running``, checked every time.
+    """
+
+    __slots__ = ('_keep_running', '_context_ok', '_alive', '_next_check_s', '_clock')
+
+    def __init__(self, keep_running: Callable[[], bool], context_ok: Callable[[], bool],
+                 clock: Callable[[], float] = time.perf_counter) -> None:
+        self._keep_running = keep_running
+        self._context_ok = context_ok
+        self._clock = clock
+        self._alive = True
+        self._next_check_s = -float('inf')
+
+    def __call__(self) -> bool:
+        """Return True while the loop should go on."""
+        if not self._keep_running():
+            return False
+        now = self._clock()
+        if now >= self._next_check_s:
+            self._next_check_s = now + CONTEXT_CHECK_S
+            self._alive = self._context_ok()
+        return self._alive

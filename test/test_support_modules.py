@@ -11,7 +11,7 @@ from quat_jt_controller import paper
 from quat_jt_controller.control_law import Task
 from quat_jt_controller.goal_check import check_goal, GoalCheckWorker, ModelSpec
 from quat_jt_controller.joints import movable_joints, StateLayout
-from quat_jt_controller.loop_stats import LoopStats, TickStats
+from quat_jt_controller.loop_stats import LoopStats, Ring, TickStats
 from quat_jt_controller.resources import default_urdf_xml
 from quat_jt_controller.throttle import cause, Throttle
 from robots import wrist_model
@@ -50,6 +50,23 @@ def test_tick_stats_window_then_reset():
     after = stats.window(1.0)
     assert after['ticks_in_window'] == 0 and math.isnan(after['compute_us_p50'])
     assert after['total_ticks'] == 40
+
+
+def test_ring_keeps_the_last_samples_and_returns_the_finite_ones_sorted():
+    ring = Ring(4)
+    for x in (5.0, math.nan, 1.0, math.inf, 3.0, 2.0):  # the first two fall out of the ring
+        ring.push(x)
+    assert ring.values().tolist() == [1.0, 2.0, 3.0] and ring.count == 6
+    ring.clear()
+    assert ring.values().tolist() == []
+
+
+def test_loop_stats_count_late_publications_in_the_window():
+    stats = LoopStats(capacity=100)
+    for k in range(50):
+        stats.record_step(k * 1e-3, 50e-6, 0.7e-3 if k in (10, 20) else 1e-6, fresh=True)
+    out = stats.summary()
+    assert out['window_late_steps'] == 2 and out['lateness_us_max'] == pytest.approx(700.0)
 
 
 def test_throttle_passes_once_per_period_and_cause_and_counts_the_rest():

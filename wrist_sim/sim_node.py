@@ -13,6 +13,8 @@ ros2_control robot driven by a JointGroupEffortController:
 - command watchdog: no valid command for ``command_timeout`` seconds of simulated time (= wall
   time when pacing in real time) -> zero torque, logged once, recovers when commands return;
 - ``~/reset`` (std_srvs/Trigger): back to ``initial_positions`` at rest, held command zeroed;
+  commands that arrive before the reset state is published answer older states and are not
+  applied, so the reset state is always published;
 - real-time pacing at ``rate_hz`` (dt = 1 / rate_hz), or with ``publish_clock:=true`` lockstep
   with the controller: ``/clock`` is published with the simulation time and a step is taken
   as soon as a command has arrived for the last published state (or after
@@ -23,13 +25,13 @@ tick (the executor sleeps, with 1 ns of timer slack, until just before it, then 
 busy-wait); the command that answers it is applied as soon as it arrives, stepping the
 simulation, and the new state waits for the next tick. The answer is awaited until shortly
 before that tick, and at least half a period after a state published late (see
-``_run_real_time``, ``answer_deadline``, ``await_answer``).
+``_run_real_time``; ``realtime.answer_deadline``, ``realtime.await_answer``).
 
 Until the first valid command after start-up or ``~/reset``, the joints are held at rest
 (``hold_until_first_command``). Timing figures (rate, missed deadlines, step compute time,
 command freshness and latency) are kept in ``node.stats`` (:class:`loop_stats.LoopStats`, over
-the last ``stats_window`` steps), logged at shutdown and written as JSON to ``stats_file`` if
-set. ``cpu_affinity`` pins the process (``realtime.py``).
+the last ``stats_window_steps`` steps), logged at shutdown and written as JSON to
+``stats_file`` if set. ``cpu_affinity`` pins the process (``realtime.py``).
 """
 import json
 import math
@@ -58,53 +60,8 @@ NODE_NAME = 'wrist_sim'
 # Real-time loop (``_run_real_time``): the executor sleeps (timer slack 1 ns) until BUSY_WAIT_S
 # before a tick, then a busy-wait; the sleep's wake-up latency here is ~30 us p50, ~130 us p99.
 BUSY_WAIT_S = 1.0e-4
-# Step with the last command (a stale tick) if no answer came this long before the tick. A
-# step that runs past the tick only delays that state's publication; a stale tick applies an
-# old command, so the answer gets as long as the step leaves...
-STEP_LEAD_S = 1.0e-4
-# ... but at least this fraction of a period after its state went out: a state published late
-# (this process descheduled at its tick) still gets its answer, and the lateness is absorbed
-# by the next tick's wait instead of costing a stale step.
-MIN_ANSWER_FRACTION = 0.5
-# At the deadline, events that arrived while this process was descheduled are still taken, up to
-# this many (composed: the state to the controller, then its command back).
-DRAIN_EVENTS = 4
 LOG_PERIOD_S = 1.0
 THROTTLE_S = 1.0
-
-
-def answer_deadline(next_tick_s: float, published_s: float, period_s: float) -> float:
-    """
-    Return when to stop waiting for the answer to the state published at ``published_s``.
-
-    ``STEP_LEAD_S`` before the next tick, but at least ``MIN_ANSWER_FRACTION`` of a period
-    after the state went out. Times from ``time.perf_counter``, in s.
-    """
-    return max(next_tick_s - STEP_LEAD_S, published_s + MIN_ANSWER_FRACTION * period_s)
-
-
-def await_answer(executor: Any, answered: Callable[[], bool], deadline_s: float,
-                 ok: Callable[[], bool]) -> bool:
-    """
-    Spin ``executor`` until ``answered()`` or ``deadline_s`` (perf_counter s); return answered().
-
-    At the deadline, what has already arrived is taken (up to ``DRAIN_EVENTS`` queued events):
-    a command that came while this process was descheduled is in the queue, as it would be in
-    a driver's command buffer, and is not a missed tick.
-    """
-    clock = time.perf_counter
-    while not answered():
-        if not ok():
-            return False
-        remaining = deadline_s - clock()
-        if remaining <= 0.0:
-            for _ in range(DRAIN_EVENTS):
-                executor.spin_once(timeout_sec=0.0)
-                if answered():
-                    return True
-            return False
-        executor.spin_once(timeout_sec=remaining)
-    return True
 
 
 def _float_range(lo: float, hi: float) -> list[FloatingPointRange]:
@@ -134,7 +91,7 @@ class WristSimNode(Node):
         self._at_velocity_limit = [0.999 * v for v in self._velocity_limits]
         self.publish_clock = bool(p['publish_clock'])
         self._clock_divider = int(p['clock_divider'])
-        self.stats = LoopStats(capacity=int(p['stats_window']))
+        self.stats = LoopStats(capacity=int(p['stats_window_steps']))
         # Without use_sim_time the node's ROS clock is the system clock: stamp from it directly
         # (time.time_ns) rather than through rclpy's Clock object on every tick.
         self._system_clock = not self.get_parameter('use_sim_time').value
@@ -149,6 +106,8 @@ class WristSimNode(Node):
         self._publish_wall_s = time.perf_counter()
         self._watchdog_tripped = False
         self._last_stamp_ns = -1
+        # After ~/reset, until the reset state is published: commands then answer older states.
+        self._reset_unpublished = False
 
         self._js = JointState()
         self._js.name = list(self.sim.joint_names)
@@ -230,7 +189,7 @@ class WristSimNode(Node):
             'it is only reported', read_only=True))
         self.declare_parameter('stats_file', '', desc(
             'if set, timing statistics are written there as JSON at shutdown', read_only=True))
-        self.declare_parameter('stats_window', 30000, desc(
+        self.declare_parameter('stats_window_steps', 30000, desc(
             'the timing percentiles and stale-step counts cover the last N steps (30000: 30 s '
             'at 1 kHz)', read_only=True,
             integer_range=[IntegerRange(from_value=100, to_value=10_000_000, step=1)]))
@@ -241,7 +200,7 @@ class WristSimNode(Node):
         self.structural = {k: self.get_parameter(k).value for k in (
             'joints', 'rate_hz', 'use_gui', 'publish_clock', 'clock_divider',
             'hold_until_first_command',
-            'enforce_velocity_limits', 'stats_file', 'stats_window')}
+            'enforce_velocity_limits', 'stats_file', 'stats_window_steps')}
         self.live = LiveParameters(self, LIVE_PARAMETERS,
                                    lambda values: SimConfig.create(values, n),
                                    on_apply=self._apply_config)
@@ -257,6 +216,8 @@ class WristSimNode(Node):
     # -- callbacks -----------------------------------------------------------------------
 
     def _on_command(self, msg: Float64MultiArray) -> None:
+        if self._reset_unpublished:  # it answers a state from before ~/reset: not applied
+            return
         data = msg.data
         if len(data) != self.n:
             self.stats.rejected_commands += 1
@@ -296,6 +257,7 @@ class WristSimNode(Node):
         self._cmd[:] = 0.0
         self._have_cmd = False
         self._watchdog_tripped = False
+        self._reset_unpublished = True
         response.success = True
         response.message = f'reset to {list(self.live.current.initial_positions_rad)} at rest'
         self.get_logger().info(response.message)
@@ -370,6 +332,7 @@ class WristSimNode(Node):
             self._clock_msg.clock.nanosec = nsec
             self.clock_pub.publish(self._clock_msg)
         self._seq_at_publish = self._cmd_seq
+        self._reset_unpublished = False
         self._publish_wall_s = time.perf_counter()
         self.js_pub.publish(js)
 
@@ -377,7 +340,7 @@ class WristSimNode(Node):
 
     def run(self, executor: Any, keep_running: Callable[[], bool] = lambda: True) -> None:
         """Step until ``keep_running()`` is false or the context shuts down."""
-        self._ok = lifecycle.RunCheck(keep_running, self.context.ok)
+        self._ok = realtime.RunCheck(keep_running, self.context.ok)
         self.publish_state()  # the initial state, so a controller can answer it
         self.stats.start_s = time.perf_counter()
         if self.publish_clock:
@@ -408,11 +371,11 @@ class WristSimNode(Node):
         The state of step k is published at its tick t_k (the executor sleeps until shortly
         before, then a busy-wait). The controller answers that state; its command is applied
         the moment it arrives, stepping the physics to k + 1, whose state then waits for
-        t_k+1. If no answer has come ``STEP_LEAD_S`` before t_k+1, and at least
-        ``MIN_ANSWER_FRACTION`` of a period after the state went out, the last command is
-        applied again (a stale tick; ``answer_deadline``, ``await_answer``). So the controller
-        has nearly the whole period to answer, even for a state published late, and the
-        publication never waits for the physics.
+        t_k+1. If no answer has come ``realtime.STEP_LEAD_S`` before t_k+1, and at least
+        ``realtime.MIN_ANSWER_FRACTION`` of a period after the state went out, the last command
+        is applied again (a stale tick; ``realtime.answer_deadline``, ``await_answer``). So the
+        controller has nearly the whole period to answer, even for a state published late, and
+        the publication never waits for the physics.
         """
         period = self.dt_ns * 1e-9
         realtime.set_timer_slack(1)  # wake-ups on time, so the busy-wait can be short
@@ -424,8 +387,9 @@ class WristSimNode(Node):
         def answered() -> bool:
             return self._cmd_seq != self._seq_at_publish
         while ok():
-            await_answer(executor, answered,
-                         answer_deadline(next_t, self._publish_wall_s, period), ok)
+            realtime.await_answer(
+                executor, answered, realtime.answer_deadline(next_t, self._publish_wall_s,
+                                                             period), ok)
             fresh = answered()
             t0 = clock()
             self._advance_simulation()

@@ -154,7 +154,7 @@ def loop_benchmark(duration_s: float, warmup_s: float, out: Path, composed: bool
     stats_file.unlink(missing_ok=True)
     # The simulator's statistics cover the measured interval: it is stopped right after it.
     sim_params = {'stats_file': str(stats_file), 'coulomb_friction': [0.0] * 3,
-                  'stats_window': int(duration_s * 1000)}
+                  'stats_window_steps': max(int(duration_s * 1000), 100)}
     controller_params = {'potential': 'tanh'}
     for params, cpu_affinity in zip((sim_params, controller_params), cpus):
         if cpu_affinity:

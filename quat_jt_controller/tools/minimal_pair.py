@@ -25,7 +25,7 @@ from rclpy.executors import ExternalShutdownException
 from rclpy.experimental import EventsExecutor
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
-from wrist_sim.sim_node import answer_deadline, await_answer, BUSY_WAIT_S
+from wrist_sim.sim_node import BUSY_WAIT_S
 
 
 def run_controller(node, executor) -> None:
@@ -71,8 +71,9 @@ def run_sim(node, executor, duration_s: float, warmup_s: float, stats_path: Path
     def answered() -> bool:
         return state['answered'] == state['published']
     while clock() < end and rclpy.ok(context=node.context):
-        await_answer(executor, answered, answer_deadline(next_t, state['t_pub'], period),
-                     lambda: rclpy.ok(context=node.context))
+        realtime.await_answer(executor, answered,
+                              realtime.answer_deadline(next_t, state['t_pub'], period),
+                              lambda: rclpy.ok(context=node.context))
         fresh = answered()  # (nothing to step)
         remaining = next_t - clock()
         while remaining > BUSY_WAIT_S:

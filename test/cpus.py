@@ -1,0 +1,24 @@
+"""What the CPU tests share: skips, and the CPUs each thread of a process may run on."""
+from pathlib import Path
+import sys
+
+import pytest
+from quat_jt_controller import realtime
+
+linux_only = pytest.mark.skipif(not sys.platform.startswith('linux'), reason='Linux only')
+two_cpus = pytest.mark.skipif(len(realtime.allowed_cpus()) < 2,
+                              reason='pinning to one CPU of one proves nothing')
+
+
+def thread_cpus(pid: int) -> dict[int, str]:
+    """Return ``{thread id: Cpus_allowed_list}`` of every thread of ``pid``."""
+    out = {}
+    for task in Path(f'/proc/{pid}/task').iterdir():
+        try:
+            status = (task / 'status').read_text()
+        except FileNotFoundError:  # the thread ended meanwhile
+            continue
+        for line in status.splitlines():
+            if line.startswith('Cpus_allowed_list:'):
+                out[int(task.name)] = line.split(':', 1)[1].strip()
+    return out
