@@ -58,7 +58,7 @@ from wrist_sim.simulator import SimulatorError, WristSimulator
 
 NODE_NAME = 'wrist_sim'
 # Real-time loop (``_run_real_time``): the executor sleeps (timer slack 1 ns) until BUSY_WAIT_S
-# before a tick, then a busy-wait; the sleep's wake-up latency here is ~30 us p50, ~130 us p99.
+# before a tick, then a busy-wait (tools/tick_profile.py: such a sleep wakes ~50 us late p50).
 BUSY_WAIT_S = 1.0e-4
 LOG_PERIOD_S = 1.0
 THROTTLE_S = 1.0
