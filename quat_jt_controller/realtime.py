@@ -27,6 +27,9 @@ from typing import Any, Callable, Iterable
 
 PR_SET_TIMERSLACK = 29  # <linux/prctl.h>
 PR_GET_TIMERSLACK = 30
+# The real-time loop sleeps (timer slack 1 ns) until this long before a tick, then busy-waits
+# (tools/tick_profile.py: such a sleep wakes ~50 us late p50).
+BUSY_WAIT_S = 1.0e-4
 # Step with the last command (a stale tick) if no answer came this long before the tick. A
 # step that runs past the tick only delays that state's publication; a stale tick applies an
 # old command, so the answer gets as long as the step leaves...
@@ -148,6 +151,29 @@ def await_answer(executor: Any, answered: Callable[[], bool], deadline_s: float,
             return False
         executor.spin_once(timeout_sec=remaining)
     return True
+
+
+def wait_for_tick(executor: Any, tick_s: float) -> float:
+    """
+    Spin ``executor`` until ``BUSY_WAIT_S`` before ``tick_s``, then busy-wait to it.
+
+    Times from ``time.perf_counter``, in s; returns the time reached (``tick_s`` or later).
+    """
+    clock = time.perf_counter
+    remaining = tick_s - clock()
+    while remaining > BUSY_WAIT_S:
+        executor.spin_once(timeout_sec=remaining - BUSY_WAIT_S)
+        remaining = tick_s - clock()
+    now = clock()
+    while now < tick_s:
+        now = clock()
+    return now
+
+
+def ticks_to_skip(next_tick_s: float, period_s: float, now_s: float) -> int:
+    """Return the whole ticks a loop stalled past ``next_tick_s`` cannot make up (0 if none)."""
+    behind = now_s - next_tick_s
+    return int(behind / period_s) if behind > period_s else 0
 
 
 class RunCheck:

@@ -144,3 +144,27 @@ def test_run_check_asks_the_context_at_most_every_period_and_the_flag_every_time
     running[0] = False  # Ctrl-C: seen at once
     alive[0] = True
     assert not check()
+
+
+class _IdleExecutor:
+    """An executor with nothing queued: spin_once records its timeout and returns."""
+
+    def __init__(self) -> None:
+        self.timeouts = []
+
+    def spin_once(self, timeout_sec: float) -> None:
+        self.timeouts.append(timeout_sec)
+
+
+def test_wait_for_tick_sleeps_in_the_executor_then_busy_waits_to_the_tick():
+    executor = _IdleExecutor()
+    tick = time.perf_counter() + 2e-3
+    reached = realtime.wait_for_tick(executor, tick)
+    assert reached >= tick
+    assert executor.timeouts and all(0.0 < t <= 2e-3 - realtime.BUSY_WAIT_S
+                                     for t in executor.timeouts)
+
+
+def test_ticks_to_skip_counts_whole_periods_beyond_one():
+    assert realtime.ticks_to_skip(10.0, 1e-3, 10.0005) == 0  # late, but catches up
+    assert realtime.ticks_to_skip(10.0, 1e-3, 10.0035) == 3

@@ -5,6 +5,7 @@ Loop statistics, log throttling, joint layout, the simulator's live config and t
 worker.
 """
 import math
+import time
 
 import pytest
 from quat_jt_controller import paper
@@ -139,7 +140,6 @@ def test_goal_check_worker_checks_the_newest_goal_of_a_flood():
         for k in range(200):
             worker.submit(k, [0.5, 0.5, 0.5], singular, (0, 0, 0))
         verdicts = []
-        import time
         deadline = time.monotonic() + 30.0
         while worker.busy and time.monotonic() < deadline:
             verdicts += worker.poll()

@@ -57,9 +57,6 @@ from wrist_sim.config import LIVE_PARAMETERS, SimConfig
 from wrist_sim.simulator import SimulatorError, WristSimulator
 
 NODE_NAME = 'wrist_sim'
-# Real-time loop (``_run_real_time``): the executor sleeps (timer slack 1 ns) until BUSY_WAIT_S
-# before a tick, then a busy-wait (tools/tick_profile.py: such a sleep wakes ~50 us late p50).
-BUSY_WAIT_S = 1.0e-4
 LOG_PERIOD_S = 1.0
 THROTTLE_S = 1.0
 
@@ -394,26 +391,18 @@ class WristSimNode(Node):
             t0 = clock()
             self._advance_simulation()
             step_s = clock() - t0
-            remaining = next_t - clock()
-            while remaining > BUSY_WAIT_S:
-                executor.spin_once(timeout_sec=remaining - BUSY_WAIT_S)
-                remaining = next_t - clock()
+            now = realtime.wait_for_tick(executor, next_t)
             if not ok():
                 break
-            while clock() < next_t:
-                pass
-            now = clock()
             late = now - next_t
             if late > 0.5 * period:
                 self.stats.missed_deadlines += 1
             self.publish_state()
             self.stats.record_step(now, step_s + clock() - now, late, fresh)
             next_t += period
-            behind = clock() - next_t
-            if behind > period:  # stalled: skip the ticks we cannot make up, resync
-                skipped = int(behind / period)
-                self.stats.missed_deadlines += skipped
-                next_t += skipped * period
+            skipped = realtime.ticks_to_skip(next_t, period, clock())  # stalled: resync
+            self.stats.missed_deadlines += skipped
+            next_t += skipped * period
             self._periodic_log(now, last_log)
 
     def _run_lockstep(self, executor: Any) -> None:

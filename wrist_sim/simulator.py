@@ -111,6 +111,15 @@ def _as_vector(values: Optional[Sequence[float]], n: int, name: str,
     return vec
 
 
+def disconnect(client: Optional[BulletClient]) -> None:
+    """Disconnect a PyBullet client; None or an already dead server is fine."""
+    if client is not None:
+        try:
+            client.disconnect()
+        except pybullet.error:
+            pass
+
+
 class WristSimulator:
     """
     A fixed-base serial robot from a URDF, in its own PyBullet client, torque controlled.
@@ -414,13 +423,8 @@ class WristSimulator:
 
     def close(self) -> None:
         """Disconnect the PyBullet client (idempotent)."""
-        client = getattr(self, '_client', None)
-        if client is not None:
-            try:
-                client.disconnect()
-            except pybullet.error:
-                pass
-            self._client = None
+        disconnect(getattr(self, '_client', None))
+        self._client = None
 
     def __enter__(self) -> 'WristSimulator':
         return self

@@ -26,7 +26,7 @@ from PIL import Image, ImageDraw
 import pybullet
 import pybullet_data
 from pybullet_utils.bullet_client import BulletClient
-from wrist_sim.simulator import resolve_package_uris
+from wrist_sim.simulator import disconnect, resolve_package_uris
 
 AXIS_RGB = ((220, 20, 20), (20, 170, 20), (20, 60, 230))  # x, y, z
 TEXT_RGB = (20, 20, 20)
@@ -228,12 +228,8 @@ class RobotRenderer:
 
     def close(self) -> None:
         """Disconnect the PyBullet client (idempotent)."""
-        if self._client is not None:
-            try:
-                self._client.disconnect()
-            except pybullet.error:
-                pass
-            self._client = None
+        disconnect(self._client)
+        self._client = None
 
     def __enter__(self) -> 'RobotRenderer':
         return self

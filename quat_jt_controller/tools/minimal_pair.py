@@ -3,8 +3,8 @@ The floor of the host: a minimal rclpy state/command pair, for the benchmark's b
 
 Two processes, like ``wrist_sim_node`` and ``controller_node`` but with nothing to compute:
 ``--role sim`` publishes a 3-joint ``JointState`` on each 1 kHz tick, with the simulator's own
-deadline loop pieces (``answer_deadline``, ``await_answer``, the timer slack and busy-wait) and
-counts how many ticks get an answer in time; ``--role controller`` answers each state at once
+deadline loop pieces (``realtime``: the answer deadline, the timer slack, the wait for the tick),
+and counts how many ticks get an answer in time; ``--role controller`` answers each state at once
 with a ``Float64MultiArray``. ``--cpu N`` pins the process, as ``cpu_affinity`` pins a node.
 The sim's figures use the simulator's own ``LoopStats``, so they compare one to one with
 ``wrist_sim_node``'s: whatever the real nodes add beyond this pair is theirs, the rest is the
@@ -25,7 +25,6 @@ from rclpy.executors import ExternalShutdownException
 from rclpy.experimental import EventsExecutor
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
-from wrist_sim.sim_node import BUSY_WAIT_S
 
 
 def run_controller(node, executor) -> None:
@@ -70,18 +69,14 @@ def run_sim(node, executor, duration_s: float, warmup_s: float, stats_path: Path
 
     def answered() -> bool:
         return state['answered'] == state['published']
-    while clock() < end and rclpy.ok(context=node.context):
+
+    def ok() -> bool:
+        return rclpy.ok(context=node.context)
+    while clock() < end and ok():
         realtime.await_answer(executor, answered,
-                              realtime.answer_deadline(next_t, state['t_pub'], period),
-                              lambda: rclpy.ok(context=node.context))
+                              realtime.answer_deadline(next_t, state['t_pub'], period), ok)
         fresh = answered()  # (nothing to step)
-        remaining = next_t - clock()
-        while remaining > BUSY_WAIT_S:
-            executor.spin_once(timeout_sec=remaining - BUSY_WAIT_S)
-            remaining = next_t - clock()
-        while clock() < next_t:
-            pass
-        now = clock()
+        now = realtime.wait_for_tick(executor, next_t)
         if state['measuring']:
             if now - next_t > 0.5 * period:
                 stats.missed_deadlines += 1
@@ -89,12 +84,10 @@ def run_sim(node, executor, duration_s: float, warmup_s: float, stats_path: Path
         state['measuring'] = now >= measure_from
         publish()
         next_t += period
-        behind = clock() - next_t
-        if behind > period:  # stalled: skip the ticks we cannot make up, as the simulator does
-            skipped = int(behind / period)
-            if state['measuring']:
-                stats.missed_deadlines += skipped
-            next_t += skipped * period
+        skipped = realtime.ticks_to_skip(next_t, period, clock())  # as the simulator does
+        if state['measuring']:
+            stats.missed_deadlines += skipped
+        next_t += skipped * period
     stats_path.write_text(json.dumps(stats.summary(), indent=1))
 
 
