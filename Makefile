@@ -27,8 +27,10 @@ demo: $(STAMP)
 
 # The 1 kHz loop benchmark (about 5 min): two processes pinned and not pinned, each beside a
 # minimal pair, composed for 60 s, the lockstep experiment in both modes, the core tick.
+# BENCH_ARGS go to the benchmark, e.g. make bench BENCH_ARGS='--prewarm-lead 0'
+BENCH_ARGS ?=
 bench: $(STAMP)
-	$(PY) -m quat_jt_controller.tools.benchmark
+	$(PY) -m quat_jt_controller.tools.benchmark $(BENCH_ARGS)
 
 # Both nodes for DURATION seconds (10 minutes by default): RSS and rates per minute, the final
 # error and the warnings seen. LOAD=N runs N busy processes beside them (a loaded host).

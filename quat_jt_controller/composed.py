@@ -26,10 +26,15 @@ NAME = 'composed'
 
 
 def make_nodes() -> tuple[WristSimNode, QuatJtController]:
-    """Build the simulator, then the controller (the simulator is destroyed if that fails)."""
+    """
+    Build the simulator, then the controller (the simulator is destroyed if that fails).
+
+    The controller runs no throwaway tick (``prewarm_lead``) here: in one process its caches
+    stay warm, and the throwaway tick cost 8 points of CPU for no fewer missed ticks.
+    """
     sim = WristSimNode()
     try:
-        return sim, QuatJtController()
+        return sim, QuatJtController(prewarm=False)  # the simulator's loop keeps it warm
     except BaseException:
         sim.destroy_node()
         raise

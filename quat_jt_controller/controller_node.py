@@ -15,6 +15,7 @@ from geometry_msgs.msg import PoseStamped, Vector3Stamped
 from quat_jt_controller import diagnostics
 from quat_jt_controller import lifecycle
 from quat_jt_controller import quaternion as quat
+from quat_jt_controller import realtime
 from quat_jt_controller.control_law import Gains, GainsError, Task
 from quat_jt_controller.goal_check import GoalCheckWorker, ModelSpec
 from quat_jt_controller.joints import stamp_problem, StateLayout
@@ -42,7 +43,8 @@ DIAGNOSTICS_WAIT_NS = 20_000_000
 class QuatJtController(Node):
     """Transpose-Jacobian regulator with unit-quaternion orientation error, Eq. (22)."""
 
-    def __init__(self, **kwargs) -> None:
+    def __init__(self, prewarm: bool = True, **kwargs) -> None:
+        """Build the node; ``prewarm=False``: never a throwaway tick (the composed mode)."""
         super().__init__(NODE_NAME, **kwargs)
         cfg = self.config = declare_structural(self)
         self.cpu_affinity = declare_cpu_affinity(self)  # pinned by lifecycle.run_node
@@ -98,6 +100,14 @@ class QuatJtController(Node):
         self.create_timer(0.05, self._on_goal_checks)
         self._diagnostics_due = False
         self.create_timer(1.0, self._on_diagnostics_timer)
+        self._prewarm, self._prewarm_timer, self._prewarm_delay_ns = None, None, 0
+        off = ('prewarm_lead is 0' if cfg.prewarm_lead_s <= 0.0 else
+               'composed' if not prewarm else 'simulated time' if self._use_sim_time else
+               'pinned (cpu_affinity)' if self.cpu_affinity else '')
+        if not off:
+            self._prewarm = realtime.Prewarm(int(cfg.prewarm_lead_s * 1e9))
+            self._prewarm_timer = self.create_timer(1e-3, self._on_prewarm)
+            self._prewarm_timer.cancel()  # armed by each state
         # /diagnostics is one topic for the whole graph: statuses carry the full node name.
         self._diag_name = self.get_fully_qualified_name().lstrip('/')
         g = self.regulator.gains
@@ -106,6 +116,9 @@ class QuatJtController(Node):
             f'{cfg.tip_link}, potential {g.potential.value}, kp {list(g.kp)}, kv {list(g.kv)}, '
             f'lambda {list(g.lam)}, effort limits {self.regulator.effort_limits_nm} N m; '
             'holding the first measured pose until a goal arrives on ~/target_pose')
+        self.get_logger().info(
+            f'prewarm: off ({off})' if off else
+            f'prewarm: a throwaway tick {cfg.prewarm_lead_s * 1e3:g} ms before each state is due')
 
     @property
     def gains(self) -> Gains:
@@ -153,6 +166,8 @@ class QuatJtController(Node):
                           out.saturated)
         self._last, self._last_q, self._last_qdot = out, q, qdot
         self._last_state_ns = time.monotonic_ns()
+        if self._prewarm is not None:
+            self._arm_prewarm(t0)
         self.stall.feed(t0 * 1e-9, q, qdot, out)
         if not out.finite:
             self.counters.nonfinite_torques += 1
@@ -169,6 +184,22 @@ class QuatJtController(Node):
         if self._diagnostics_due:  # now: the command is out, the next state ~1 period away
             self._diagnostics_due = False
             self._publish_diagnostics()
+
+    def _arm_prewarm(self, arrival_ns: int) -> None:
+        """Set the throwaway tick to run ``prewarm_lead`` before the next state is due."""
+        delay_ns = self._prewarm.arrived(arrival_ns)
+        if delay_ns is None:
+            return
+        if abs(delay_ns - self._prewarm_delay_ns) > delay_ns >> 5:  # the rate moved > 3%
+            self._prewarm_delay_ns = self._prewarm_timer.timer_period_ns = delay_ns
+        self._prewarm_timer.reset()
+
+    def _on_prewarm(self) -> None:
+        """Run the throwaway tick: the last state's law again, output dropped (caches warm)."""
+        self._prewarm_timer.cancel()  # once per state: no wake-ups while states are away
+        if self._last_q is not None:
+            self.regulator.update(self._last_q, self._last_qdot)
+            self.counters.prewarm_passes += 1
 
     def _hold(self, q: list[float]) -> None:
         """Until the first goal: hold the pose measured on the first joint state."""

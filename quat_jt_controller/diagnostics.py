@@ -29,6 +29,7 @@ class Counters:
     rejected_goals: int = 0
     accepted_goals: int = 0
     nonfinite_torques: int = 0
+    prewarm_passes: int = 0  # throwaway ticks run before a state was due (realtime.Prewarm)
 
 
 def graph_warnings(command_topic: str, command_publishers: int, node_name: str,
@@ -73,6 +74,7 @@ def loop_status(figures: dict, waiting: bool, stopped: bool, counters: Counters,
     values += [('rejected_states_total', str(counters.rejected_states)),
                ('stale_states_total', str(counters.stale_states)),
                ('nonfinite_torques_total', str(counters.nonfinite_torques)),
+               ('prewarm_passes_total', str(counters.prewarm_passes)),
                ('state_timeout', str(stopped))]
     return level, message, values
 

@@ -20,7 +20,7 @@ from typing import Any, Callable, Generic, Mapping, Optional, Sequence, TypeVar
 from quat_jt_controller import paper
 from quat_jt_controller.control_law import gain_ceiling, Gains, MAX_LAMBDA, Potential, Task
 from quat_jt_controller.joints import DEFAULT_MAX_STATE_AGE_S, DEFAULT_STATE_TIMEOUT_S
-from quat_jt_controller.realtime import check_cpus
+from quat_jt_controller.realtime import check_cpus, DEFAULT_PREWARM_LEAD_S
 from quat_jt_controller.resources import default_urdf_xml
 from quat_jt_controller.shaping import from_parameters as shaping_from_parameters, Shaping
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
@@ -55,6 +55,7 @@ class StructuralConfig:
     state_timeout_s: float
     max_state_age_s: float  # 0: stamps not checked
     publish_rate_divider: int
+    prewarm_lead_s: float  # 0: no throwaway tick before each state
 
 
 def history_qos(simulated_time: bool) -> QoSProfile:
@@ -188,6 +189,15 @@ def declare_structural(node: Node) -> StructuralConfig:
                     '(N = 10: 100 Hz at a 1 kHz state rate).',
                     ParameterType.PARAMETER_INTEGER, read_only=True,
                     int_range=(1, 1000))).value
+    prewarm = node.declare_parameter(
+        'prewarm_lead', DEFAULT_PREWARM_LEAD_S,
+        _descriptor('Seconds before the next joint state is due (from the measured state rate) '
+                    'at which the controller runs a throwaway tick, so that the real tick finds '
+                    'its code and data in the CPU caches another process evicted; costs one '
+                    'wake-up per state. 0 = off. Not used when the process is pinned '
+                    '(cpu_affinity), on simulated time, or composed (README, Real-time '
+                    'settings).', ParameterType.PARAMETER_DOUBLE, read_only=True,
+                    float_range=(0.0, 0.01))).value
     if not joints or any(not j for j in joints):
         raise ValueError(f'joints must be a non-empty list of names, got {list(joints)}')
     if not base_link or not tip_link:
@@ -195,7 +205,8 @@ def declare_structural(node: Node) -> StructuralConfig:
     return StructuralConfig(task=task, joints=tuple(joints), base_link=base_link,
                             tip_link=tip_link, robot_description=urdf or default_urdf_xml(),
                             given_robot_description=urdf, state_timeout_s=float(timeout),
-                            max_state_age_s=float(max_age), publish_rate_divider=int(divider))
+                            max_state_age_s=float(max_age), publish_rate_divider=int(divider),
+                            prewarm_lead_s=float(prewarm))
 
 
 def declare_cpu_affinity(node: Node) -> tuple[int, ...]:

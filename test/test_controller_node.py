@@ -523,6 +523,10 @@ def test_real_time_closed_loop_with_the_simulator(tmp_path, model):
         print('controller loop against wrist_sim_node:', loop)
         assert float(loop['control_rate_hz']) > 100.0, loop
         assert loop['state_timeout'] == 'False', loop
+        # Not pinned, at the simulator's 1 kHz: a throwaway tick before (most) states.
+        assert int(loop['prewarm_passes_total']) > 0, loop
+        assert 'prewarm: a throwaway tick 0.3 ms before each state is due' in (
+            tmp_path / 'controller_node.log').read_text()
     finally:
         h.close()
 

@@ -276,4 +276,5 @@ def test_the_composed_process_regulates_and_exits_cleanly(pair):
     assert local_ros.stop_node(both, timeout=10.0) == 0, pair.logs()
     text = pair.log('composed')
     assert '[wrist_sim]: stats {' in text and '[quat_jt_controller]: new goal' in text, text
+    assert 'prewarm: off (composed)' in text, text  # one process: its caches stay warm
     assert 'Traceback' not in text and 'context is invalid' not in text, text[-3000:]

@@ -168,3 +168,48 @@ def test_wait_for_tick_sleeps_in_the_executor_then_busy_waits_to_the_tick():
 def test_ticks_to_skip_counts_whole_periods_beyond_one():
     assert realtime.ticks_to_skip(10.0, 1e-3, 10.0005) == 0  # late, but catches up
     assert realtime.ticks_to_skip(10.0, 1e-3, 10.0035) == 3
+
+
+def _arrivals(prewarm: realtime.Prewarm, start_ns: int, intervals_ns) -> tuple[int, list]:
+    """Feed arrivals spaced by ``intervals_ns``; return the last time and the delays given."""
+    delays, now = [], start_ns
+    for interval in intervals_ns:
+        now += interval
+        delays.append(prewarm.arrived(now))
+    return now, delays
+
+
+def test_prewarm_is_due_the_lead_before_the_next_state():
+    prewarm = realtime.Prewarm(300_000)
+    assert prewarm.arrived(5_000_000) is None  # one state: no period yet
+    _, delays = _arrivals(prewarm, 5_000_000, [1_000_000] * 50)
+    assert delays[0] == delays[-1] == 700_000
+    assert prewarm.period_ns == 1_000_000
+    with pytest.raises(ValueError):
+        realtime.Prewarm(0)
+
+
+def test_prewarm_estimate_shrugs_off_a_late_state_and_a_pause_and_follows_a_new_rate():
+    prewarm = realtime.Prewarm(300_000)
+    now, _ = _arrivals(prewarm, 0, [1_000_000] * 50)
+    # A late state and the one right after it: the estimate moves by a few percent only.
+    now, delays = _arrivals(prewarm, now, [1_900_000, 100_000])
+    assert all(abs(d - 700_000) < 0.1 * 1_000_000 for d in delays)
+    now, _ = _arrivals(prewarm, now, [1_000_000] * 100)
+    assert abs(prewarm.period_ns - 1_000_000) < 5_000
+    # The states pause for a second: one interval, clipped to twice the period.
+    now, delays = _arrivals(prewarm, now, [1_000_000_000])
+    assert prewarm.period_ns <= 1_000_000 * (1 + 1 / realtime.PERIOD_SMOOTHING) + 5_000
+    # The rate halves for good (500 Hz): followed within a few dozen states.
+    now, delays = _arrivals(prewarm, now, [2_000_000] * 80)
+    assert abs(prewarm.period_ns - 2_000_000) < 0.05 * 2_000_000
+    assert abs(delays[-1] - 1_700_000) < 0.05 * 2_000_000
+
+
+def test_prewarm_has_no_time_to_use_when_states_come_faster_than_twice_the_lead():
+    """Lockstep answers each state at once: after the first period, no throwaway tick."""
+    prewarm = realtime.Prewarm(300_000)
+    _, delays = _arrivals(prewarm, 0, [1_000_000_000] * 2 + [150_000] * 300)
+    # A start-up pause is taken as the period at first...
+    assert delays[0] is None and delays[1] is not None
+    assert delays[-1] is None and prewarm.period_ns < 600_000  # ... not for long

@@ -63,8 +63,14 @@ def test_cpu_affinity_pins_each_node_and_is_read_only(tmp_path):
             res = client.set_parameters([Parameter('cpu_affinity', value=[0])])
             h.spin_until(res.done, 10.0, 'set cpu_affinity')
             assert not res.result().results[0].successful
+        res = clients['controller_node'].set_parameters([Parameter('prewarm_lead', value=0.0)])
+        h.spin_until(res.done, 10.0, 'set prewarm_lead')
+        assert not res.result().results[0].successful  # read-only
         for executable in clients:
             assert 'process pinned to CPUs' in (tmp_path / f'{executable}.log').read_text()
+        # Pinned, the controller's caches stay warm: no throwaway tick before each state.
+        assert 'prewarm: off (pinned (cpu_affinity))' in (
+            tmp_path / 'controller_node.log').read_text()
     finally:
         h.close()
 

@@ -77,7 +77,8 @@ def test_benchmark_reports_every_figure(tmp_path):
                 'controller compute p50 (lowest-highest 1 s window) / p99 (us)',
                 'CPU % (sim / controller, or the one process)',
                 'paper experiment in lockstep (x real time)', 'host CPU steal during the run (%)',
-                'core tick Regulator.update, xArm6 6-DOF pose'):
+                'core tick Regulator.update, xArm6 6-DOF pose',
+                'controller throwaway ticks before a state (prewarm_lead; % of states)'):
         assert f'| {row}' in stdout, row
     result = json.loads((tmp_path / 'bench.json').read_text())
     pinned = ('two processes, pinned',) if two_cpus else ()
@@ -87,6 +88,10 @@ def test_benchmark_reports_every_figure(tmp_path):
         assert result['loops'][mode]['command_rate_hz'] > 100.0, mode
     for mode in ('two processes', 'composed'):
         assert result['lockstep'][mode]['real_time_factor'] > 0.0, mode
+    # The throwaway tick runs where another process can evict the controller's caches only.
+    assert result['loops']['two processes, not pinned']['prewarm_per_state'] > 0.0
+    for mode in (*pinned, 'composed'):
+        assert result['loops'][mode]['prewarm_per_state'] == 0.0, mode
     for mode in (*pinned, 'two processes, not pinned'):
         assert result['baselines'][mode]['window_steps'] > 1000  # the minimal pair ran too
     for log in ('wrist_sim_node.log', 'controller_node.log') if two_cpus else ():

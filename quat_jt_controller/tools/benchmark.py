@@ -134,12 +134,13 @@ def baseline_benchmark(duration_s: float, warmup_s: float, out: Path,
 
 
 def loop_benchmark(duration_s: float, warmup_s: float, out: Path, composed: bool = False,
-                   cpus: tuple[tuple[int, ...], tuple[int, ...]] = ((), ())) -> dict:
+                   cpus: tuple[tuple[int, ...], tuple[int, ...]] = ((), ()),
+                   controller_params: Optional[dict] = None) -> dict:
     """
     Measure the real-time loop of the two nodes: two processes, or composed in one.
 
     ``cpus``: the simulator's and the controller's ``cpu_affinity`` (composed: the process is
-    pinned to both); empty = not pinned.
+    pinned to both); empty = not pinned. ``controller_params`` override the paper's config.
     """
     from diagnostic_msgs.msg import DiagnosticArray
     from quat_jt_controller.tools.probe import ProbeNode
@@ -155,7 +156,7 @@ def loop_benchmark(duration_s: float, warmup_s: float, out: Path, composed: bool
     # The simulator's statistics cover the measured interval: it is stopped right after it.
     sim_params = {'stats_file': str(stats_file), 'coulomb_friction': [0.0] * 3,
                   'stats_window_steps': max(int(duration_s * 1000), 100)}
-    controller_params = {'potential': 'tanh'}
+    controller_params = {'potential': 'tanh', **(controller_params or {})}
     for params, cpu_affinity in zip((sim_params, controller_params), cpus):
         if cpu_affinity:
             params['cpu_affinity'] = list(cpu_affinity)
@@ -214,6 +215,7 @@ def loop_benchmark(duration_s: float, warmup_s: float, out: Path, composed: bool
     if not windows:
         raise RuntimeError(f'no controller diagnostics received; logs in {out}')
     full = [w for w in windows if int(w['ticks_in_window']) > 0]
+    passes = [int(w.get('prewarm_passes_total', 0)) for w in full]
     return {
         'duration_s': wall,
         'sim': sim_stats,
@@ -224,6 +226,9 @@ def loop_benchmark(duration_s: float, warmup_s: float, out: Path, composed: bool
         'command_rate_hz': statistics.mean(float(w['control_rate_hz']) for w in full),
         'compute_us_p50': statistics.median(float(w['compute_us_p50']) for w in full),
         'compute_us_p99': max(float(w['compute_us_p99']) for w in full),
+        # throwaway ticks (prewarm_lead) per state, over the windows after the first
+        'prewarm_per_state': (passes[-1] - passes[0]) / max(
+            sum(int(w['ticks_in_window']) for w in full[1:]), 1),
     }
 
 
@@ -269,7 +274,8 @@ def pinned_layout() -> tuple[tuple[int, ...], tuple[int, ...]]:
 
 
 def report(loops: dict, baselines: dict, core: dict, lockstep: dict,
-           layout: tuple[tuple[int, ...], tuple[int, ...]]) -> str:
+           layout: tuple[tuple[int, ...], tuple[int, ...]],
+           prewarm_text: str = 'its default') -> str:
     """
     Return the figures as a markdown table: each mode beside the minimal pair run the same way.
 
@@ -321,6 +327,8 @@ def report(loops: dict, baselines: dict, core: dict, lockstep: dict,
          *cells(lambda r: f'{r["compute_us_p50"]:.1f} ({_window_range(r)}) / '
                           f'{r["compute_us_p99"]:.1f}'),
          TARGETS['compute p50 (us)']),
+        ('controller throwaway ticks before a state (prewarm_lead; % of states)',
+         *cells(lambda r: f'{100.0 * r.get("prewarm_per_state", 0.0):.0f}'), ''),
         ('sim step + publish p50 / p99 (us)',
          *cells(lambda r: f'{r["sim"]["step_compute_us_p50"]:.1f} / '
                           f'{r["sim"]["step_compute_us_p99"]:.1f}'), ''),
@@ -334,7 +342,8 @@ def report(loops: dict, baselines: dict, core: dict, lockstep: dict,
              '|---' * (len(header) + 2) + '|']
     lines += ['| ' + ' | '.join(row) + ' |' for row in rows]
     lines += ['', f'Pinned: simulator on CPU {list(layout[0])}, controller on CPU '
-              f'{list(layout[1])} (``cpu_affinity``); the minimal pair likewise.', '',
+              f'{list(layout[1])} (``cpu_affinity``); the minimal pair likewise. The '
+              f"controller's prewarm_lead: {prewarm_text}.", '',
               '| figure | two processes | composed | target |', '|---|---|---|---|',
               f'| paper experiment in lockstep (x real time) | {lock("two processes")} | '
               f'{lock("composed")} | {TARGETS["lockstep (x real time)"]} |']
@@ -352,6 +361,9 @@ def main(argv: Optional[list] = None) -> int:
                         help='measured seconds of the composed run')
     parser.add_argument('--lockstep-duration', type=float, default=20.0,
                         help='simulated seconds of each lockstep paper experiment')
+    parser.add_argument('--prewarm-lead', type=float, default=None,
+                        help="the controller's prewarm_lead (s) in the two-process runs; "
+                             'default: its own default (0 = off)')
     parser.add_argument('--warmup', type=float, default=3.0)
     parser.add_argument('--out', type=Path, default=Path('results/bench'))
     args = parser.parse_args(argv)
@@ -360,17 +372,20 @@ def main(argv: Optional[list] = None) -> int:
     core = core_benchmark()
     layout = pinned_layout()
     loops, baselines = {}, {}
+    prewarm = {} if args.prewarm_lead is None else {'prewarm_lead': args.prewarm_lead}
     for mode, cpus in ((PINNED, layout), (UNPINNED, ((), ()))):
         if mode == PINNED and not any(cpus):
             print('fewer than 2 CPUs: no pinned run')
             continue
         print(f'baseline ({mode}): a minimal rclpy pair for {args.duration} s')
         baselines[mode] = baseline_benchmark(args.duration, args.warmup, args.out, cpus)
-        loops[mode] = loop_benchmark(args.duration, args.warmup, args.out, cpus=cpus)
+        loops[mode] = loop_benchmark(args.duration, args.warmup, args.out, cpus=cpus,
+                                     controller_params=prewarm)
     loops[COMPOSED] = loop_benchmark(args.composed_duration, args.warmup, args.out,
                                      composed=True)
     lockstep = lockstep_benchmark(args.out, args.lockstep_duration)
-    text = report(loops, baselines, core, lockstep, layout)
+    text = report(loops, baselines, core, lockstep, layout,
+                  'its default' if args.prewarm_lead is None else f'{args.prewarm_lead:g} s')
     (args.out / 'bench.json').write_text(json.dumps(
         {'loops': loops, 'core': core, 'baselines': baselines, 'lockstep': lockstep,
          'pinned_layout': layout}, indent=1))
