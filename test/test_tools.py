@@ -102,6 +102,17 @@ def test_benchmark_reports_every_figure(tmp_path):
         assert math.isfinite(core['us_per_tick']) and core['us_per_tick'] > 0.0, name
 
 
+def test_benchmark_compares_prewarm_off_and_on(tmp_path):
+    stdout = run_tool('quat_jt_controller.tools.benchmark', '--out', str(tmp_path),
+                      '--prewarm-pairs', '1', '--duration', '2', '--warmup', '1')
+    table = stdout[stdout.index('| pair |'):].strip().splitlines()
+    assert len(table) == 2 + 2 + 2, table  # header, a run each way, a mean each way
+    runs = {cells[2].strip(): cells for cells in (line.split('|') for line in table[2:4])}
+    assert set(runs) == {'off (prewarm_lead 0)', 'on (its default)'}, table
+    assert float(runs['off (prewarm_lead 0)'][8]) == 0.0  # no throwaway tick when off
+    assert float(runs['on (its default)'][8]) > 0.0  # some when on (not pinned, 1 kHz)
+
+
 def test_tick_profile_times_every_piece_of_both_ticks():
     stdout = run_tool('quat_jt_controller.tools.tick_profile', '--calls', '500')
     pieces_table, sleep_table = stdout[stdout.index('| controller'):].split('\n\n')[:2]

@@ -31,7 +31,10 @@ error, law, finite check, clamp), for the wrist (3-DOF, orientation task) and th
 pose task), in one process.
 
     python -m quat_jt_controller.tools.benchmark [--duration 30] [--composed-duration 60]
-        [--out results/bench]
+        [--prewarm-lead S] [--out results/bench]
+
+``--prewarm-pairs N`` runs only the comparison behind the controller's ``prewarm_lead``: N pairs
+of two-process runs, not pinned, the throwaway tick off then on, each ``--duration`` s.
 """
 import argparse
 import json
@@ -353,6 +356,37 @@ def report(loops: dict, baselines: dict, core: dict, lockstep: dict,
     return '\n'.join(lines)
 
 
+def prewarm_comparison(duration_s: float, warmup_s: float, out: Path, pairs: int) -> str:
+    """
+    Run two processes, not pinned, with the controller's ``prewarm_lead`` 0 then its default.
+
+    ``pairs`` times, alternating, so that both see the same host; return a markdown table of
+    each run and the means.
+    """
+    rows, sums = [], {}
+    for k in range(pairs):
+        for label, params in (('off (prewarm_lead 0)', {'prewarm_lead': 0.0}),
+                              ('on (its default)', {})):
+            loop = loop_benchmark(duration_s, warmup_s, out / f'prewarm_{k}_{label[:3].strip()}',
+                                  controller_params=params)
+            s, cpu = loop['sim'], loop['cpu_percent']
+            figures = (loop['compute_us_p50'], 100.0 * s['window_stale_steps'] / s['window_steps'],
+                       s['cmd_latency_us_p50'] / 1e3, cpu['wrist_sim_node'],
+                       cpu['controller_node'], 100.0 * loop['prewarm_per_state'])
+            sums.setdefault(label, []).append(figures)
+            rows.append(f'| {k + 1} | {label} | ' + ' | '.join(
+                f'{v:.{d}f}' for v, d in zip(figures, (1, 3, 3, 1, 1, 0))) +
+                f' | {loop["host_steal_percent"]:.1f} |')
+    for label, runs in sums.items():
+        means = [sum(col) / len(col) for col in zip(*runs)]
+        rows.append(f'| mean | {label} | ' + ' | '.join(
+            f'{v:.{d}f}' for v, d in zip(means, (1, 3, 3, 1, 1, 0))) + ' | |')
+    return '\n'.join([
+        '| pair | prewarm | compute p50 (us) | missed ticks (%) | latency p50 (ms) | '
+        'CPU sim (%) | CPU controller (%) | throwaway ticks (% of states) | steal (%) |',
+        '|---|---|---|---|---|---|---|---|---|', *rows])
+
+
 def main(argv: Optional[list] = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split('\n')[0])
     parser.add_argument('--duration', type=float, default=30.0,
@@ -366,8 +400,17 @@ def main(argv: Optional[list] = None) -> int:
                              'default: its own default (0 = off)')
     parser.add_argument('--warmup', type=float, default=3.0)
     parser.add_argument('--out', type=Path, default=Path('results/bench'))
+    parser.add_argument('--prewarm-pairs', type=int, default=0,
+                        help='instead of the benchmark: this many pairs of two-process runs, '
+                             'not pinned, prewarm off then on (--duration s each)')
     args = parser.parse_args(argv)
     args.out.mkdir(parents=True, exist_ok=True)
+    if args.prewarm_pairs > 0:
+        text = prewarm_comparison(args.duration, args.warmup, args.out, args.prewarm_pairs)
+        (args.out / 'prewarm.md').write_text(text + '\n')
+        print()
+        print(text)
+        return 0
     print('core: timing the control tick in one process')
     core = core_benchmark()
     layout = pinned_layout()
