@@ -20,8 +20,8 @@ real-time deployment of a 1 kHz loop sets (ros2_control's controller_manager has
 * **Prewarm** (:class:`Prewarm`): the controller, when it shares its CPUs with another busy
   process, runs a throwaway tick shortly before each state is due, so that the real tick finds
   its code and data in the caches. Two processes not pinned, on the test machine: the compute
-  time in the loop went from about 40 us to about 23 us and the state-to-command latency p50
-  dropped by about 40 us, for about 4 points more CPU (README, 'Real-time settings').
+  time in the loop went from about 40 us to about 24 us and the state-to-command latency p50
+  dropped by about 20 us, for about 5 points more CPU (README, 'Real-time settings').
 * :class:`RunCheck`: the nodes' "keep running?" check, cheap enough to ask after every event.
 """
 import ctypes
@@ -48,8 +48,8 @@ MIN_ANSWER_FRACTION = 0.5
 DRAIN_EVENTS = 4
 CONTEXT_CHECK_S = 0.01  # an external shutdown is noticed within this (wall s)
 # The controller's throwaway tick runs this long before the next state is due (its timer wakes
-# up to 50 us late: about 0.2 ms before, measured). Leads from 0.1 to 0.3 ms helped equally;
-# a timer set 0.1 ms before the state mostly fired after it.
+# 50-80 us late, so about 0.2 ms before). In A/B runs, 0.2 ms did as well; 0.4 ms cost more CPU
+# for no faster tick; with 0.1 ms the timer mostly fired after the state had come.
 DEFAULT_PREWARM_LEAD_S = 3.0e-4
 PERIOD_SMOOTHING = 16  # the state period estimate moves 1/16 of the way to each new interval
 
