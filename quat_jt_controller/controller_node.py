@@ -29,6 +29,7 @@ from quat_jt_controller.resources import bundled_urdf_hint
 from quat_jt_controller.shaping import describe as describe_shaping
 from quat_jt_controller.stall import StallDetector
 from quat_jt_controller.throttle import cause, Throttle
+from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
@@ -101,13 +102,14 @@ class QuatJtController(Node):
         self._diagnostics_due = False
         self.create_timer(1.0, self._on_diagnostics_timer)
         self._prewarm, self._prewarm_timer, self._prewarm_delay_ns = None, None, 0
-        off = ('prewarm_lead is 0' if cfg.prewarm_lead_s <= 0.0 else
-               'composed' if not prewarm else 'simulated time' if self._use_sim_time else
-               'pinned (cpu_affinity)' if self.cpu_affinity else '')
-        if not off:
-            self._prewarm = realtime.Prewarm(int(cfg.prewarm_lead_s * 1e9))
-            self._prewarm_timer = self.create_timer(1e-3, self._on_prewarm)
-            self._prewarm_timer.cancel()  # armed by each state
+        lead_ns = int(cfg.prewarm_lead_s * 1e9)
+        off = ('prewarm_lead is 0' if lead_ns <= 0 else 'composed' if not prewarm else
+               'simulated time' if self._use_sim_time else '')
+        if not off:  # armed by each state, on the steady clock (as the arrival times)
+            self._prewarm = realtime.Prewarm(lead_ns)
+            self._prewarm_timer = self.create_timer(
+                1e-3, self._on_prewarm, clock=Clock(clock_type=ClockType.STEADY_TIME),
+                autostart=False)
         # /diagnostics is one topic for the whole graph: statuses carry the full node name.
         self._diag_name = self.get_fully_qualified_name().lstrip('/')
         g = self.regulator.gains
@@ -118,7 +120,8 @@ class QuatJtController(Node):
             'holding the first measured pose until a goal arrives on ~/target_pose')
         self.get_logger().info(
             f'prewarm: off ({off})' if off else
-            f'prewarm: a throwaway tick {cfg.prewarm_lead_s * 1e3:g} ms before each state is due')
+            f'prewarm: a throwaway tick {cfg.prewarm_lead_s * 1e3:g} ms before each state is due '
+            f'(while states come at least {2e3 * cfg.prewarm_lead_s:g} ms apart)')
 
     @property
     def gains(self) -> Gains:
@@ -187,17 +190,22 @@ class QuatJtController(Node):
 
     def _arm_prewarm(self, arrival_ns: int) -> None:
         """Set the throwaway tick to run ``prewarm_lead`` before the next state is due."""
-        delay_ns = self._prewarm.arrived(arrival_ns)
+        timer = self._prewarm_timer
+        delay_ns = self._prewarm.arrived(arrival_ns, time.perf_counter_ns())
         if delay_ns is None:
+            timer.cancel()
             return
-        if abs(delay_ns - self._prewarm_delay_ns) > delay_ns >> 5:  # the rate moved > 3%
-            self._prewarm_delay_ns = self._prewarm_timer.timer_period_ns = delay_ns
-        self._prewarm_timer.reset()
+        if abs(delay_ns - self._prewarm_delay_ns) > delay_ns >> 5:  # moved > 3%: reprogram
+            self._prewarm_delay_ns = timer.timer_period_ns = max(delay_ns, 1)
+        timer.reset()
 
     def _on_prewarm(self) -> None:
         """Run the throwaway tick: the last state's law again, output dropped (caches warm)."""
+        run = self._prewarm.take(time.perf_counter_ns())
+        if run is None:  # fired for an earlier state: the timer stays armed for this one
+            return
         self._prewarm_timer.cancel()  # once per state: no wake-ups while states are away
-        if self._last_q is not None:
+        if run:
             self.regulator.update(self._last_q, self._last_qdot)
             self.counters.prewarm_passes += 1
 

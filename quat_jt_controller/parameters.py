@@ -193,10 +193,10 @@ def declare_structural(node: Node) -> StructuralConfig:
         'prewarm_lead', DEFAULT_PREWARM_LEAD_S,
         _descriptor('Seconds before the next joint state is due (from the measured state rate) '
                     'at which the controller runs a throwaway tick, so that the real tick finds '
-                    'its code and data in the CPU caches another process evicted; costs one '
-                    'wake-up per state. 0 = off. Not used when the process is pinned '
-                    '(cpu_affinity), on simulated time, or composed (README, Real-time '
-                    'settings).', ParameterType.PARAMETER_DOUBLE, read_only=True,
+                    'its code and data in the CPU caches another process evicted, and its CPU '
+                    'awake; costs one wake-up per state. 0 = off. Not used on simulated time '
+                    'or composed (README, Real-time settings).',
+                    ParameterType.PARAMETER_DOUBLE, read_only=True,
                     float_range=(0.0, 0.01))).value
     if not joints or any(not j for j in joints):
         raise ValueError(f'joints must be a non-empty list of names, got {list(joints)}')

@@ -221,36 +221,62 @@ class Prewarm:
     When to run the controller's throwaway tick: ``lead_ns`` before the next state is due.
 
     The state period is estimated from the arrival times (``time.perf_counter_ns``) of the
-    states: a running mean that moves ``1/PERIOD_SMOOTHING`` of the way to each new interval,
-    the interval first clipped to between half and twice the estimate. So a late state and the
-    one right after it (a long interval, then a short one), or a pause in the states, move the
-    estimate by a few percent only, while a lasting change of rate is followed within a few
-    dozen states. :meth:`arrived` returns how long after this state the throwaway tick is due,
-    or None while the period is unknown or under twice the lead (lockstep, where states come as
-    fast as they are answered, has no idle time to use).
+    states: a running mean that moves ``1/PERIOD_SMOOTHING`` of the way to each new interval
+    (at least 1 ns), the interval first clipped to between half and twice the estimate. So a
+    late state and the one right after it (a long interval, then a short one), or a pause in the
+    states, move the estimate by a few percent only, while a lasting change of rate is followed
+    within a few dozen states. :meth:`arrived` gives how long from now the throwaway tick is
+    due; :meth:`take` says whether a timer that fired now should run it.
     """
 
-    __slots__ = ('lead_ns', 'period_ns', '_last_ns')
+    __slots__ = ('lead_ns', 'period_ns', 'due_ns', '_last_ns')
 
     def __init__(self, lead_ns: int) -> None:
         if lead_ns <= 0:
             raise ValueError(f'the prewarm lead must be > 0 ns, got {lead_ns}')
         self.lead_ns = int(lead_ns)
         self.period_ns = 0  # 0 until two states have arrived
+        self.due_ns = 0  # when the throwaway tick is due; 0: none
         self._last_ns: Optional[int] = None
 
-    def arrived(self, now_ns: int) -> Optional[int]:
-        """Take a state's arrival time (ns); return the delay to the throwaway tick, or None."""
-        last, self._last_ns = self._last_ns, now_ns
-        if last is None:
+    def arrived(self, arrival_ns: int, now_ns: int) -> Optional[int]:
+        """
+        Take a state's arrival time; return the delay from ``now_ns`` to the throwaway tick.
+
+        None (and nothing due) while the period is unknown or under twice the lead: lockstep,
+        where states come as fast as they are answered, has no idle time to use.
+        """
+        last_ns, self._last_ns = self._last_ns, arrival_ns
+        self.due_ns = 0
+        if last_ns is None or arrival_ns <= last_ns:
             return None
-        interval = now_ns - last
-        period = self.period_ns
-        if period <= 0:
-            period = interval
+        interval_ns = arrival_ns - last_ns
+        period_ns = self.period_ns
+        if period_ns <= 0:
+            period_ns = interval_ns
         else:
-            period += (min(max(interval, period >> 1), period << 1) - period) // PERIOD_SMOOTHING
-        self.period_ns = period
-        if period < 2 * self.lead_ns:
+            target_ns = min(max(interval_ns, period_ns >> 1), period_ns << 1)
+            step_ns = (target_ns - period_ns) // PERIOD_SMOOTHING
+            if step_ns == 0 and target_ns != period_ns:
+                step_ns = 1 if target_ns > period_ns else -1
+            period_ns += step_ns
+        self.period_ns = period_ns
+        if period_ns < 2 * self.lead_ns:
             return None
-        return period - self.lead_ns
+        self.due_ns = arrival_ns + period_ns - self.lead_ns
+        return max(self.due_ns - now_ns, 0)
+
+    def take(self, now_ns: int) -> Optional[bool]:
+        """
+        Return True to run the throwaway tick now, False to drop it, None if it is not yet due.
+
+        A timer that fires over half the lead early fired for an earlier arrival (the state came
+        while its callback was queued): not yet, None. One that fires over half the lead late
+        would hold up the state about to arrive, and one with nothing due has nothing to do:
+        False. After True or False nothing is due until the next arrival.
+        """
+        due_ns = self.due_ns
+        if due_ns and now_ns < due_ns - (self.lead_ns >> 1):
+            return None
+        self.due_ns = 0
+        return bool(due_ns) and now_ns <= due_ns + (self.lead_ns >> 1)

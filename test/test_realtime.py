@@ -175,16 +175,18 @@ def _arrivals(prewarm: realtime.Prewarm, start_ns: int, intervals_ns) -> tuple[i
     delays, now = [], start_ns
     for interval in intervals_ns:
         now += interval
-        delays.append(prewarm.arrived(now))
+        delays.append(prewarm.arrived(now, now))
     return now, delays
 
 
 def test_prewarm_is_due_the_lead_before_the_next_state():
     prewarm = realtime.Prewarm(300_000)
-    assert prewarm.arrived(5_000_000) is None  # one state: no period yet
-    _, delays = _arrivals(prewarm, 5_000_000, [1_000_000] * 50)
+    assert prewarm.arrived(5_000_000, 5_000_000) is None  # one state: no period yet
+    now, delays = _arrivals(prewarm, 5_000_000, [1_000_000] * 50)
     assert delays[0] == delays[-1] == 700_000
-    assert prewarm.period_ns == 1_000_000
+    assert prewarm.period_ns == 1_000_000 and prewarm.due_ns == now + 700_000
+    # Armed 40 us after the arrival (the tick's own time): the delay is counted from then.
+    assert prewarm.arrived(now + 1_000_000, now + 1_040_000) == 660_000
     with pytest.raises(ValueError):
         realtime.Prewarm(0)
 
@@ -206,6 +208,16 @@ def test_prewarm_estimate_shrugs_off_a_late_state_and_a_pause_and_follows_a_new_
     assert abs(delays[-1] - 1_700_000) < 0.05 * 2_000_000
 
 
+def test_prewarm_recovers_from_a_burst_at_start_up_however_short():
+    """A queue of states delivered at once seeds a tiny period; it grows back, never sticks."""
+    for seed_ns in (1, 10, 30_000):
+        prewarm = realtime.Prewarm(300_000)
+        now, _ = _arrivals(prewarm, 0, [seed_ns])
+        now, delays = _arrivals(prewarm, now, [0] + [1_000_000] * 400)  # 0: same instant
+        assert abs(prewarm.period_ns - 1_000_000) < 0.05 * 1_000_000, seed_ns
+        assert delays[-1] is not None and abs(delays[-1] - 700_000) < 50_000, seed_ns
+
+
 def test_prewarm_has_no_time_to_use_when_states_come_faster_than_twice_the_lead():
     """Lockstep answers each state at once: after the first period, no throwaway tick."""
     prewarm = realtime.Prewarm(300_000)
@@ -213,3 +225,16 @@ def test_prewarm_has_no_time_to_use_when_states_come_faster_than_twice_the_lead(
     # A start-up pause is taken as the period at first...
     assert delays[0] is None and delays[1] is not None
     assert delays[-1] is None and prewarm.period_ns < 600_000  # ... not for long
+    assert prewarm.due_ns == 0 and prewarm.take(10**12) is False  # nothing due
+
+
+def test_prewarm_runs_only_near_its_time():
+    prewarm = realtime.Prewarm(300_000)
+    now, _ = _arrivals(prewarm, 0, [1_000_000] * 20)
+    due = prewarm.due_ns
+    assert prewarm.take(due - 200_000) is None  # a fire for an earlier state: not yet
+    assert prewarm.due_ns == due  # still due
+    assert prewarm.take(due + 100_000) is True  # on time, within half the lead
+    assert prewarm.take(due + 100_000) is False  # once
+    _arrivals(prewarm, now, [1_000_000])
+    assert prewarm.take(prewarm.due_ns + 200_000) is False  # late: the state is near

@@ -68,8 +68,8 @@ def test_cpu_affinity_pins_each_node_and_is_read_only(tmp_path):
         assert not res.result().results[0].successful  # read-only
         for executable in clients:
             assert 'process pinned to CPUs' in (tmp_path / f'{executable}.log').read_text()
-        # Pinned, the controller's caches stay warm: no throwaway tick before each state.
-        assert 'prewarm: off (pinned (cpu_affinity))' in (
+        # Pinned too, a throwaway tick before each state (its CPU is awake when the state comes).
+        assert 'prewarm: a throwaway tick 0.3 ms before each state is due' in (
             tmp_path / 'controller_node.log').read_text()
     finally:
         h.close()

@@ -34,7 +34,8 @@ pose task), in one process.
         [--prewarm-lead S] [--out results/bench]
 
 ``--prewarm-pairs N`` runs only the comparison behind the controller's ``prewarm_lead``: N pairs
-of two-process runs, not pinned, the throwaway tick off then on, each ``--duration`` s.
+of two-process runs, the throwaway tick off then on, each ``--duration`` s, not pinned and then
+pinned.
 """
 import argparse
 import json
@@ -356,35 +357,54 @@ def report(loops: dict, baselines: dict, core: dict, lockstep: dict,
     return '\n'.join(lines)
 
 
-def prewarm_comparison(duration_s: float, warmup_s: float, out: Path, pairs: int) -> str:
+def prewarm_comparison(duration_s: float, warmup_s: float, out: Path,
+                       pairs: int) -> tuple[str, list[dict]]:
     """
-    Run two processes, not pinned, with the controller's ``prewarm_lead`` 0 then its default.
+    Run two processes with the controller's ``prewarm_lead`` 0, then its default.
 
-    ``pairs`` times, alternating, so that both see the same host; return a markdown table of
-    each run and the means.
+    ``pairs`` times, alternating, so that both see the same host; not pinned, then pinned as
+    in the benchmark (with at least 2 CPUs). Return a markdown table of each run and the
+    means, and the figures of each run.
     """
-    rows, sums = [], {}
-    for k in range(pairs):
-        for label, params in (('off (prewarm_lead 0)', {'prewarm_lead': 0.0}),
-                              ('on (its default)', {})):
-            loop = loop_benchmark(duration_s, warmup_s, out / f'prewarm_{k}_{label[:3].strip()}',
-                                  controller_params=params)
-            s, cpu = loop['sim'], loop['cpu_percent']
-            figures = (loop['compute_us_p50'], 100.0 * s['window_stale_steps'] / s['window_steps'],
-                       s['cmd_latency_us_p50'] / 1e3, cpu['wrist_sim_node'],
-                       cpu['controller_node'], 100.0 * loop['prewarm_per_state'])
-            sums.setdefault(label, []).append(figures)
-            rows.append(f'| {k + 1} | {label} | ' + ' | '.join(
-                f'{v:.{d}f}' for v, d in zip(figures, (1, 3, 3, 1, 1, 0))) +
-                f' | {loop["host_steal_percent"]:.1f} |')
-    for label, runs in sums.items():
-        means = [sum(col) / len(col) for col in zip(*runs)]
-        rows.append(f'| mean | {label} | ' + ' | '.join(
-            f'{v:.{d}f}' for v, d in zip(means, (1, 3, 3, 1, 1, 0))) + ' | |')
-    return '\n'.join([
-        '| pair | prewarm | compute p50 (us) | missed ticks (%) | latency p50 (ms) | '
-        'CPU sim (%) | CPU controller (%) | throwaway ticks (% of states) | steal (%) |',
-        '|---|---|---|---|---|---|---|---|---|', *rows])
+    columns = (('compute p50 (us)', 'compute_us_p50', 1),
+               ('missed ticks (%)', 'missed_pct', 3),
+               ('latency p50 (ms)', 'latency_ms_p50', 3),
+               ('latency p99 (ms)', 'latency_ms_p99', 3),
+               ('CPU sim (%)', 'cpu_sim_pct', 1), ('CPU controller (%)', 'cpu_controller_pct', 1),
+               ('throwaway ticks (% of states)', 'prewarm_pct', 0))
+    layout = pinned_layout()
+    modes = [('not pinned', ((), ()))] + ([('pinned', layout)] if any(layout) else [])
+    runs, rows = [], []
+    for mode, cpus in modes:
+        for k in range(pairs):
+            for label, params in (('off (prewarm_lead 0)', {'prewarm_lead': 0.0}),
+                                  ('on (its default)', {})):
+                loop = loop_benchmark(
+                    duration_s, warmup_s,
+                    out / f'prewarm_{mode.replace(" ", "_")}_{k}_{label[:3].strip()}',
+                    cpus=cpus, controller_params=params)
+                s, cpu = loop['sim'], loop['cpu_percent']
+                run = {'mode': mode, 'pair': k + 1, 'prewarm': label,
+                       'compute_us_p50': loop['compute_us_p50'],
+                       'missed_pct': 100.0 * s['window_stale_steps'] / s['window_steps'],
+                       'latency_ms_p50': s['cmd_latency_us_p50'] / 1e3,
+                       'latency_ms_p99': s['cmd_latency_us_p99'] / 1e3,
+                       'cpu_sim_pct': cpu['wrist_sim_node'],
+                       'cpu_controller_pct': cpu['controller_node'],
+                       'prewarm_pct': 100.0 * loop['prewarm_per_state'],
+                       'steal_pct': loop['host_steal_percent']}
+                runs.append(run)
+                rows.append(f'| {mode} | {k + 1} | {label} | ' + ' | '.join(
+                    f'{run[key]:.{d}f}' for _, key, d in columns) +
+                    f' | {run["steal_pct"]:.1f} |')
+        for label in dict.fromkeys(run['prewarm'] for run in runs):
+            mine = [run for run in runs if run['prewarm'] == label and run['mode'] == mode]
+            rows.append(f'| {mode} | mean | {label} | ' + ' | '.join(
+                f'{statistics.mean(run[key] for run in mine):.{d}f}' for _, key, d in columns) +
+                ' | |')
+    header = ' | '.join(title for title, _, _ in columns)
+    return '\n'.join([f'| mode | pair | prewarm | {header} | steal (%) |',
+                      '|---' * (len(columns) + 4) + '|', *rows]), runs
 
 
 def main(argv: Optional[list] = None) -> int:
@@ -402,12 +422,19 @@ def main(argv: Optional[list] = None) -> int:
     parser.add_argument('--out', type=Path, default=Path('results/bench'))
     parser.add_argument('--prewarm-pairs', type=int, default=0,
                         help='instead of the benchmark: this many pairs of two-process runs, '
-                             'not pinned, prewarm off then on (--duration s each)')
+                             'prewarm off then on (--duration s each), not pinned then pinned')
     args = parser.parse_args(argv)
     args.out.mkdir(parents=True, exist_ok=True)
+    if args.prewarm_lead is not None and args.prewarm_lead < 0.0:
+        parser.error(f'--prewarm-lead must be >= 0 s, got {args.prewarm_lead}')
     if args.prewarm_pairs > 0:
-        text = prewarm_comparison(args.duration, args.warmup, args.out, args.prewarm_pairs)
+        if args.prewarm_lead is not None:
+            parser.error('--prewarm-pairs compares prewarm_lead 0 with its default: '
+                         'no --prewarm-lead with it')
+        text, runs = prewarm_comparison(args.duration, args.warmup, args.out,
+                                        args.prewarm_pairs)
         (args.out / 'prewarm.md').write_text(text + '\n')
+        (args.out / 'prewarm.json').write_text(json.dumps(runs, indent=1))
         print()
         print(text)
         return 0
