@@ -17,11 +17,11 @@ real-time deployment of a 1 kHz loop sets (ros2_control's controller_manager has
   busy-wait, which costs a core while it lasts, can be short.
 * **Waiting for an answer** (:func:`answer_deadline`, :func:`await_answer`): the simulator's
   rules, shared with the benchmark's minimal pair so that the two compare one to one.
-* **Prewarm** (:class:`Prewarm`): the controller, when it shares its CPUs with another busy
-  process, runs a throwaway tick shortly before each state is due, so that the real tick finds
-  its code and data in the caches. Two processes not pinned, on the test machine: the compute
-  time in the loop went from about 40 us to about 24 us and the state-to-command latency p50
-  dropped by about 20 us, for about 5 points more CPU (README, 'Real-time settings').
+* **Prewarm** (:class:`Prewarm`): the controller runs a throwaway tick shortly before each
+  state is due, so that the real tick finds its code and data in the caches and its CPU awake.
+  On the test machine (README, 'Real-time settings'): not pinned, the compute time in the loop
+  went from about 43 us to about 25 us and the state-to-command latency p50 dropped by about
+  40 us; pinned, the missed ticks fell by about half; for about 5 points more CPU.
 * :class:`RunCheck`: the nodes' "keep running?" check, cheap enough to ask after every event.
 """
 import ctypes
