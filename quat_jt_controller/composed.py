@@ -34,7 +34,7 @@ def make_nodes() -> tuple[WristSimNode, QuatJtController]:
     """
     sim = WristSimNode()
     try:
-        return sim, QuatJtController(prewarm=False)  # the simulator's loop keeps it warm
+        return sim, QuatJtController(prewarm=False)  # one process: its caches stay warm
     except BaseException:
         sim.destroy_node()
         raise
