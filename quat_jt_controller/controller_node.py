@@ -170,7 +170,7 @@ class QuatJtController(Node):
         self._last, self._last_q, self._last_qdot = out, q, qdot
         self._last_state_ns = time.monotonic_ns()
         if self._prewarm is not None:
-            self._arm_prewarm(t0)
+            self._arm_prewarm(t0, t2)
         self.stall.feed(t0 * 1e-9, q, qdot, out)
         if not out.finite:
             self.counters.nonfinite_torques += 1
@@ -188,10 +188,10 @@ class QuatJtController(Node):
             self._diagnostics_due = False
             self._publish_diagnostics()
 
-    def _arm_prewarm(self, arrival_ns: int) -> None:
+    def _arm_prewarm(self, arrival_ns: int, now_ns: int) -> None:
         """Set the throwaway tick to run ``prewarm_lead`` before the next state is due."""
         timer = self._prewarm_timer
-        delay_ns = self._prewarm.arrived(arrival_ns, time.perf_counter_ns())
+        delay_ns = self._prewarm.arrived(arrival_ns, now_ns)
         if delay_ns is None:
             timer.cancel()
             return
