@@ -42,9 +42,10 @@ setup(
     tests_require=['pytest'],
     entry_points={
         'console_scripts': [
-            'controller_node = quat_jt_controller.controller_node:main',
-            'wrist_sim_node = wrist_sim.sim_node:main',
-            'composed = quat_jt_controller.composed:main',
+            # the stop flag first, then the node's slow imports (entry_points.py)
+            'controller_node = quat_jt_controller.entry_points:controller_node',
+            'wrist_sim_node = quat_jt_controller.entry_points:wrist_sim_node',
+            'composed = quat_jt_controller.entry_points:composed',
             'design_gains = quat_jt_controller.gain_design:main',
         ],
     },

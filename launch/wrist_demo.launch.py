@@ -4,11 +4,13 @@ The wrist demo: the simulated spherical wrist and the transpose-Jacobian regulat
     ros2 launch quat_jt_controller wrist_demo.launch.py [potential:=tanh|quadratic]
                                                       [use_gui:=true|false]
                                                       [composed:=true|false]
+                                                      [namespace:=left]
 
 The nodes read their parameters from this package's ``config/wrist_sim.yaml`` and
 ``config/wrist_controller.yaml`` (gains from the robot with the issue-10 extensions;
 ``config/paper_wrist_controller.yaml`` is the paper's experiment). The files are keyed ``/**``,
-so a namespace (``-r __ns:=/arm``) keeps them. ``potential`` overrides the controller's,
+so a namespace (``namespace:=left``, or ``-r __ns:=/left`` with ``ros2 run``) keeps them; the
+launch remaps ``/clock`` into the namespace too. ``potential`` overrides the controller's,
 ``use_gui`` opens the PyBullet window (it needs a display). If either node exits, the whole
 launch shuts down. Then send a goal, e.g. the paper's corrected one (docs/errata.md, note 2):
 
@@ -26,6 +28,10 @@ from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
 from launch_ros.parameter_descriptions import ParameterValue
 
+# /clock is absolute (rclpy's time source subscribes to it): remapped to the relative 'clock',
+# it becomes <namespace>/clock, so two robots in lockstep (publish_clock) keep their own time.
+CLOCK_IN_NAMESPACE = [('/clock', 'clock')]
+
 
 def generate_launch_description() -> LaunchDescription:
     share = get_package_share_directory('quat_jt_controller')
@@ -33,6 +39,7 @@ def generate_launch_description() -> LaunchDescription:
     controller_config = os.path.join(share, 'config', 'wrist_controller.yaml')
     potential = LaunchConfiguration('potential')
     use_gui = LaunchConfiguration('use_gui')
+    namespace = LaunchConfiguration('namespace')
     composed = LaunchConfiguration('composed')
     overrides = {'use_gui': ParameterValue(use_gui, value_type=bool),
                  'potential': ParameterValue(potential, value_type=str)}
@@ -43,22 +50,29 @@ def generate_launch_description() -> LaunchDescription:
                                           "'quadratic' (Eq. 37)"),
         DeclareLaunchArgument('use_gui', default_value='false', choices=['true', 'false'],
                               description='open the PyBullet window of the simulator'),
+        DeclareLaunchArgument('namespace', default_value='',
+                              description='namespace of both nodes, their topics and their '
+                                          'simulated clock, e.g. left (one robot per '
+                                          'namespace)'),
         DeclareLaunchArgument('composed', default_value='false', choices=['true', 'false'],
                               description='both nodes in one process on one executor '
                                           '(the composed mode)'),
         Node(package='quat_jt_controller', executable='wrist_sim_node', name='wrist_sim',
-             output='screen', emulate_tty=True, condition=UnlessCondition(composed),
+             output='screen', emulate_tty=True, namespace=namespace,
+             remappings=CLOCK_IN_NAMESPACE, condition=UnlessCondition(composed),
              on_exit=Shutdown(reason='the simulator exited'),
              parameters=[sim_config, {'use_gui': overrides['use_gui']}]),
         Node(package='quat_jt_controller', executable='controller_node',
-             name='quat_jt_controller', output='screen', emulate_tty=True,
+             name='quat_jt_controller', output='screen', emulate_tty=True, namespace=namespace,
+             remappings=CLOCK_IN_NAMESPACE,
              condition=UnlessCondition(composed),
              on_exit=Shutdown(reason='the controller exited'),
              parameters=[controller_config, {'potential': overrides['potential']}]),
         # Composed: one process holds both nodes (their own names: no name= here, which would
         # rename both); each takes the parameters it declares from both files.
         Node(package='quat_jt_controller', executable='composed', output='screen',
-             emulate_tty=True, condition=IfCondition(composed),
+             emulate_tty=True, namespace=namespace, remappings=CLOCK_IN_NAMESPACE,
+             condition=IfCondition(composed),
              on_exit=Shutdown(reason='the composed process exited'),
              parameters=[sim_config, controller_config, overrides]),
     ])

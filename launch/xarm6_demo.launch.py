@@ -3,6 +3,7 @@ The 6-DOF demo: the xArm6 of pybullet_data in the simulator, regulated in full p
 
     ros2 launch quat_jt_controller xarm6_demo.launch.py [potential:=tanh|quadratic]
                                                        [use_gui:=true|false]
+                                                       [namespace:=left]
 
 The general case of Campa and Kelly (Section 4): y_tilde = [p_d - p; e], law (24) or (32). The
 URDF ships inside the ``pybullet_data`` Python package (no download): it is read here into
@@ -39,6 +40,10 @@ import pybullet_data
 
 XARM6_URDF = Path(pybullet_data.getDataPath()) / 'xarm' / 'xarm6_robot.urdf'
 
+# /clock is absolute (rclpy's time source subscribes to it): remapped to the relative 'clock',
+# it becomes <namespace>/clock, so two robots in lockstep (publish_clock) keep their own time.
+CLOCK_IN_NAMESPACE = [('/clock', 'clock')]
+
 
 def generate_launch_description() -> LaunchDescription:
     share = get_package_share_directory('quat_jt_controller')
@@ -47,6 +52,7 @@ def generate_launch_description() -> LaunchDescription:
     robot_description = XARM6_URDF.read_text()
     potential = LaunchConfiguration('potential')
     use_gui = LaunchConfiguration('use_gui')
+    namespace = LaunchConfiguration('namespace')
     return LaunchDescription([
         DeclareLaunchArgument('potential', default_value='tanh',
                               choices=['tanh', 'quadratic'],
@@ -54,14 +60,20 @@ def generate_launch_description() -> LaunchDescription:
                                           "'quadratic' (Eq. 24)"),
         DeclareLaunchArgument('use_gui', default_value='false', choices=['true', 'false'],
                               description='open the PyBullet window of the simulator'),
+        DeclareLaunchArgument('namespace', default_value='',
+                              description='namespace of both nodes, their topics and their '
+                                          'simulated clock, e.g. left (one robot per '
+                                          'namespace)'),
         Node(package='quat_jt_controller', executable='wrist_sim_node', name='xarm6_sim',
-             output='screen', emulate_tty=True,
+             output='screen', emulate_tty=True, namespace=namespace,
+             remappings=CLOCK_IN_NAMESPACE,
              on_exit=Shutdown(reason='the simulator exited'),
              parameters=[sim_config,
                          {'robot_description': robot_description,
                           'use_gui': ParameterValue(use_gui, value_type=bool)}]),
         Node(package='quat_jt_controller', executable='controller_node',
-             name='quat_jt_controller', output='screen', emulate_tty=True,
+             name='quat_jt_controller', output='screen', emulate_tty=True, namespace=namespace,
+             remappings=CLOCK_IN_NAMESPACE,
              on_exit=Shutdown(reason='the controller exited'),
              parameters=[controller_config,
                          {'robot_description': robot_description,

@@ -21,8 +21,9 @@ from quat_jt_controller.goal_check import GoalCheckWorker, ModelSpec
 from quat_jt_controller.joints import stamp_problem, StateLayout
 from quat_jt_controller.loop_stats import TickStats
 from quat_jt_controller.model import ModelError, RobotModel
-from quat_jt_controller.parameters import declare_cpu_affinity, declare_gains, declare_shaping
-from quat_jt_controller.parameters import declare_structural
+from quat_jt_controller.parameters import ChangeLog, declare_cpu_affinity, declare_gains
+from quat_jt_controller.parameters import declare_shaping, declare_structural, describe_gains
+from quat_jt_controller.parameters import GAIN_PARAMETERS, SHAPING_PARAMETERS
 from quat_jt_controller.parameters import history_qos
 from quat_jt_controller.regulator import Goal, Regulator, TickOutput
 from quat_jt_controller.resources import bundled_urdf_hint
@@ -65,7 +66,11 @@ class QuatJtController(Node):
                                        on_apply=self._apply_shaping)
         self.regulator.set_shaping(self.shaping.current)
         self.stall = StallDetector(self.regulator)
-        self.get_logger().info(f'issue-10 extensions: {describe_shaping(self.shaping.current)}')
+        self._change_log = ChangeLog(self, (
+            (GAIN_PARAMETERS, lambda: describe_gains(self.regulator.gains)),
+            (SHAPING_PARAMETERS,
+             lambda: f'extensions: {describe_shaping(self.regulator.shaping)}')))
+        self.get_logger().info(f'extensions: {describe_shaping(self.shaping.current)}')
 
         self._goal_source = 'none'  # 'none' | 'hold' (initial pose) | 'target_pose'
         self._goal_warning = ''
@@ -129,15 +134,10 @@ class QuatJtController(Node):
         return self.regulator.gains
 
     def _apply_gains(self, gains: Gains) -> None:
-        self.regulator.set_gains(gains)
-        self.get_logger().info(
-            f'gains updated: potential {gains.potential.value}, kp {list(gains.kp)}, kv '
-            f'{list(gains.kv)}, lambda {list(gains.lam)}, gravity_compensation '
-            f'{gains.gravity_compensation}')
+        self.regulator.set_gains(gains)  # logged once per request by the ChangeLog
 
     def _apply_shaping(self, shaping) -> None:
         self.regulator.set_shaping(shaping)
-        self.get_logger().info(f'issue-10 extensions updated: {describe_shaping(shaping)}')
 
     # ---------------------------------------------------------------------------------- tick
     def _on_joint_state(self, msg: JointState) -> None:
@@ -288,9 +288,16 @@ class QuatJtController(Node):
 
     def _on_goal_checks(self) -> None:
         """Take the A1/A2 verdicts of the worker; only the goal still in force counts."""
-        for goal, verdict in self._goal_checker.poll():
-            q_star = self._goal_checker.take_configuration(goal)
-            if q_star is not None:  # issue 10: the goal-configuration term pulls towards it
+        checker = self._goal_checker
+        verdicts = checker.poll()
+        failure = checker.take_failure()
+        if failure is not None:  # once per death; the worker restarts by itself
+            self.get_logger().error(f'{failure}; regulation goes on')
+        for goal, verdict in verdicts:
+            if goal is None:
+                continue
+            q_star = checker.take_configuration(goal)
+            if q_star is not None:  # the goal-configuration term pulls towards it
                 self.regulator.set_goal_configuration(goal, q_star)
             if goal is self.regulator.goal and verdict != self._goal_warning:
                 self._goal_warning = verdict
@@ -327,7 +334,8 @@ class QuatJtController(Node):
                 self._graph_warnings())),
             ('goal', diagnostics.goal_status(
                 self._goal_source, self.regulator.goal, self._goal_warning, self._last,
-                self._last_qdot, self.config.task is Task.POSE, self.counters)),
+                self._last_qdot, self.config.task is Task.POSE, self.counters,
+                self._goal_checker.unavailable_reason)),
             ('stall', self.stall.status()),
         )
         arr = DiagnosticArray(status=[

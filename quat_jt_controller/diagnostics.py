@@ -80,12 +80,20 @@ def loop_status(figures: dict, waiting: bool, stopped: bool, counters: Counters,
 
 
 def goal_status(source: str, goal: Optional[Goal], warning: str, last: Optional[TickOutput],
-                qdot: Optional[Sequence[float]], pose_task: bool, counters: Counters) -> Status:
-    """Report the goal: its source, the A1/A2 advice, the errors, a near-180-degree warning."""
+                qdot: Optional[Sequence[float]], pose_task: bool, counters: Counters,
+                goal_check_unavailable: str = '') -> Status:
+    """
+    Report the goal: its source, the A1/A2 advice, the errors, a near-180-degree warning.
+
+    ``goal_check_unavailable`` says why goal checks are not being made ('' when they are).
+    """
     level = OK
     messages = [{'none': 'no goal (no joint state yet)',
                  'hold': 'holding the initial pose (no goal received)',
                  'target_pose': 'regulating to target_pose'}[source]]
+    if goal_check_unavailable:
+        level = WARN
+        messages.append(f'goal checks unavailable: {goal_check_unavailable}')
     if warning:
         level = WARN
         messages.append(warning)
@@ -99,6 +107,7 @@ def goal_status(source: str, goal: Optional[Goal], warning: str, last: Optional[
         ('eta_e', f'{eta_e:.6g}'),
         ('max_joint_speed_rad_s', f'{max(abs(x) for x in qdot):.4g}' if qdot else 'nan'),
         ('goal_source', source),
+        ('goal_check', 'unavailable' if goal_check_unavailable else 'available'),
         ('goal_xyzw', str([round(c, 6) for c in goal.xyzw()]) if goal else ''),
     ]
     if pose_task:

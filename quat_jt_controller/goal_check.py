@@ -19,10 +19,12 @@ import json
 from math import atan2, pi, sqrt
 import os
 import queue
+import signal
 import subprocess
 import sys
 import threading
-from typing import Optional, Sequence
+import time
+from typing import Callable, Optional, Sequence
 
 import numpy as np
 
@@ -193,34 +195,76 @@ class ModelSpec:
     task: Task
 
 
+RESTART_BACKOFF_S = (1.0, 2.0, 4.0, 8.0, 16.0, 30.0)  # after the 1st, 2nd, ... death in a row
+
+
 class GoalCheckWorker:
     """
-    :func:`check_goal` in a separate process, fed the newest goal only.
+    :func:`check_goal` in a separate process, fed the newest goal only, restarted if it dies.
 
     The worker is ``python -m quat_jt_controller.goal_check`` (niced), talking JSON lines over
-    its stdin/stdout; it exits when its stdin closes, so it never outlives its parent. A
-    reader thread waits on its output (blocked in I/O, it holds no lock the tick needs).
-    :meth:`submit` never blocks: if a check is running, the goal waits as the next one and a
-    newer goal replaces it, so a flood of goals costs one check at a time and the newest goal
-    is always checked. :meth:`poll` returns finished verdicts. Call :meth:`close` at the end.
+    its stdin/stdout; it exits when its stdin closes, so it never outlives its parent. It runs
+    in a session of its own and ignores SIGINT: a terminal's Ctrl-C reaches only the node,
+    which then closes it. A reader thread waits on its output (blocked in I/O, it holds no lock
+    the tick needs). :meth:`submit` never blocks: if a check is running, the goal waits as the
+    next one and a newer goal replaces it, so a flood of goals costs one check at a time and
+    the newest goal is always checked. :meth:`poll` returns finished verdicts.
+
+    If the worker dies, :meth:`take_failure` says so once, :attr:`available` is False, and
+    :meth:`poll` starts a new worker after a back-off (``RESTART_BACKOFF_S``, reset by a verdict
+    from the new one); the goal that was running or waiting is checked by the new one. Call
+    :meth:`close` at the end.
     """
 
-    def __init__(self, spec: ModelSpec) -> None:
-        self._proc = subprocess.Popen(
-            [sys.executable, '-m', 'quat_jt_controller.goal_check'], stdin=subprocess.PIPE,
-            stdout=subprocess.PIPE, stderr=None, text=True, bufsize=1)
-        self._send({'urdf_xml': spec.urdf_xml, 'base_link': spec.base_link,
-                    'tip_link': spec.tip_link, 'joint_names': list(spec.joint_names),
-                    'task': Task(spec.task).value})
+    def __init__(self, spec: ModelSpec, clock: Callable[[], float] = time.monotonic) -> None:
+        self._spec = spec
+        self._clock = clock
         self._done: queue.SimpleQueue = queue.SimpleQueue()
-        self._reader = threading.Thread(target=self._read, name='goal_check_reader',
-                                        daemon=True)
-        self._reader.start()
         self._keys: dict[int, object] = {}
+        self._requests: dict[int, tuple[object, dict]] = {}
         self._configurations: dict[object, Optional[list[float]]] = {}
         self._next_id = 0
         self._running: Optional[int] = None
         self._next: Optional[tuple[object, dict]] = None
+        self._deaths_in_a_row = 0
+        self._restart_at: Optional[float] = None
+        self._failure: Optional[str] = None
+        self._last_exit = ''
+        self.restarts = 0
+        self._closed = False
+        self._start_process()
+
+    @property
+    def available(self) -> bool:
+        """Tell whether a worker process is up (False from its death until its restart)."""
+        return self._restart_at is None
+
+    @property
+    def unavailable_reason(self) -> str:
+        """Say why checks are unavailable, and when the worker restarts ('' if available)."""
+        if self._restart_at is None:
+            return ''
+        wait_s = max(0.0, self._restart_at - self._clock())
+        return f'{self._last_exit}; restarting in {wait_s:.1f} s'
+
+    def _start_process(self) -> None:
+        # SIGINT blocked from its first instruction (a blocked mask survives exec) until it
+        # ignores it (_serve), and out of the terminal's process group: Ctrl-C is the node's.
+        # Here a SIGINT only waits until the mask is restored.
+        mask = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
+        try:
+            self._proc = subprocess.Popen(
+                [sys.executable, '-m', 'quat_jt_controller.goal_check'], stdin=subprocess.PIPE,
+                stdout=subprocess.PIPE, stderr=None, text=True, bufsize=1,
+                start_new_session=True)
+        finally:
+            signal.pthread_sigmask(signal.SIG_SETMASK, mask)
+        spec = self._spec
+        self._send({'urdf_xml': spec.urdf_xml, 'base_link': spec.base_link,
+                    'tip_link': spec.tip_link, 'joint_names': list(spec.joint_names),
+                    'task': Task(spec.task).value})
+        threading.Thread(target=self._read, args=(self._proc,), name='goal_check_reader',
+                         daemon=True).start()
 
     def _send(self, obj: dict) -> bool:
         try:
@@ -228,15 +272,15 @@ class GoalCheckWorker:
             self._proc.stdin.flush()
             return True
         except (BrokenPipeError, OSError, ValueError):
-            return False
+            return False  # the reader sees the end of its output and reports the exit
 
-    def _read(self) -> None:
-        for line in self._proc.stdout:
+    def _read(self, proc: subprocess.Popen) -> None:
+        for line in proc.stdout:
             try:
                 self._done.put(json.loads(line))
             except ValueError:
                 pass
-        self._done.put({'id': None, 'verdict': 'the goal-check worker exited'})
+        self._done.put({'exited': proc})
 
     def submit(self, key: object, q_measured: Optional[Sequence[float]],
                q_desired: Sequence[float], p_desired: Sequence[float],
@@ -253,7 +297,7 @@ class GoalCheckWorker:
                    'p_desired': [float(x) for x in p_desired],
                    'configuration_margin': configuration_margin_rad}
         self._next = (key, request)
-        if self._running is None:
+        if self._running is None and self.available:
             self._start_next()
 
     def _start_next(self) -> None:
@@ -261,9 +305,9 @@ class GoalCheckWorker:
         self._next = None
         self._next_id += 1
         self._keys[self._next_id] = key
+        self._requests[self._next_id] = (key, request)
         self._running = self._next_id
-        if not self._send({'id': self._next_id, **request}):
-            self._done.put({'id': self._next_id, 'verdict': 'the goal-check worker is gone'})
+        self._send({'id': self._next_id, **request})
 
     @property
     def busy(self) -> bool:
@@ -275,18 +319,49 @@ class GoalCheckWorker:
         out = []
         while not self._done.empty():
             reply = self._done.get()
+            if 'exited' in reply:
+                if reply['exited'] is self._proc and not self._closed:
+                    self._on_exit()
+                continue
             key = self._keys.pop(reply.get('id'), None)
-            if reply.get('id') == self._running or reply.get('id') is None:
+            self._requests.pop(reply.get('id'), None)
+            if reply.get('id') == self._running:
                 self._running = None
+            self._deaths_in_a_row = 0
             if reply.get('configuration') is not None and key is not None:
                 try:
                     self._configurations[key] = reply['configuration']
                 except TypeError:  # an unhashable key: nobody can take it
                     pass
             out.append((key, str(reply.get('verdict', ''))))
-        if self._running is None and self._next is not None:
+        if self._restart_at is not None and self._clock() >= self._restart_at:
+            self._restart_at = None
+            self.restarts += 1
+            self._start_process()
+        if self._running is None and self._next is not None and self.available:
             self._start_next()
         return out
+
+    def _on_exit(self) -> None:
+        """Hold the dead worker's check for the next one, and schedule the restart."""
+        code = self._proc.poll()  # no wait on the control thread: its output has closed
+        if self._running is not None and self._next is None:  # re-check it after the restart
+            self._next = self._requests.get(self._running)
+        self._keys.clear()
+        self._requests.clear()
+        self._running = None
+        backoff_s = RESTART_BACKOFF_S[min(self._deaths_in_a_row, len(RESTART_BACKOFF_S) - 1)]
+        self._deaths_in_a_row += 1
+        self._restart_at = self._clock() + backoff_s
+        self._last_exit = ('the goal-check worker exited'
+                           + ('' if code is None else f' (exit code {code})'))
+        self._failure = (f'{self._last_exit}: goal checks and goal configurations are '
+                         f'unavailable; restarting it in {backoff_s:g} s')
+
+    def take_failure(self) -> Optional[str]:
+        """Return (once) what happened to the worker since the last call, or None."""
+        failure, self._failure = self._failure, None
+        return failure
 
     def take_configuration(self, key: object) -> Optional[list[float]]:
         """Return (once) the goal configuration found for ``key``, or None if none was."""
@@ -297,7 +372,9 @@ class GoalCheckWorker:
 
     def close(self) -> None:
         """Stop the worker (closing its stdin ends it); idempotent."""
+        self._closed = True
         self._next = None
+        self._restart_at = None
         if self._proc.poll() is None:
             try:
                 self._proc.stdin.close()
@@ -312,6 +389,8 @@ class GoalCheckWorker:
 
 def _serve() -> None:
     """Worker process: a spec line, then one verdict line per request line, until EOF."""
+    signal.signal(signal.SIGINT, signal.SIG_IGN)  # the node stops it (closes its stdin)
+    signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})  # blocked since its start
     try:
         os.nice(10)  # advice only: leave the CPU to the 1 kHz nodes
     except OSError:

@@ -3,38 +3,25 @@ How this package's nodes start and stop: one idiom for ``main()``.
 
 rclpy's default SIGINT handler shuts the context down at once, even while a callback is running,
 so a callback that was about to publish fails with "publisher's context is invalid" and the
-process exits with an error. Here SIGINT and SIGTERM only set a flag; the node's loop checks it
-between callbacks, then the node is destroyed and the context shut down, in that order.
+process exits with an error. Here SIGINT and SIGTERM only set a flag (``shutdown_signals``,
+installed by the entry points before any slow import, and kept to the end, so a second signal
+during shutdown changes nothing); the node's loop checks it between callbacks, then the node is
+destroyed and the context shut down, in that order, and the process exits with status 0.
 """
 import gc
-import signal
 from typing import Callable, Optional
 
 from quat_jt_controller import realtime
+from quat_jt_controller import shutdown_signals
 import rclpy
 from rclpy.signals import SignalHandlerOptions
 
 
-class StopFlag:
-    """Set by SIGINT / SIGTERM; the spin loop ends then."""
-
-    def __init__(self) -> None:
-        self.is_set = False
-        for sig in (signal.SIGINT, signal.SIGTERM):
-            signal.signal(sig, self._on_signal)
-
-    def _on_signal(self, signum: int, frame: object) -> None:
-        self.is_set = True
-
-    def __call__(self) -> bool:
-        """Return True while the node should keep running."""
-        return not self.is_set
-
-
-def init(args: Optional[list[str]] = None) -> StopFlag:
-    """``rclpy.init`` without rclpy's signal handlers, and a StopFlag in their place."""
+def init(args: Optional[list[str]] = None) -> shutdown_signals.StopFlag:
+    """``rclpy.init`` without rclpy's signal handlers; the process's StopFlag in their place."""
+    keep_running = shutdown_signals.install()  # already there if started by an entry point
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
-    return StopFlag()
+    return keep_running
 
 
 def spin(executor, context: rclpy.Context, keep_running: Callable[[], bool],
@@ -98,3 +85,4 @@ def run_node(make_node: Callable[[], object], name: str, startup_errors: tuple,
         for each in reversed(nodes):
             each.destroy_node()
         rclpy.try_shutdown()
+        shutdown_signals.ignore_from_now_on()  # a late Ctrl-C: the exit status stays 0

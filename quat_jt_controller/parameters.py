@@ -15,7 +15,7 @@ Defaults are the paper's wrist experiment (Section 5, Eqs. 43-45, orientation ta
 K_p = (4.5, 20.5, 17.5) N m, K_v = (1, 1, 1) N m s/rad, Lambda = (30, 30, 30).
 """
 from dataclasses import dataclass
-from typing import Any, Callable, Generic, Mapping, Optional, Sequence, TypeVar
+from typing import Any, Callable, Collection, Generic, Mapping, Optional, Sequence, TypeVar
 
 from quat_jt_controller import paper
 from quat_jt_controller.control_law import gain_ceiling, Gains, MAX_LAMBDA, Potential, Task
@@ -25,6 +25,7 @@ from quat_jt_controller.resources import default_urdf_xml
 from quat_jt_controller.shaping import from_parameters as shaping_from_parameters, Shaping
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 from rcl_interfaces.msg import ParameterType, SetParametersResult
+from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.parameter import Parameter
 from rclpy.qos import HistoryPolicy, QoSProfile
@@ -81,7 +82,7 @@ class LiveParameters(Generic[Snapshot]):
 
     ``build`` turns a complete ``{name: value}`` mapping into the snapshot or raises ValueError
     naming the bad value. ``current`` is the snapshot in force; ``on_apply`` is called with
-    each new one after a successful set (for a log line or to push it to a model).
+    each new one after a successful set (to push it to a model; :class:`ChangeLog` logs it).
     """
 
     def __init__(self, node: Node, names: Sequence[str],
@@ -119,6 +120,44 @@ class LiveParameters(Generic[Snapshot]):
         self._pending = None
         if self._on_apply is not None:
             self._on_apply(self.current)
+
+
+class ChangeLog:
+    """
+    One INFO line per parameter request, however many parameters it sets.
+
+    ``ros2 param load`` sends a whole file in one set-parameters request, which rclpy applies
+    one parameter at a time: each is validated and its snapshot applied whole, all within the
+    one service callback, so no tick runs in between. Each post-set callback here only notes the
+    names and (re)arms a one-shot steady-clock timer, which fires after the request's callback
+    and logs the new values of every group touched, once. (The EventsExecutor takes no guard
+    conditions.) ``groups`` pairs parameter names with a function that describes their snapshot
+    in force.
+    """
+
+    def __init__(self, node: Node,
+                 groups: Sequence[tuple[Collection[str], Callable[[], str]]]) -> None:
+        self._node = node
+        self._groups = groups
+        self._names: list[str] = []
+        self._timer = node.create_timer(1e-3, self._flush, autostart=False,
+                                        clock=Clock(clock_type=ClockType.STEADY_TIME))
+        node.add_post_set_parameters_callback(self._note)
+
+    def _note(self, params) -> None:
+        self._names += [p.name for p in params if p.name not in self._names]
+        self._timer.reset()
+
+    def _flush(self) -> None:
+        self._timer.cancel()
+        if not self._names:
+            return
+        names, self._names = self._names, []
+        parts = [describe() for group, describe in self._groups
+                 if any(name in group for name in names)]
+        self._node.get_logger().info(
+            f'parameters updated ({", ".join(names)})' + (': ' + '; '.join(parts) if parts
+                                                          else ''))
 
 
 def _descriptor(description: str, ptype: int, read_only: bool = False,
@@ -213,17 +252,36 @@ def declare_cpu_affinity(node: Node) -> tuple[int, ...]:
     """
     Declare the read-only ``cpu_affinity`` (every node of this package has it) and return it.
 
-    Unset (the default) leaves the process where the OS puts it. ``lifecycle.run_node`` pins
+    Empty (the default) leaves the process where the OS puts it. ``lifecycle.run_node`` pins
     the process once its nodes are built (``realtime.pin_process``). Raises ValueError if a CPU
     is not available to the process.
     """
-    param = node.declare_parameter(
-        'cpu_affinity', Parameter.Type.INTEGER_ARRAY,
-        _descriptor('CPUs to pin this process to (all its threads), e.g. [1]; unset = not '
-                    'pinned. A 1 kHz node on a CPU of its own keeps its caches warm between '
-                    'ticks (README, Real-time settings).',
-                    ParameterType.PARAMETER_INTEGER_ARRAY, read_only=True))
-    return check_cpus(param.value or ())
+    descriptor = _descriptor(
+        'CPUs to pin this process to (all its threads), e.g. [1]; [] (the default) = not '
+        'pinned. A 1 kHz node on a CPU of its own keeps its caches warm between ticks '
+        '(README, Real-time settings).', ParameterType.PARAMETER_INTEGER_ARRAY, read_only=True)
+    return check_cpus(declare_array(node, 'cpu_affinity', Parameter.Type.INTEGER_ARRAY,
+                                    descriptor))
+
+
+def declare_array(node: Node, name: str, ptype: Parameter.Type,
+                  descriptor: ParameterDescriptor) -> list:
+    """
+    Declare an array parameter whose default is the empty list; return its value.
+
+    rclpy infers a byte array from an empty default, so the parameter is declared by type. An
+    unset parameter would have no value: ``ros2 param get`` says "Parameter not set" and the
+    get-parameters service answers nothing for a request that names it (``ros2 param dump``
+    prints ``{}``). So, unless given, it is set to ``[]``, then the descriptor (read-only or
+    not) is put in place.
+    """
+    writable = ParameterDescriptor()
+    writable.type = ptype.value
+    param = node.declare_parameter(name, ptype, writable)
+    if param.type_ is Parameter.Type.NOT_SET:
+        node.set_parameters([Parameter(name, ptype, [])])
+    node.set_descriptor(name, descriptor)
+    return list(node.get_parameter(name).value)
 
 
 def default_gains(task: Task, n_joints: int) -> dict[str, Any]:
@@ -278,6 +336,12 @@ def declare_gains(node: Node, config: StructuralConfig, effort_limits_nm: Sequen
     return LiveParameters(
         node, GAIN_PARAMETERS, lambda values: build_gains(values, config, effort_limits_nm),
         on_apply)
+
+
+def describe_gains(gains: Gains) -> str:
+    """Describe the gains in force, as the log lines do."""
+    return (f'potential {gains.potential.value}, kp {list(gains.kp)}, kv {list(gains.kv)}, '
+            f'lambda {list(gains.lam)}, gravity_compensation {gains.gravity_compensation}')
 
 
 def build_gains(values: Mapping[str, Any], config: StructuralConfig,

@@ -22,8 +22,12 @@ from quat_jt_controller import paper
 from quat_jt_controller import quaternion as quat
 from quat_jt_controller.resources import share_path
 from quat_jt_controller.tools import local_ros
+from rcl_interfaces.msg import Parameter as ParameterMsg, ParameterType
 import rclpy
 from rclpy.experimental import EventsExecutor
+from rclpy.parameter import Parameter
+from rclpy.parameter_client import AsyncParameterClient
+from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 from std_srvs.srv import Trigger
@@ -88,8 +92,15 @@ class Pair(ProcessHarnessMixin):
     def commands_flow(self, since: float, count: int = 50) -> Callable[[], bool]:
         return lambda: sum(1 for t, _ in self.commands if t > since) >= count
 
-    def running(self, timeout: float = 30.0) -> None:
-        """Wait until states flow and the controller answers them."""
+    def running(self, controller: str = '', timeout: float = 60.0) -> None:
+        """
+        Wait until states flow and the controller answers them.
+
+        With ``controller`` (a log name), also until that process has taken its first state, so
+        the commands counted are its own, however slowly it started.
+        """
+        if controller:
+            wait_log(self, controller, 'first joint state', timeout)
         now = time.monotonic()
         self.spin_until(lambda: len(self.states) > 50 and self.commands_flow(now)(), timeout,
                         'states and commands')
@@ -123,7 +134,7 @@ def pair(tmp_path):
     p.close()
 
 
-def wait_log(pair: Pair, name: str, pattern: str, timeout: float = 10.0) -> None:
+def wait_log(pair: 'Pair', name: str, pattern: str, timeout: float = 10.0) -> None:
     pair.spin_until(lambda: re.search(pattern, pair.log(name)), timeout,
                     f'{pattern!r} in {name}.log')
 
@@ -155,7 +166,7 @@ def test_sigint_with_states_flowing_exits_cleanly_every_time(pair):
     pair.start('wrist_sim_node')
     for k in range(3):
         ctrl = pair.start('controller_node', f'controller_{k}')
-        pair.running()
+        pair.running(f'controller_{k}')
         assert local_ros.stop_node(ctrl, timeout=10.0) == 0, pair.logs()
         text = pair.log(f'controller_{k}')
         assert 'context is invalid' not in text and 'Traceback' not in text, text[-3000:]
@@ -278,3 +289,133 @@ def test_the_composed_process_regulates_and_exits_cleanly(pair):
     assert '[wrist_sim]: stats {' in text and '[quat_jt_controller]: new goal' in text, text
     assert 'prewarm: off (composed)' in text, text  # one process: its caches stay warm
     assert 'Traceback' not in text and 'context is invalid' not in text, text[-3000:]
+
+
+def stop_flag_installed(pid: int) -> bool:
+    """Tell whether the process catches SIGTERM: its stop flag is in (Python's is SIGINT's)."""
+    try:
+        status = Path(f'/proc/{pid}/status').read_text()
+    except OSError:
+        return False
+    caught = int(re.search(r'SigCgt:\s*([0-9a-f]+)', status).group(1), 16)
+    return bool(caught >> (signal.SIGTERM - 1) & 1)
+
+
+@pytest.mark.parametrize('executable', ['controller_node', 'wrist_sim_node', 'composed'])
+def test_ctrl_c_during_start_up_exits_0_without_a_traceback(pair, executable):
+    """Ctrl-C to the group as soon as the process runs this package's code; at its first line."""
+    for when in ('stop flag', 'first log line'):
+        name = f'{executable}_{when.replace(" ", "_")}'
+        proc = pair.start(executable, name)
+        if when == 'stop flag':
+            pair.spin_until(lambda: proc.poll() is not None or stop_flag_installed(proc.pid),
+                            30.0, 'the stop flag')
+        else:
+            pair.spin_until(lambda: proc.poll() is not None or '[INFO]' in pair.log(name),
+                            60.0, 'the first log line')
+        local_ros.interrupt_group(proc)
+        assert proc.wait(60.0) == 0, pair.logs()
+        assert 'Traceback' not in pair.log(name), pair.log(name)
+
+
+@pytest.mark.parametrize('executable', ['controller_node', 'composed'])
+def test_ctrl_c_again_and_again_during_shutdown_still_exits_0(pair, executable):
+    """A second Ctrl-C (ros2 launch sends one when another process exits) changes nothing."""
+    if executable == 'controller_node':
+        pair.start('wrist_sim_node')
+    proc = pair.start(executable)
+    pair.running(executable)
+    deadline = time.monotonic() + 60.0
+    while proc.poll() is None and time.monotonic() < deadline:  # every 10 ms until it exits
+        local_ros.interrupt_group(proc)
+        try:
+            proc.wait(0.01)
+        except subprocess.TimeoutExpired:
+            pass
+    assert proc.wait(10.0) == 0, pair.logs()
+    assert 'Traceback' not in pair.log(executable), pair.log(executable)
+
+
+def test_the_goal_check_worker_ignores_ctrl_c_and_comes_back_when_it_dies(pair):
+    """
+    The worker dies before any goal: one ERROR, regulation goes on, the worker restarts.
+
+    Then the new worker gets a SIGINT (as it would from a terminal, were it in the node's
+    group): it ignores it, and is still there when the next goal has been reached.
+    """
+    pair.start('wrist_sim_node')
+    ctrl = pair.start('controller_node')
+    pair.running('controller_node')
+    pair.spin_until(lambda: children_of(ctrl.pid), 10.0, 'the goal-check worker')
+    [first] = children_of(ctrl.pid)
+    os.kill(first, signal.SIGKILL)
+    wait_log(pair, 'controller_node', r'\[ERROR\].*goal-check worker exited')
+    since = time.monotonic()
+    pair.spin_until(pair.commands_flow(since, 200), 10.0, 'commands while the worker is down')
+    pair.spin_until(lambda: [w for w in children_of(ctrl.pid) if w != first and alive(w)],
+                    30.0, 'the restarted worker')
+    [second] = [w for w in children_of(ctrl.pid) if w != first and alive(w)]
+    os.kill(second, signal.SIGINT)
+    pair.send_paper_goal()
+    pair.spin_until(lambda: pair.error_norm() < 1e-2, 30.0, 'the paper goal')
+    assert alive(second) and ctrl.poll() is None, pair.logs()
+    assert local_ros.stop_node(ctrl) == 0, pair.logs()
+    text = pair.log('controller_node')
+    assert text.count('goal-check worker exited') == 1, text[-3000:]
+    assert 'Traceback' not in text and 'accepted with a warning' not in text, text[-3000:]
+
+
+def test_every_parameter_has_a_value_and_a_whole_file_is_one_logged_change(pair):
+    """``ros2 param dump`` gets every value back; ``ros2 param load`` of it logs one line."""
+    pair.start('wrist_sim_node')
+    pair.start('controller_node')
+    pair.running('controller_node')
+    for node_name, log_name in (('quat_jt_controller', 'controller_node'),
+                                ('wrist_sim', 'wrist_sim_node')):
+        client = AsyncParameterClient(pair.node, node_name)
+        pair.spin_until(client.services_are_ready, 30.0, f'{node_name} parameter services')
+        listed = client.list_parameters()
+        pair.spin_until(listed.done, 10.0, 'list_parameters')
+        names = list(listed.result().result.names)
+        got = client.get_parameters(names)  # what ros2 param dump asks for
+        pair.spin_until(got.done, 10.0, 'get_parameters')
+        values = got.result().values
+        assert len(values) == len(names) > 10, (names, values)
+        unset = [n for n, v in zip(names, values) if v.type == ParameterType.PARAMETER_NOT_SET]
+        assert not unset, unset
+        # What ros2 param load sends for the dumped file: every parameter in one request.
+        before = pair.log(log_name).count('parameters updated')
+        loaded = client.set_parameters(
+            [ParameterMsg(name=n, value=v) for n, v in zip(names, values)])
+        pair.spin_until(loaded.done, 10.0, 'set_parameters')
+        refused = [n for n, r in zip(names, loaded.result().results) if not r.successful]
+        assert 'cpu_affinity' in refused and 'joints' in refused, refused  # read-only
+        assert 'kv' in names and 'kv' not in refused or node_name == 'wrist_sim', refused
+        wait_log(pair, log_name, 'parameters updated')
+        # One more request, of one parameter: its line is the next one, so the file made one.
+        single = client.set_parameters([Parameter('use_sim_time', value=False)])
+        pair.spin_until(single.done, 10.0, 'set use_sim_time')
+        pair.spin_until(lambda: pair.log(log_name).count('parameters updated') >= before + 2,
+                        10.0, 'the line of the second request')
+        assert pair.log(log_name).count('parameters updated') == before + 2, pair.log(log_name)
+
+
+def test_a_namespaced_lockstep_pair_keeps_its_clock_in_its_namespace(pair):
+    """As the launch files run them: ``__ns:=/left`` and ``/clock:=clock``; nothing on /clock."""
+    remaps = ('-r', '__ns:=/left', '-r', '/clock:=clock')
+    for executable, params, config in (
+            ('wrist_sim_node', {'publish_clock': True}, 'config/wrist_sim.yaml'),
+            ('controller_node', {'use_sim_time': True}, 'config/wrist_controller.yaml')):
+        pair.procs[executable] = local_ros.spawn_node(
+            executable, pair.env, pair.work_dir, params=params, ros_args=remaps,
+            params_files=(share_path(config),))
+    clocks = {'/left/clock': 0, '/clock': 0}
+    commands = []
+    for topic in clocks:
+        pair.node.create_subscription(Clock, topic, lambda m, t=topic: clocks.__setitem__(
+            t, clocks[t] + 1), 10)
+    pair.node.create_subscription(Float64MultiArray, '/left/effort_controller/commands',
+                                  commands.append, 10)
+    pair.spin_until(lambda: clocks['/left/clock'] > 100 and len(commands) > 1000, 60.0,
+                    'lockstep in /left')
+    assert clocks['/clock'] == 0, clocks

@@ -107,8 +107,12 @@ def test_launch_description(monkeypatch, launch_file):
     assert nodes['wrist_sim_node']['parameters'][1]['use_gui'].kwargs == {'value_type': bool}
     defaults = {a.args[0]: a.kwargs['default_value'] for a in actions
                 if 'default_value' in a.kwargs}
-    assert defaults == {'potential': 'tanh', 'use_gui': 'false',
+    assert defaults == {'potential': 'tanh', 'use_gui': 'false', 'namespace': '',
                         **({'composed': 'false'} if composed is not None else {})}
+    # Every process in the launch's namespace, with its simulated clock there too.
+    for node in [*nodes.values(), *([composed] if composed is not None else [])]:
+        assert node['namespace'].args == ('namespace',)
+        assert node['remappings'] == [('/clock', 'clock')]
     choices = {a.args[0]: a.kwargs['choices'] for a in actions if 'choices' in a.kwargs}
     assert choices['potential'] == ['tanh', 'quadratic'] and choices['use_gui'] == [
         'true', 'false']

@@ -150,3 +150,49 @@ def test_goal_check_worker_checks_the_newest_goal_of_a_flood():
         assert verdicts[0][1] == '' and 'singular' in verdicts[-1][1]
     finally:
         worker.close()
+
+
+def test_goal_check_worker_that_dies_says_so_once_and_restarts_after_its_back_off():
+    """Killed mid-check: one failure, unavailable until the back-off ends, then the check again."""
+    import os
+    import signal
+    from quat_jt_controller.goal_check import RESTART_BACKOFF_S
+    now = [0.0]
+    model = wrist_model()
+    worker = GoalCheckWorker(ModelSpec(default_urdf_xml(), 'base_link', 'tool0',
+                                       model.joint_names, Task.ORIENTATION),
+                             clock=lambda: now[0])
+    try:
+        assert worker.available and worker.unavailable_reason == ''
+        os.kill(worker._proc.pid, signal.SIGKILL)
+        worker.submit('paper', [0.0, 0.0, 0.0], paper.Q_DESIRED, (0, 0, 0))
+        deadline = time.monotonic() + 30.0
+        while worker.available and time.monotonic() < deadline:
+            assert worker.poll() == []
+            time.sleep(0.01)
+        failure = worker.take_failure()
+        assert 'exited (exit code -9)' in failure and f'{RESTART_BACKOFF_S[0]:g} s' in failure
+        assert worker.take_failure() is None  # said once
+        assert 'restarting in 1.0 s' in worker.unavailable_reason
+        assert worker.poll() == [] and not worker.available and worker.restarts == 0
+        now[0] += RESTART_BACKOFF_S[0]
+        verdicts = []
+        while not verdicts and time.monotonic() < deadline:
+            verdicts += worker.poll()
+            time.sleep(0.01)
+        assert worker.restarts == 1 and worker.available
+        assert verdicts == [('paper', '')]  # the goal that waited is checked by the new one
+    finally:
+        worker.close()
+
+
+def test_goal_check_unavailability_is_a_diagnostics_warning():
+    from quat_jt_controller import diagnostics
+    level, message, values = diagnostics.goal_status(
+        'hold', None, '', None, None, False, diagnostics.Counters(),
+        'the goal-check worker exited (exit code -9); restarting in 0.6 s')
+    assert level == diagnostics.WARN and 'goal checks unavailable' in message
+    assert ('goal_check', 'unavailable') in values
+    level, _, values = diagnostics.goal_status('hold', None, '', None, None, False,
+                                               diagnostics.Counters())
+    assert level == diagnostics.OK and ('goal_check', 'available') in values

@@ -44,7 +44,8 @@ from quat_jt_controller import lifecycle
 from quat_jt_controller import realtime
 from quat_jt_controller.joints import movable_joints
 from quat_jt_controller.loop_stats import LoopStats
-from quat_jt_controller.parameters import declare_cpu_affinity, history_qos, LiveParameters
+from quat_jt_controller.parameters import ChangeLog, declare_cpu_affinity, history_qos
+from quat_jt_controller.parameters import LiveParameters
 from quat_jt_controller.resources import bundled_urdf_hint, default_urdf_xml
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 from rclpy.node import Node
@@ -201,14 +202,21 @@ class WristSimNode(Node):
         self.live = LiveParameters(self, LIVE_PARAMETERS,
                                    lambda values: SimConfig.create(values, n),
                                    on_apply=self._apply_config)
+        self._change_log = ChangeLog(self, ((LIVE_PARAMETERS, self._describe_config),))
 
     def _apply_config(self, config: SimConfig) -> None:
         """Take a new live config: push its friction to the simulator."""
         friction = (list(config.viscous_nm_s_per_rad), list(config.coulomb_nm))
         if friction != [a.tolist() for a in self.sim.friction]:
             self.sim.set_friction(*friction)
-            self.get_logger().info(f'friction: viscous {friction[0]} N m s/rad, Coulomb '
-                                   f'{friction[1]} N m')
+
+    def _describe_config(self) -> str:
+        """Describe the live settings in force (logged once per parameter request)."""
+        c = self.live.current
+        return (f'initial_positions {list(c.initial_positions_rad)} rad, friction: viscous '
+                f'{list(c.viscous_nm_s_per_rad)} N m s/rad, Coulomb {list(c.coulomb_nm)} N m, '
+                f'command_timeout {c.command_timeout_s} s, lockstep_timeout '
+                f'{c.lockstep_timeout_s} s, max_real_time_factor {c.max_real_time_factor}')
 
     # -- callbacks -----------------------------------------------------------------------
 

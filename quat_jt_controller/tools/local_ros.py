@@ -17,11 +17,13 @@ from typing import Any, Mapping, Optional
 
 from quat_jt_controller.resources import share_path
 
-NODE_MODULES = {
-    'controller_node': 'quat_jt_controller.controller_node',
-    'wrist_sim_node': 'wrist_sim.sim_node',
-    'composed': 'quat_jt_controller.composed',  # both in one process
-    'minimal_pair': 'quat_jt_controller.tools.minimal_pair',  # the benchmark's baseline
+# How each executable starts: the package's nodes through their console-script entry points
+# (the stop flag before the slow imports, as ``ros2 run`` does), the baseline as a module.
+NODE_COMMANDS = {
+    'controller_node': ('-m', 'quat_jt_controller.entry_points', 'controller_node'),
+    'wrist_sim_node': ('-m', 'quat_jt_controller.entry_points', 'wrist_sim_node'),
+    'composed': ('-m', 'quat_jt_controller.entry_points', 'composed'),  # both in one process
+    'minimal_pair': ('-m', 'quat_jt_controller.tools.minimal_pair'),  # the benchmark's baseline
 }
 
 
@@ -72,13 +74,15 @@ def spawn_node(executable: str, env: Mapping[str, str], work_dir: Path,
                params_files: tuple[Path, ...] = (), ros_args: tuple[str, ...] = (),
                name: Optional[str] = None, args: tuple[str, ...] = ()) -> subprocess.Popen:
     """
-    Start ``executable`` (a key of NODE_MODULES) as ``python -m module --ros-args ...``.
+    Start ``executable`` (a key of NODE_COMMANDS) as ``python -m ... --ros-args ...``.
 
-    ``args`` go before ``--ros-args``. Its stdout and stderr go to ``work_dir/<name>.log``.
+    ``args`` go before ``--ros-args``. Its stdout and stderr go to ``work_dir/<name>.log``. It
+    leads a process group of its own, as a command started from a terminal does: Ctrl-C
+    (:func:`stop_node`) goes to the whole group.
     """
     name = name or executable
     work_dir = Path(work_dir)
-    argv = [sys.executable, '-m', NODE_MODULES[executable], *args, '--ros-args']
+    argv = [sys.executable, *NODE_COMMANDS[executable], *args, '--ros-args']
     for f in params_files:
         argv += ['--params-file', str(f)]
     if params:
@@ -123,13 +127,28 @@ def spawn_wrist_pair(env: Mapping[str, str], work_dir: Path,
     return sim, controller
 
 
+def interrupt_group(proc: subprocess.Popen) -> None:
+    """Send SIGINT to ``proc``'s process group, as a terminal's Ctrl-C does."""
+    try:
+        os.killpg(proc.pid, signal.SIGINT)  # spawn_node made it a group leader
+    except ProcessLookupError:
+        pass
+
+
 def stop_node(proc: subprocess.Popen, timeout: float = 10.0) -> int:
-    """SIGINT (as Ctrl-C / launch does), then SIGKILL if it does not exit in ``timeout``."""
+    """
+    Ctrl-C to the process group, then SIGKILL (the group) if it does not exit in ``timeout``.
+
+    Return the exit code.
+    """
     if proc.poll() is None:
-        proc.send_signal(signal.SIGINT)
+        interrupt_group(proc)
         try:
             proc.wait(timeout)
         except subprocess.TimeoutExpired:
-            proc.kill()
+            try:
+                os.killpg(proc.pid, signal.SIGKILL)
+            except ProcessLookupError:
+                pass
             proc.wait()
     return proc.returncode
