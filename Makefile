@@ -39,9 +39,12 @@ LOAD ?= 0
 soak: $(STAMP)
 	$(PY) -m quat_jt_controller.tools.soak --duration $(DURATION) --load $(LOAD)
 
-# Goals must never delay a tick: 1000 singular goals/s for 3 s, with a no-goal control run.
+# Goals must never delay a tick: 1000 singular goals/s for 3 s, with a no-goal control run
+# (the paper config), then a moving goal streamed at 30, 100 and 1000 Hz with the product
+# config, as a user streams it: the loop and the tracking error (tools/goal_stream.py).
 flood: $(STAMP)
 	$(PY) -m quat_jt_controller.tools.goal_flood
+	$(PY) -m quat_jt_controller.tools.goal_stream
 
 lint: $(STAMP)
 	$(VENV)/bin/ament_flake8 .

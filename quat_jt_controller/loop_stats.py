@@ -207,6 +207,7 @@ class LoopStats:
                 'lateness_us_max': float(late.max()),
                 'window_late_steps': int(np.count_nonzero(late > 0.5 * float(np.median(period)))),
                 'window_fresh_fraction': float(fresh.mean()),
+                **fresh_command_figures(t, fresh),
             })
         if self.latencies:
             lat = self._window(self._lat, self.latencies) * 1e6
@@ -214,3 +215,26 @@ class LoopStats:
             out['cmd_latency_us_p99'] = float(np.percentile(lat, 99))
             out['cmd_latency_us_max'] = float(lat.max())
         return out
+
+
+FRESH_WINDOW_S = 0.25
+
+
+def fresh_command_figures(t_s: np.ndarray, fresh: np.ndarray) -> dict:
+    """
+    Describe the loop as the robot saw it: the steps that applied a fresh command, at ``t_s``.
+
+    Returns the lowest rate of fresh steps in a whole FRESH_WINDOW_S window
+    (``fresh_rate_hz_min``) and the largest gap between two fresh steps (``fresh_gap_ms_max``).
+    """
+    order = np.argsort(t_s)
+    t_sorted = t_s[order]
+    fresh_t = t_sorted[fresh[order].astype(bool)]
+    out = {'fresh_gap_ms_max': float(np.diff(fresh_t).max() * 1e3) if fresh_t.size > 1
+           else float('inf')}
+    n_windows = int((t_sorted[-1] - t_sorted[0]) / FRESH_WINDOW_S)
+    if n_windows >= 1:
+        edges = t_sorted[0] + FRESH_WINDOW_S * np.arange(n_windows + 1)
+        counts, _ = np.histogram(fresh_t, bins=edges)
+        out['fresh_rate_hz_min'] = float(counts.min() / FRESH_WINDOW_S)
+    return out

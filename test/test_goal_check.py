@@ -50,3 +50,20 @@ def test_xarm_goal_outside_the_workspace_breaks_a1():
     q_d, _ = goal_at(model, [0.0, -0.5, -1.0, 0.0, 1.5, 0.0])
     warning = check_goal(model, [0.0, -0.5, -1.0, 0.0, 1.5, 0.0], q_d, (1.2, 0.0, 0.5), POSE)
     assert 'A1' in warning, warning
+
+
+def test_a_stream_of_goals_keeps_one_ik_branch_from_the_warm_start():
+    """Goals along a joint path: each q* (warm-started from the last) follows the path."""
+    from quat_jt_controller.goal_check import goal_configuration, WARM_STEP_RAD
+    model = xarm6_model()
+    q_path = [[0.2 + 0.01 * k, -0.4, -1.1 + 0.01 * k, 0.2, 1.4 - 0.01 * k, 0.3]
+              for k in range(20)]
+    q_last = None
+    for q_goal in q_path:
+        q_d, p_d = goal_at(model, q_goal)
+        q_star = goal_configuration(model, q_path[0], q_d, p_d, POSE, 0.1, q_warm=q_last)
+        assert q_star is not None
+        if q_last is not None:  # the same branch: a small step from the last q*
+            assert max(abs(a - b) for a, b in zip(q_star, q_last)) < WARM_STEP_RAD
+        q_last = q_star.tolist()
+    assert max(abs(a - b) for a, b in zip(q_last, q_path[-1])) < 1e-3  # still the path's branch

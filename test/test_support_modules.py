@@ -196,3 +196,14 @@ def test_goal_check_unavailability_is_a_diagnostics_warning():
     level, _, values = diagnostics.goal_status('hold', None, '', None, None, False,
                                                diagnostics.Counters())
     assert level == diagnostics.OK and ('goal_check', 'available') in values
+
+
+def test_fresh_command_figures_find_the_lowest_window_and_the_largest_gap():
+    import numpy as np
+    from quat_jt_controller.loop_stats import fresh_command_figures
+    t = np.arange(2000) * 1e-3  # 2 s at 1 kHz
+    fresh = np.ones(2000, dtype=bool)
+    fresh[600:640] = False  # 40 stale steps in the third window
+    figures = fresh_command_figures(t[::-1].copy(), fresh[::-1].copy())  # any order
+    assert figures['fresh_rate_hz_min'] == pytest.approx((250 - 40) / 0.25)
+    assert figures['fresh_gap_ms_max'] == pytest.approx(41.0)

@@ -144,3 +144,19 @@ def test_design_gains_entry_point_is_installed():
                          timeout=120)
     assert out.returncode == 0, out.stderr
     assert out.stdout.startswith('# quat_jt_controller: orientation task')
+
+
+def test_goal_stream_reports_the_loop_and_the_tracking_error(tmp_path):
+    """Short streams: every figure is there and finite, from the simulator's own statistics."""
+    out = subprocess.run([sys.executable, '-m', 'quat_jt_controller.tools.goal_stream',
+                          '--rates', '100', '--duration', '2', '--out', str(tmp_path)],
+                         capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stdout + out.stderr
+    figures = json.loads((tmp_path / 'stream.json').read_text())
+    stream = figures['streams']['100.0']
+    assert stream['goals_sent'] > 100 and stream['states'] > 500, stream
+    for key in ('fresh_rate_hz_min', 'fresh_gap_ms_max', 'median_error', 'max_error'):
+        assert math.isfinite(stream[key]) and math.isfinite(
+            figures['control'].get(key, 0.0)), (key, figures)
+    assert 0.0 <= stream['median_error'] <= stream['max_error'] < 0.5
+    assert '| 100 |' in out.stdout and 'tracking at 100 goals/s' in out.stdout
