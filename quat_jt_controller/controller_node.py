@@ -18,6 +18,7 @@ from quat_jt_controller import quaternion as quat
 from quat_jt_controller import realtime
 from quat_jt_controller.control_law import Gains, GainsError, Task
 from quat_jt_controller.goal_check import GoalCheckWorker, ModelSpec
+from quat_jt_controller.goal_motion import GoalVelocityEstimator
 from quat_jt_controller.joints import stamp_problem, StateLayout
 from quat_jt_controller.loop_stats import TickStats
 from quat_jt_controller.model import ModelError, RobotModel
@@ -73,6 +74,8 @@ class QuatJtController(Node):
         self.get_logger().info(f'extensions: {describe_shaping(self.shaping.current)}')
 
         self._goal_source = 'none'  # 'none' | 'hold' (initial pose) | 'target_pose'
+        self._goal_motion = GoalVelocityEstimator(cfg.task is Task.POSE)
+        self._goal_velocity_until_ns = 0  # perf_counter ns; 0: not a stream (a fixed goal)
         self._goal_warning = ''
         self._reject_log = Throttle(THROTTLE_S)  # per cause (the reason without numbers)
         self._goal_log = Throttle(GOAL_LOG_PERIOD_S)
@@ -160,6 +163,9 @@ class QuatJtController(Node):
             return
         if self.regulator.goal is None:
             self._hold(q)
+        elif self._goal_velocity_until_ns and t0 > self._goal_velocity_until_ns:
+            self._goal_velocity_until_ns = 0  # the stream stopped: a fixed goal again
+            self.regulator.set_goal_joint_velocity(None)
         out = self.regulator.update(q, qdot)
         self._cmd_msg.data = out.tau_nm
         t1 = time.perf_counter_ns()
@@ -262,13 +268,24 @@ class QuatJtController(Node):
         previous = self.regulator.goal
         self.regulator.set_goal(goal)
         self._goal_source = 'target_pose'
+        stamp = msg.header.stamp
+        nu_desired = self._goal_motion.update(stamp.sec + 1e-9 * stamp.nanosec,
+                                              goal.q_desired_base, goal.p_desired_base)
+        if nu_desired is None:  # a fixed goal, or the first of a stream
+            self._goal_velocity_until_ns = 0
+            self.regulator.set_goal_joint_velocity(None)
+        else:  # a stream: its joint velocity comes from the worker, until the stream stops
+            self._goal_velocity_until_ns = (time.perf_counter_ns()
+                                            + int(self._goal_motion.hold_s() * 1e9))
         if goal == previous:
             return
         self._goal_warning = ''
         shaping = self.regulator.shaping
+        tracking = shaping.goal_velocity_gain > 0.0 and nu_desired is not None
         self._goal_checker.submit(goal, self._last_q, goal.q_desired_base, goal.p_desired_base,
                                   shaping.joint_limit_margin_rad
-                                  if shaping.configuration_on else None)
+                                  if shaping.configuration_on or tracking else None,
+                                  nu_desired if tracking else None)
         self._log_goal(goal)
 
     def _log_goal(self, goal: Goal) -> None:
@@ -299,6 +316,9 @@ class QuatJtController(Node):
             q_star = checker.take_configuration(goal)
             if q_star is not None:  # the goal-configuration term pulls towards it
                 self.regulator.set_goal_configuration(goal, q_star)
+            qdot_star = checker.take_configuration_velocity(goal)
+            if qdot_star is not None and self._goal_velocity_until_ns:  # the stream goes on
+                self.regulator.set_goal_joint_velocity(qdot_star)
             if goal is self.regulator.goal and verdict != self._goal_warning:
                 self._goal_warning = verdict
                 if verdict:

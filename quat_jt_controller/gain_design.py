@@ -61,6 +61,9 @@ SAMPLES = 24  # representative regular configurations for M(q), J(q)
 SURVEY = 400  # random configurations for the largest g(q) and lever ||J_p[:, j]||
 REGULAR_SIGMA_MIN = 0.1
 SHRINK = 0.8  # gains are scaled by this until the sampled loop is stable
+# The damping acts on qdot - g_v qdot*_d of a streamed goal: all of it (an exogenous input to
+# the loop, which changes none of its gains; docs/lyapunov.md, section 7)
+GOAL_VELOCITY_GAIN = 1.0
 QO = 0.5  # |Q| on the orientation rows (Eq. 15)
 
 
@@ -178,6 +181,7 @@ class Design:
             'configuration_radius': s.configuration_radius_rad,
             'configuration_ramp': s.configuration_ramp_rad,
             'damping_speed': s.damping_speed_rad_s,
+            'goal_velocity_gain': s.goal_velocity_gain,
         }
 
 
@@ -422,7 +426,8 @@ def design(model: RobotModel, task: cl.Task, rate_hz: float = 1000.0,
         friction_error_band=FRICTION_ERROR_BAND,
         friction_position_band=FRICTION_POSITION_BAND_M,
         configuration_gain=guide.round(3).tolist(), configuration_radius=GUIDE_RADIUS_RAD,
-        configuration_ramp=GUIDE_RAMP_RAD, damping_speed=damping_speed.round(3).tolist())
+        configuration_ramp=GUIDE_RAMP_RAD, damping_speed=damping_speed.round(3).tolist(),
+        goal_velocity_gain=GOAL_VELOCITY_GAIN)
     kp_r = tuple(float(f'{v:.4g}') for v in kp)
     kv_r = tuple(float(f'{v:.4g}') for v in kv)
     lam_r = tuple(float(f'{v:.4g}') for v in lam)
@@ -481,7 +486,8 @@ def to_yaml(d: Design, potential: str = 'tanh', command: str = '',
         f'  {command or "python -m quat_jt_controller.gain_design ..."}',
         'Live parameters (ros2 param set): potential, kp, kv, lambda, gravity_compensation and '
         'the issue-10 extensions (joint_limit_*, large_error_gain, friction_*, '
-        'configuration_*, damping_speed; docs/lyapunov.md). The rest is read-only.',
+        'configuration_*, damping_speed, goal_velocity_gain; docs/lyapunov.md). The rest is '
+        'read-only.',
         'The design, per joint (N m unless said):',
         f'  effort limits {_fmt(f["effort_limits_nm"])}, largest |g(q)| '
         f'{_fmt(np.round(f["gravity_max_nm"], 4))}, friction estimates '
@@ -538,6 +544,8 @@ def to_yaml(d: Design, potential: str = 'tanh', command: str = '',
         'over this',
         f'    damping_speed: {_fmt(s.damping_speed_rad_s)}  # rad/s, v_c of the cubic '
         'damping (0 = none)',
+        f'    goal_velocity_gain: {_float(s.goal_velocity_gain)}   # damping towards a streamed '
+        "goal's velocity (0 = off)",
         f'    joints: [{", ".join(d.joints)}]',
         f'    base_link: {d.base_link}',
         f'    tip_link: {d.tip_link}',

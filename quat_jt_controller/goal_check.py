@@ -16,7 +16,7 @@ controller runs it in :class:`GoalCheckWorker`, a separate process, never on the
 """
 from dataclasses import dataclass
 import json
-from math import atan2, pi, sqrt
+from math import pi
 import os
 import queue
 import signal
@@ -40,11 +40,8 @@ def _pose_residual(model: RobotModel, q: np.ndarray, q_desired: Sequence[float],
                    p_desired: Sequence[float], task: Task) -> tuple[np.ndarray, np.ndarray]:
     """Residual (rotation vector of q_d * conj(q), and p_d - p for the pose) and its J."""
     p, R, rows = model.kinematics(q.tolist())
-    eta_e, e = quat.orientation_error(quat.from_rotation_matrix(R), q_desired)
-    if eta_e < 0.0:
-        eta_e, e = -eta_e, (-e[0], -e[1], -e[2])
-    s = sqrt(e[0] * e[0] + e[1] * e[1] + e[2] * e[2])
-    rot = np.array(e) * (2.0 * atan2(s, eta_e) / s) if s > 1e-12 else np.zeros(3)
+    rot = np.array(quat.rotation_vector(*quat.orientation_error(quat.from_rotation_matrix(R),
+                                                                q_desired)))
     J = np.array(rows)
     if task is Task.POSE:
         return np.concatenate((np.subtract(p_desired, p), rot)), J
@@ -204,6 +201,22 @@ def goal_configuration(model: RobotModel, q_measured: Optional[Sequence[float]],
     return None if best is None else best[1]
 
 
+def configuration_velocity(model: RobotModel, q_star: Sequence[float],
+                           nu_desired: Sequence[float], task: Task) -> np.ndarray:
+    """
+    Return qdot*_d with J(q*) qdot*_d = nu_d: the joint velocity of a moving goal at q*.
+
+    ``nu_desired`` is the goal's task velocity in the task's rows (``[v; omega]`` or
+    ``omega``, base frame). Least squares: the minimum-norm solution for a redundant arm. It
+    runs in the worker, so the tick never inverts a Jacobian (docs/lyapunov.md, section 7).
+    """
+    _, _, rows = model.kinematics(list(q_star))
+    J = np.array(rows)
+    if task is Task.ORIENTATION:
+        J = J[3:]
+    return np.linalg.lstsq(J, np.asarray(nu_desired, dtype=float), rcond=None)[0]
+
+
 @dataclass(frozen=True)
 class ModelSpec:
     """What the worker process needs to build the same RobotModel."""
@@ -243,6 +256,7 @@ class GoalCheckWorker:
         self._keys: dict[int, object] = {}
         self._requests: dict[int, tuple[object, dict]] = {}
         self._configurations: dict[object, Optional[list[float]]] = {}
+        self._velocities: dict[object, list[float]] = {}
         self._next_id = 0
         self._running: Optional[int] = None
         self._next: Optional[tuple[object, dict]] = None
@@ -304,18 +318,22 @@ class GoalCheckWorker:
 
     def submit(self, key: object, q_measured: Optional[Sequence[float]],
                q_desired: Sequence[float], p_desired: Sequence[float],
-               configuration_margin_rad: Optional[float] = None) -> None:
+               configuration_margin_rad: Optional[float] = None,
+               nu_desired: Optional[Sequence[float]] = None) -> None:
         """
         Queue a check; ``key`` comes back with its verdict (e.g. the goal object).
 
         With ``configuration_margin_rad`` (not None) the worker also looks for the goal
         configuration (:func:`goal_configuration` with that joint-limit margin); take it with
-        :meth:`take_configuration` once ``key`` has come back from :meth:`poll`.
+        :meth:`take_configuration` once ``key`` has come back from :meth:`poll`. With
+        ``nu_desired`` too (the goal's task velocity), also its joint velocity
+        (:func:`configuration_velocity`), with :meth:`take_configuration_velocity`.
         """
         request = {'q_measured': None if q_measured is None else [float(x) for x in q_measured],
                    'q_desired': [float(x) for x in q_desired],
                    'p_desired': [float(x) for x in p_desired],
-                   'configuration_margin': configuration_margin_rad}
+                   'configuration_margin': configuration_margin_rad,
+                   'nu_desired': None if nu_desired is None else [float(x) for x in nu_desired]}
         self._next = (key, request)
         if self._running is None and self.available:
             self._start_next()
@@ -351,6 +369,8 @@ class GoalCheckWorker:
             if reply.get('configuration') is not None and key is not None:
                 try:
                     self._configurations[key] = reply['configuration']
+                    if reply.get('configuration_velocity') is not None:
+                        self._velocities[key] = reply['configuration_velocity']
                 except TypeError:  # an unhashable key: nobody can take it
                     pass
             out.append((key, str(reply.get('verdict', ''))))
@@ -390,6 +410,13 @@ class GoalCheckWorker:
         except TypeError:  # an unhashable key never has one
             return None
 
+    def take_configuration_velocity(self, key: object) -> Optional[list[float]]:
+        """Return (once) the joint velocity of ``key``'s configuration, or None if none."""
+        try:
+            return self._velocities.pop(key, None)
+        except TypeError:  # an unhashable key never has one
+            return None
+
     def close(self) -> None:
         """Stop the worker (closing its stdin ends it); idempotent."""
         self._closed = True
@@ -423,7 +450,7 @@ def _serve() -> None:
     q_last: Optional[list[float]] = None  # the last q*: the warm start of the next search
     for line in lines:
         request = json.loads(line)
-        configuration = None
+        configuration = velocity = None
         try:
             margin = request.get('configuration_margin')
             if margin is not None:
@@ -431,6 +458,9 @@ def _serve() -> None:
                                             request['p_desired'], task, float(margin),
                                             q_warm=q_last)
                 configuration = q_last = None if q_star is None else q_star.tolist()
+                if q_star is not None and request.get('nu_desired') is not None:
+                    velocity = configuration_velocity(model, q_star, request['nu_desired'],
+                                                      task).tolist()
             # A q* is a regular configuration within the limits that reaches the goal: A1 and
             # A2 hold, and the full check is not needed.
             verdict = '' if configuration is not None else check_goal(
@@ -438,7 +468,8 @@ def _serve() -> None:
         except Exception as exc:  # noqa: B902 - reported to the node, which logs it
             verdict = f'the goal check failed: {exc!r}'
         sys.stdout.write(json.dumps({'id': request['id'], 'verdict': verdict,
-                                     'configuration': configuration}) + '\n')
+                                     'configuration': configuration,
+                                     'configuration_velocity': velocity}) + '\n')
         sys.stdout.flush()
 
 

@@ -358,7 +358,7 @@ def build_gains(values: Mapping[str, Any], config: StructuralConfig,
 SHAPING_PARAMETERS = ('joint_limit_margin', 'joint_limit_gain', 'large_error_gain',
                       'friction_compensation', 'friction_velocity', 'friction_error_band',
                       'friction_position_band', 'configuration_gain', 'configuration_radius',
-                      'configuration_ramp', 'damping_speed')
+                      'configuration_ramp', 'damping_speed', 'goal_velocity_gain')
 
 
 def default_shaping(n_joints: int) -> dict[str, Any]:
@@ -372,7 +372,8 @@ def default_shaping(n_joints: int) -> dict[str, Any]:
             'configuration_gain': [0.0] * n_joints,
             'configuration_radius': s.configuration_radius_rad,
             'configuration_ramp': s.configuration_ramp_rad,
-            'damping_speed': [0.0] * n_joints}
+            'damping_speed': [0.0] * n_joints,
+            'goal_velocity_gain': 0.0}
 
 
 def declare_shaping(node: Node, config: StructuralConfig,
@@ -432,6 +433,12 @@ def declare_shaping(node: Node, config: StructuralConfig,
             f'v_c (rad/s) of the cubic damping term -k_v qdot (qdot / v_c)^2, one per joint '
             f'({n}); 0 = linear damping only. Live.', joint_vector,
             constraints=f'{n} finite values >= 0'),
+        'goal_velocity_gain': _descriptor(
+            'g_v in [0, 1]: for a stream of stamped goals on ~/target_pose, the joint damping '
+            'acts on qdot - g_v qdot*_d, qdot*_d the velocity of the goal configuration (the '
+            'velocity of the stream, mapped to the joints by the goal-check worker), so a moving '
+            'goal is followed without the lag of the damping. A fixed goal, or a stream that '
+            'stops, has qdot*_d = 0. 0 = off. Live.', number, float_range=(0.0, 1.0)),
     }
     defaults = default_shaping(n)
     for name in SHAPING_PARAMETERS:

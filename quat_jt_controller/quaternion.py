@@ -9,7 +9,7 @@ Everything here works on plain floats and tuples (no numpy): at 1 kHz a handful 
 on 3-vectors costs more than the arithmetic itself. Rotation matrices are indexable as
 ``R[i][j]`` (nested lists/tuples or a numpy array).
 """
-from math import isfinite, sqrt
+from math import atan2, isfinite, sqrt
 from typing import Sequence
 
 Quaternion = tuple[float, float, float, float]
@@ -141,6 +141,22 @@ def orientation_error(q: Sequence[float], q_desired: Sequence[float]) -> tuple[f
          eta * d3 - eta_d * e3 + (e1 * d2 - e2 * d1))
     eta_e = eta * eta_d + d1 * e1 + d2 * e2 + d3 * e3
     return eta_e, e
+
+
+def rotation_vector(eta_e: float, e: Sequence[float]) -> Vector3:
+    """
+    Return the rotation vector (axis times angle, rad) of the unit quaternion ``(eta_e, e)``.
+
+    The shorter way round: ``(eta_e, e)`` and ``(-eta_e, -e)`` give the same vector, of norm
+    at most pi.
+    """
+    if eta_e < 0.0:
+        eta_e, e = -eta_e, (-e[0], -e[1], -e[2])
+    s = sqrt(e[0] * e[0] + e[1] * e[1] + e[2] * e[2])
+    if s < 1e-12:
+        return (2.0 * e[0], 2.0 * e[1], 2.0 * e[2])  # the small-angle limit
+    k = 2.0 * atan2(s, eta_e) / s
+    return (k * e[0], k * e[1], k * e[2])
 
 
 def q_matrix(eta_e: float, e: Sequence[float]) -> tuple[Vector3, Vector3, Vector3]:

@@ -118,6 +118,13 @@ class TickOutput(NamedTuple):
         return sqrt(p[0] * p[0] + p[1] * p[1] + p[2] * p[2])
 
 
+class Target(NamedTuple):
+    """What the regulator drives to, swapped whole: the goal and its q* (None until known)."""
+
+    goal: Optional[Goal]
+    q_star: Optional[tuple[float, ...]] = None
+
+
 def _limits(model: RobotModel, effort_limits_nm: Optional[Sequence[float]]) -> list[float]:
     """Per-joint clamp; a missing, zero or non-finite URDF limit means no clamp."""
     values = model.effort_limits if effort_limits_nm is None else effort_limits_nm
@@ -159,7 +166,10 @@ class Regulator:
         shaping = sh.Shaping() if shaping is None else shaping
         self._law: tuple[cl.Gains, sh.Shaping, Optional[sh.LimitBand]] = (
             gains, shaping, self._band(shaping))
-        self._target: tuple[Optional[Goal], Optional[tuple[float, ...]]] = (goal, None)
+        self._target = Target(goal)
+        # qdot*_d of a streamed goal (rad/s), or None: independent of the goal, which a stream
+        # replaces at every sample while its velocity stays
+        self._goal_joint_velocity: Optional[tuple[float, ...]] = None
 
     # -- snapshots ------------------------------------------------------------------------
     @property
@@ -207,16 +217,21 @@ class Regulator:
     @property
     def goal(self) -> Optional[Goal]:
         """Return the goal in force (immutable), or None before the first."""
-        return self._target[0]
+        return self._target.goal
 
     @property
     def goal_configuration(self) -> Optional[tuple[float, ...]]:
         """Return q* of the goal in force (rad), or None if none is known."""
-        return self._target[1]
+        return self._target.q_star
+
+    @property
+    def goal_joint_velocity(self) -> Optional[tuple[float, ...]]:
+        """Return qdot*_d of the stream in force (rad/s), or None for a fixed goal."""
+        return self._goal_joint_velocity
 
     def set_goal(self, goal: Goal) -> None:
         """Swap in a new goal, whole; its goal configuration is unknown until given."""
-        self._target = (goal, None)
+        self._target = Target(goal)
 
     def set_goal_configuration(self, goal: Goal, q_star: Optional[Sequence[float]]) -> bool:
         """
@@ -225,13 +240,26 @@ class Regulator:
         Taken only if ``goal`` is still the goal in force (it may have been replaced while q*
         was being computed); returns whether it was taken.
         """
-        current = self._target[0]
-        if goal is not current:
+        target = self._target
+        if goal is not target.goal:
             return False
         if q_star is not None and len(q_star) != self.n:
             raise ValueError(f'expected {self.n} joint positions, got {len(q_star)}')
-        self._target = (current, None if q_star is None else tuple(float(x) for x in q_star))
+        self._target = target._replace(
+            q_star=None if q_star is None else tuple(float(x) for x in q_star))
         return True
+
+    def set_goal_joint_velocity(self, qdot_desired: Optional[Sequence[float]]) -> None:
+        """
+        Give qdot*_d, the joint velocity of a streamed goal's configuration (rad/s).
+
+        The damping then acts on ``qdot - g_v qdot*_d`` (``shaping.goal_velocity_gain``);
+        None makes the goal fixed again (docs/lyapunov.md, section 7).
+        """
+        if qdot_desired is not None and len(qdot_desired) != self.n:
+            raise ValueError(f'expected {self.n} joint velocities, got {len(qdot_desired)}')
+        self._goal_joint_velocity = (None if qdot_desired is None else
+                                     tuple(float(x) for x in qdot_desired))
 
     def pose(self, q: Sequence[float]) -> Goal:
         """Return the measured tip pose at ``q`` as a Goal (scalar-first quaternion, eta >= 0)."""
@@ -241,7 +269,7 @@ class Regulator:
     def hold(self, q: Sequence[float]) -> Goal:
         """Make the pose measured at ``q`` the goal (hold still where the robot is), q* = q."""
         goal = self.pose(q)
-        self._target = (goal, tuple(float(x) for x in q))
+        self._target = Target(goal, tuple(float(x) for x in q))
         return goal
 
     # -- the law ----------------------------------------------------------------------------
@@ -251,7 +279,7 @@ class Regulator:
 
         ``rows`` is the Jacobian of the task, J_o (orientation) or J_G (pose), Eq. (12).
         """
-        goal = self._target[0] if goal is None else goal
+        goal = self._target.goal if goal is None else goal
         p, R, J = self.model.kinematics(q)
         y, eta_e = cl.output_error(p, R, goal.p_desired_base, goal.q_desired_base, self.task)
         return y, eta_e, (J[3:] if self._orientation_only else J), p, R
@@ -267,6 +295,7 @@ class Regulator:
         """
         gains, shaping, band = self._law
         goal, q_star = self._target
+        qdot_goal = self._goal_joint_velocity
         y, eta_e, rows, p, R = self.error(q, goal)
         n = self.n
         tau_p = cl.potential_torque(rows, y, eta_e, gains, shaping.large_error_gain)
@@ -278,6 +307,10 @@ class Regulator:
         tau = [tau_p[j] - kv[j] * qdot[j] for j in range(n)]
         if shaping.speed_damping_on:
             sh.add_speed_damping(qdot, kv, shaping, tau, self._speed_cap)
+        if qdot_goal is not None and shaping.goal_velocity_gain > 0.0:
+            g_v = shaping.goal_velocity_gain  # damping on qdot - g_v qdot*_d
+            for j in range(n):
+                tau[j] += kv[j] * g_v * qdot_goal[j]
         if gains.gravity_compensation:
             g = self.model.gravity(q)
             for j in range(n):

@@ -19,6 +19,10 @@ The law of Eq. (22) becomes
 * The large-error term of ``U_a`` (section 3): ``k_L B(||e||)`` with
   ``B'(s) = s^2 / sqrt(1 + delta^2 - s^2)``, so that ``Q^T grad`` keeps its size up to a few
   degrees from 180 degrees instead of fading like ``eta_e``; computed in ``control_law``.
+* Damping towards a streamed goal's velocity (section 7): the joint damping acts on
+  ``qdot - g_v qdot*_d`` instead of ``qdot``, ``qdot*_d`` the velocity of the goal
+  configuration (from the goal-check worker: the stream's task velocity mapped through
+  J(q*), never an inverse in the tick), ``g_v`` in [0, 1]. Zero for a fixed goal.
 * ``tau_fc``, Coulomb friction compensation (section 4): per joint
   ``f_j [t_v + (1 - |t_v|) phi(y_tilde) t_p]``, ``t_v = tanh(qdot_j / v_eps)`` while moving,
   ``t_p = tanh(tau_p,j / (0.001 f_j))`` in the direction of the potential torque ``tau_p`` at
@@ -108,6 +112,8 @@ class Shaping:
     configuration_radius_rad: float = 0.05
     configuration_ramp_rad: float = 0.25
     damping_speed_rad_s: tuple[float, ...] = ()
+    # g_v: the joint damping acts on qdot - g_v qdot*_d of a streamed goal; 0 = off
+    goal_velocity_gain: float = 0.0
 
     @classmethod
     def create(cls, n_joints: int, joint_limit_margin: float = 0.0,
@@ -118,8 +124,11 @@ class Shaping:
                friction_position_band: float = 0.0005,
                configuration_gain: Optional[Sequence[float]] = None,
                configuration_radius: float = 0.05, configuration_ramp: float = 0.25,
-               damping_speed: Optional[Sequence[float]] = None) -> 'Shaping':
+               damping_speed: Optional[Sequence[float]] = None,
+               goal_velocity_gain: float = 0.0) -> 'Shaping':
         """Validate and build; raise ShapingError naming the bad value."""
+        if _nonnegative('goal_velocity_gain', goal_velocity_gain) > 1.0:
+            raise ShapingError(f'goal_velocity_gain must be in [0, 1], got {goal_velocity_gain}')
         return cls(
             joint_limit_margin_rad=_nonnegative('joint_limit_margin', joint_limit_margin),
             joint_limit_gain=_per_joint('joint_limit_gain', joint_limit_gain, n_joints),
@@ -133,7 +142,8 @@ class Shaping:
             configuration_gain=_per_joint('configuration_gain', configuration_gain, n_joints),
             configuration_radius_rad=_nonnegative('configuration_radius', configuration_radius),
             configuration_ramp_rad=_positive('configuration_ramp', configuration_ramp),
-            damping_speed_rad_s=_per_joint('damping_speed', damping_speed, n_joints))
+            damping_speed_rad_s=_per_joint('damping_speed', damping_speed, n_joints),
+            goal_velocity_gain=float(goal_velocity_gain))
 
     def check_size(self, n_joints: int) -> 'Shaping':
         """Return self if the per-joint vectors fit ``n_joints`` (or are empty); else raise."""
@@ -349,7 +359,8 @@ def from_parameters(values: dict, n_joints: int) -> Shaping:
         configuration_gain=values.get('configuration_gain'),
         configuration_radius=values.get('configuration_radius', d.configuration_radius_rad),
         configuration_ramp=values.get('configuration_ramp', d.configuration_ramp_rad),
-        damping_speed=values.get('damping_speed'))
+        damping_speed=values.get('damping_speed'),
+        goal_velocity_gain=values.get('goal_velocity_gain', 0.0))
 
 
 def describe(shaping: Shaping) -> str:
@@ -364,6 +375,9 @@ def describe(shaping: Shaping) -> str:
         parts.append(f'goal-configuration term {list(shaping.configuration_gain)} N m')
     if shaping.speed_damping_on:
         parts.append(f'cubic damping v_c {list(shaping.damping_speed_rad_s)} rad/s')
+    if shaping.goal_velocity_gain > 0.0:
+        parts.append(f'damping towards a streamed goal velocity, gain '
+                     f'{shaping.goal_velocity_gain:g}')
     if shaping.friction_on:
         parts.append(f'friction compensation {list(shaping.friction_compensation_nm)} N m')
     return '; '.join(parts) if parts else "off (the paper's law)"

@@ -18,6 +18,7 @@ from quat_jt_controller import paper
 from quat_jt_controller import quaternion as quat
 from quat_jt_controller.control_law import GainsError, Potential, Task
 from quat_jt_controller.controller_node import NODE_NAME, QuatJtController
+from quat_jt_controller.goal_motion import MAX_GAP_S
 from quat_jt_controller.model import ModelError
 from quat_jt_controller.parameters import GAIN_PARAMETERS, SHAPING_PARAMETERS
 from quat_jt_controller.shaping import Shaping
@@ -518,3 +519,32 @@ def test_diagnostics_report_a_stall_with_its_cause(make_probe):
     s = stall_status()
     assert 'joint1' in s.message and 'upper limit' in s.message
     assert {kv.key: kv.value for kv in s.values}['stalled'] == 'True'
+
+
+def test_a_stamped_stream_gets_its_joint_velocity_and_a_pause_makes_the_goal_fixed(make_probe):
+    """docs/lyapunov.md, section 7: nu_d from the stamps, qdot*_d from the worker, then 0."""
+    probe = make_probe({'goal_velocity_gain': 1.0})
+    node = probe.node
+    q_now = (0.1, 0.5, 0.2)
+    probe.command_for(state(q_now))
+    axis, omega = (0.48, 0.36, 0.8), 0.5  # rad/s about axis, base frame
+    t0 = time.time()
+    for k in range(40):  # 100 Hz of stamps (sent faster: the stamps are what count)
+        angle = omega * 0.01 * k
+        s = math.sin(0.5 * angle)
+        msg = goal(quat.to_xyzw(quat.multiply((math.cos(0.5 * angle), *(a * s for a in axis)),
+                                              paper.Q_DESIRED)))
+        msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(int((t0 + 0.01 * k) * 1e9),
+                                                                1_000_000_000)
+        probe.send_goal(msg)
+    probe.command_for(state(q_now))
+    probe.spin_until(lambda: node.regulator.goal_joint_velocity is not None,
+                     'qdot*_d from the goal-check worker', timeout=20.0)
+    qdot_star = node.regulator.goal_joint_velocity
+    assert len(qdot_star) == 3 and all(math.isfinite(v) for v in qdot_star)
+    assert max(abs(v) for v in qdot_star) > 0.1  # it moves (the mapping: test_goal_motion.py)
+    # No goal for longer than any hold: the next tick makes the goal fixed again.
+    paused = time.monotonic()
+    probe.spin_until(lambda: time.monotonic() > paused + MAX_GAP_S, 'the longest hold')
+    probe.command_for(state(q_now))
+    assert node.regulator.goal_joint_velocity is None

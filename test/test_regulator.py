@@ -104,3 +104,30 @@ def test_goal_validation_names_the_problem_in_ros_order():
         Goal.from_xyzw(0.0, 0.0, 0.0, 1.0, (0.0, math.inf, 0.0))
     g = Goal.from_xyzw(*(1.004 * c for c in quat.to_xyzw(paper.Q_DESIRED)))
     assert quat.norm(g.q_desired_base) == pytest.approx(1.0)
+
+
+@pytest.mark.parametrize('seed', range(3))
+def test_the_goal_velocity_term_adds_k_v_g_v_qdot_star_and_nothing_else(seed):
+    """docs/lyapunov.md, section 7: without qdot*_d, or with g_v = 0, the law to the bit."""
+    from quat_jt_controller import shaping as sh
+    model = wrist_model()
+    rng = np.random.default_rng(seed)
+    q, qdot = random_q(model, rng).tolist(), rng.normal(size=3).tolist()
+    qdot_star = rng.normal(size=3).tolist()
+    unlimited = [math.inf] * 3
+    paper_law = Regulator(model, ORI, paper_gains(), unlimited, Goal(paper.Q_DESIRED))
+    reg = Regulator(model, ORI, paper_gains(), unlimited, Goal(paper.Q_DESIRED),
+                    sh.Shaping.create(3, goal_velocity_gain=0.5))
+    assert reg.update(q, qdot).tau_nm == paper_law.update(q, qdot).tau_nm  # a fixed goal
+    reg.set_goal_joint_velocity(qdot_star)
+    want = [t + 0.5 * kv * v for t, kv, v in zip(paper_law.update(q, qdot).tau_nm,
+                                                 paper.KV, qdot_star)]
+    np.testing.assert_allclose(reg.update(q, qdot).tau_nm, want, atol=1e-12)
+    reg.set_shaping(sh.Shaping.create(3, goal_velocity_gain=0.0))
+    assert reg.update(q, qdot).tau_nm == paper_law.update(q, qdot).tau_nm  # g_v = 0: off
+    reg.set_goal_joint_velocity(None)
+    assert reg.goal_joint_velocity is None
+    with pytest.raises(ValueError, match='expected 3 joint velocities'):
+        reg.set_goal_joint_velocity([1.0, 2.0])
+    with pytest.raises(sh.ShapingError, match=r'goal_velocity_gain must be in \[0, 1\]'):
+        sh.Shaping.create(3, goal_velocity_gain=1.5)

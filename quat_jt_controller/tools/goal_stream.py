@@ -65,14 +65,15 @@ def stream_goal(t_s: float, center: quat.Quaternion) -> quat.Quaternion:
 class StreamRun:
     """The two nodes, a probe that records commands and states, and the goal publisher."""
 
-    def __init__(self, out: Path, config: str, steps: int) -> None:
+    def __init__(self, out: Path, config: str, steps: int,
+                 overrides: Optional[dict] = None) -> None:
         out.mkdir(parents=True, exist_ok=True)
         self.out = out
         self.stats_file = out / 'sim_stats.json'
         domain_id = random.randint(1, 100)
         env = local_ros.isolated_env(out, domain_id)
         self.procs = local_ros.spawn_wrist_pair(
-            env, out, controller_config=config,
+            env, out, controller_config=config, controller_params=overrides,
             sim_params={'stats_file': str(self.stats_file), 'stats_window_steps': steps})
         self.probe = ProbeNode('goal_stream', domain_id)
         self.states: list[tuple[float, bytes]] = []  # arrival, serialized JointState
@@ -178,7 +179,8 @@ class StreamRun:
             return {}
 
 
-def measure(rate_hz: float, duration_s: float, out: Path, config: str) -> dict:
+def measure(rate_hz: float, duration_s: float, out: Path, config: str,
+            overrides: Optional[dict] = None) -> dict:
     """
     One pair: reach the center goal, then stream at ``rate_hz`` (0: no goals, the control).
 
@@ -186,7 +188,7 @@ def measure(rate_hz: float, duration_s: float, out: Path, config: str) -> dict:
     the lowest 0.25 s window of fresh commands and the largest gap between two.
     """
     steps = int(duration_s * 1000)
-    run = StreamRun(out, config, steps)
+    run = StreamRun(out, config, steps, overrides)
     center = paper.Q_DESIRED
     stats: dict = {}
     try:
@@ -210,18 +212,20 @@ def measure(rate_hz: float, duration_s: float, out: Path, config: str) -> dict:
 
 
 def run(rates: list[float], duration_s: float, out: Path,
-        config: str = PRODUCT_CONFIG) -> dict:
+        config: str = PRODUCT_CONFIG, overrides: Optional[dict] = None) -> dict:
     """Measure the control (no goals), then one stream per rate, each on a pair of its own."""
-    control = measure(0.0, duration_s, out / 'control', config)
-    streams = {rate: measure(rate, duration_s, out / f'stream_{rate:g}', config)
+    control = measure(0.0, duration_s, out / 'control', config, overrides)
+    streams = {rate: measure(rate, duration_s, out / f'stream_{rate:g}', config, overrides)
                for rate in rates}
-    return {'config': config, 'control': control, 'streams': streams}
+    return {'config': config, 'overrides': overrides or {}, 'control': control,
+            'streams': streams}
 
 
 def report(figures: dict) -> list[str]:
     """Return the printed table, against the targets."""
     c = figures['control']
-    lines = [f'config {figures["config"]}; control (no goals): lowest window '
+    lines = [f'config {figures["config"]} {figures["overrides"] or ""}; control (no goals): '
+             'lowest window '
              f'{c["fresh_rate_hz_min"]:.0f} fresh commands/s, largest gap '
              f'{c["fresh_gap_ms_max"]:.2f} ms, stale steps {c["window_stale_steps"]} of '
              f'{c["window_steps"]}, simulator period max {1e-3 * c["period_us_max"]:.2f} ms',
@@ -257,10 +261,17 @@ def main(argv: Optional[list] = None) -> int:
                         help='seconds of each stream (the error is taken over its second half)')
     parser.add_argument('--config', default=PRODUCT_CONFIG,
                         help='controller config, relative to the package share')
+    parser.add_argument('--set', action='append', default=[], metavar='NAME=VALUE',
+                        help='override a controller parameter, VALUE as YAML/JSON, e.g. '
+                             "--set 'goal_velocity_damping=[0, 0, 0]'")
     parser.add_argument('--out', type=Path, default=Path('results/goal_stream'),
                         help='folder for the node logs and stream.json')
     args = parser.parse_args(argv)
-    figures = run(args.rates, args.duration, args.out, args.config)
+    overrides = {}
+    for item in args.set:
+        name, _, value = item.partition('=')
+        overrides[name] = json.loads(value)
+    figures = run(args.rates, args.duration, args.out, args.config, overrides)
     for line in report(figures):
         print(line)
     (args.out / 'stream.json').write_text(json.dumps(figures, indent=1))
