@@ -48,6 +48,7 @@ from quat_jt_controller.parameters import ChangeLog, declare_cpu_affinity, histo
 from quat_jt_controller.parameters import LiveParameters
 from quat_jt_controller.resources import bundled_urdf_hint, default_urdf_xml
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
+from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.node import Node
 from rclpy.qos import QoSProfile
 from rosgraph_msgs.msg import Clock
@@ -114,8 +115,12 @@ class WristSimNode(Node):
                                             history_qos(self.publish_clock))
         self.clock_pub = (self.create_publisher(Clock, '/clock', QoSProfile(depth=1))
                           if self.publish_clock else None)
+        # Publishers on the command topic, from matched events: no graph query (which blocks for
+        # milliseconds while DDS discovers a new process) on the stepping thread.
+        self._command_publishers = 0
         self.cmd_sub = self.create_subscription(
-            Float64MultiArray, 'effort_controller/commands', self._on_command, 10)
+            Float64MultiArray, 'effort_controller/commands', self._on_command, 10,
+            event_callbacks=SubscriptionEventCallbacks(matched=self._on_command_matched))
         self.reset_srv = self.create_service(Trigger, '~/reset', self._on_reset)
         self.get_logger().info(
             f'simulating joints {list(self.sim.joint_names)} at {self.rate_hz} Hz, '
@@ -219,6 +224,10 @@ class WristSimNode(Node):
                 f'{c.lockstep_timeout_s} s, max_real_time_factor {c.max_real_time_factor}')
 
     # -- callbacks -----------------------------------------------------------------------
+
+    def _on_command_matched(self, info: Any) -> None:
+        """Count the controllers connected to the command topic (for the twin warning)."""
+        self._command_publishers = info.current_count
 
     def _on_command(self, msg: Float64MultiArray) -> None:
         if self._reset_unpublished:  # it answers a state from before ~/reset: not applied
@@ -362,7 +371,7 @@ class WristSimNode(Node):
             f'fresh {self.stats.fresh_steps}/{self.stats.steps}, '
             f'rejected {self.stats.rejected_commands}')
         last[0], last[1] = now, self.stats.steps
-        publishers = self.count_publishers(self.cmd_sub.topic_name)
+        publishers = self._command_publishers
         if publishers > 1:
             self.get_logger().warning(
                 f'{publishers} publishers on {self.cmd_sub.topic_name}: more than one '

@@ -13,7 +13,13 @@ the final ``||e||`` and the warnings and errors the nodes logged, counted by cau
 a load average near 4): the largest gaps then measured are what the watchdog timeouts must
 tolerate (``state_timeout``, ``command_timeout``, ``max_state_age``).
 
-    python -m quat_jt_controller.tools.soak [--duration 600] [--load 0] [--out results/soak]
+``--churn S`` starts a short-lived ROS process every S seconds, as a user's ``ros2 topic echo``
+would: it joins the graph, takes joint states for a second and leaves. Each report line then
+also gives the simulator's largest period, from the stamps of its states (its publication
+times, so this process's own delays do not count). Target (streamed-goals issue): under 10 ms
+with a CLI process every 10 s.
+
+    python -m quat_jt_controller.tools.soak [--duration 600] [--load 0] [--churn 10]
 """
 import argparse
 import collections
@@ -23,6 +29,7 @@ import multiprocessing
 from pathlib import Path
 import random
 import re
+import subprocess
 import sys
 import time
 from typing import Optional
@@ -68,8 +75,23 @@ def warnings_by_cause(text: str) -> collections.Counter:
     return counts
 
 
+# A user's CLI process: joins the graph, takes joint states for a second, leaves.
+CLI_LIKE = (
+    'import sys, time\n'
+    'import rclpy\n'
+    'from sensor_msgs.msg import JointState\n'
+    'rclpy.init()\n'
+    "node = rclpy.create_node('cli_like_echo')\n"
+    "node.create_subscription(JointState, '/joint_states', lambda m: None, 10)\n"
+    'end = time.monotonic() + 1.0\n'
+    'while time.monotonic() < end:\n'
+    '    rclpy.spin_once(node, timeout_sec=0.05)\n'
+    'node.destroy_node()\n'
+    'rclpy.try_shutdown()\n')
+
+
 def soak(duration_s: float, out: Path, load: int = 0, report_s: float = 60.0,
-         goal_period_s: float = 30.0) -> dict:
+         goal_period_s: float = 30.0, churn_s: float = 0.0) -> dict:
     """Run the soak; print a line per report interval; return the figures."""
     out.mkdir(parents=True, exist_ok=True)
     domain_id = random.randint(1, 100)
@@ -91,9 +113,16 @@ def soak(duration_s: float, out: Path, load: int = 0, report_s: float = 60.0,
     last_q: list = [None]
     max_period_us = [0.0]
 
+    last_stamp = [0.0]
+    max_sim_period_s = [0.0]
+
     def on_state(msg: JointState) -> None:
         counts['states'] += 1
         last_q[0] = msg
+        stamp = msg.header.stamp.sec + 1e-9 * msg.header.stamp.nanosec
+        if last_stamp[0]:
+            max_sim_period_s[0] = max(max_sim_period_s[0], stamp - last_stamp[0])
+        last_stamp[0] = stamp
 
     def on_diag(msg: DiagnosticArray) -> None:
         for s in msg.status:
@@ -118,6 +147,8 @@ def soak(duration_s: float, out: Path, load: int = 0, report_s: float = 60.0,
         _, e = quat.orientation_error(quat.from_rotation_matrix(R), goal)
         return math.sqrt(sum(x * x for x in e))
 
+    cli: Optional[subprocess.Popen] = None
+    churned = 0
     try:
         deadline = time.monotonic() + 60.0
         while (counts['commands'] < 100 or goal_pub.get_subscription_count() == 0):
@@ -127,10 +158,11 @@ def soak(duration_s: float, out: Path, load: int = 0, report_s: float = 60.0,
         print(f'soak: {duration_s:.0f} s, {load} busy processes beside the nodes; logs in {out}',
               flush=True)
         print(f'{"t [s]":>6} {"sim RSS MB":>10} {"ctrl RSS MB":>11} {"states/s":>9} '
-              f'{"cmds/s":>7} {"max state gap ms":>16} {"sim watchdog trips":>18} '
-              f'{"||e||":>9}', flush=True)
+              f'{"cmds/s":>7} {"max state gap ms":>16} {"sim period max ms":>17} '
+              f'{"sim watchdog trips":>18} {"||e||":>9}', flush=True)
         t0 = time.monotonic()
         next_goal, next_report, k_goal = t0, t0 + report_s, 0
+        next_churn = t0 + churn_s if churn_s > 0.0 else math.inf
         window = dict(counts)
         goal = goals[0]
         while (now := time.monotonic()) < t0 + duration_s:
@@ -144,16 +176,18 @@ def soak(duration_s: float, out: Path, load: int = 0, report_s: float = 60.0,
                        'controller_rss_mb': rss_mb(ctrl.pid),
                        'state_rate_hz': (counts['states'] - window['states']) / report_s,
                        'command_rate_hz': (counts['commands'] - window['commands']) / report_s,
-                       'max_state_gap_ms': max_period_us[0] / 1e3, 'error_norm':
-                       error_norm(goal)}
+                       'max_state_gap_ms': max_period_us[0] / 1e3,
+                       'sim_period_max_ms': max_sim_period_s[0] * 1e3,
+                       'cli_processes': churned, 'error_norm': error_norm(goal)}
                 rows.append(row)
                 print(f'{row["t_s"]:6.0f} {row["sim_rss_mb"]:10.1f} '
                       f'{row["controller_rss_mb"]:11.1f} {row["state_rate_hz"]:9.1f} '
                       f'{row["command_rate_hz"]:7.1f} {row["max_state_gap_ms"]:16.1f} '
-                      f'{trips:>18} {row["error_norm"]:9.2e}',
+                      f'{row["sim_period_max_ms"]:17.1f} {trips:>18} {row["error_norm"]:9.2e}',
                       flush=True)
                 window = dict(counts)
                 max_period_us[0] = 0.0
+                max_sim_period_s[0] = 0.0
                 next_report += report_s
             if now >= next_goal:
                 goal = goals[k_goal % 2]
@@ -164,9 +198,16 @@ def soak(duration_s: float, out: Path, load: int = 0, report_s: float = 60.0,
                 goal_pub.publish(msg)
                 k_goal += 1
                 next_goal += goal_period_s
+            if now >= next_churn and (cli is None or cli.poll() is not None):
+                cli = subprocess.Popen([sys.executable, '-c', CLI_LIKE], env=env,
+                                       stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+                churned += 1
+                next_churn += churn_s
             probe.executor.spin_once(timeout_sec=0.05)
         final_error = error_norm(goal)
     finally:
+        if cli is not None:
+            cli.wait(10.0)
         for proc in (sim, ctrl):
             local_ros.stop_node(proc)
         probe.close()
@@ -176,6 +217,7 @@ def soak(duration_s: float, out: Path, load: int = 0, report_s: float = 60.0,
     warnings = warnings_by_cause((out / 'wrist_sim_node.log').read_text(errors='replace')
                                  + (out / 'controller_node.log').read_text(errors='replace'))
     return {'rows': rows, 'final_error': final_error, 'sim_stats': sim_stats,
+            'cli_processes': churned,
             'warnings': dict(warnings)}
 
 
@@ -184,9 +226,12 @@ def main(argv: Optional[list] = None) -> int:
     parser.add_argument('--duration', type=float, default=600.0, help='seconds')
     parser.add_argument('--load', type=int, default=0, help='busy processes beside the nodes')
     parser.add_argument('--report', type=float, default=60.0, help='seconds per report line')
+    parser.add_argument('--churn', type=float, default=0.0,
+                        help='start a short-lived ROS process (as a CLI command) every S seconds')
     parser.add_argument('--out', type=Path, default=Path('results/soak'))
     args = parser.parse_args(argv)
-    r = soak(args.duration, args.out, args.load, min(args.report, args.duration))
+    r = soak(args.duration, args.out, args.load, min(args.report, args.duration),
+             churn_s=args.churn)
     s = r['sim_stats']
     print(f'final ||e|| {r["final_error"]:.3e} (towards the last goal); simulator: '
           f'{s.get("watchdog_trips")} watchdog trips, {s.get("missed_deadlines")} late ticks, '
