@@ -5,7 +5,7 @@ VENV ?= .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: venv test demo bench soak flood lint clean
+.PHONY: venv test test-unit demo bench soak flood lint clean
 
 venv: $(STAMP)
 
@@ -19,32 +19,36 @@ $(STAMP): setup.py setup.cfg
 test: $(STAMP)
 	$(PY) -m pytest test
 
+# The ROS-free unit tier alone (seconds).
+test-unit: $(STAMP)
+	$(PY) -m pytest -m unit test
+
 # The main job: the paper's experiment, both potentials, real nodes over DDS.
 # DEMO_ARGS go to the experiment, e.g. make demo DEMO_ARGS='--lockstep --duration 12 --composed'
 DEMO_ARGS ?=
 demo: $(STAMP)
-	$(PY) -m quat_jt_controller.tools.paper_experiment $(DEMO_ARGS)
+	$(PY) -m experiments.paper_experiment $(DEMO_ARGS)
 
 # The 1 kHz loop benchmark (about 5 min): two processes pinned and not pinned, each beside a
 # minimal pair, composed for 60 s, the lockstep experiment in both modes, the core tick.
 # BENCH_ARGS go to the benchmark, e.g. make bench BENCH_ARGS='--prewarm-lead 0'
 BENCH_ARGS ?=
 bench: $(STAMP)
-	$(PY) -m quat_jt_controller.tools.benchmark $(BENCH_ARGS)
+	$(PY) -m experiments.benchmark $(BENCH_ARGS)
 
 # Both nodes for DURATION seconds (10 minutes by default): RSS and rates per minute, the final
 # error and the warnings seen. LOAD=N runs N busy processes beside them (a loaded host).
 DURATION ?= 600
 LOAD ?= 0
 soak: $(STAMP)
-	$(PY) -m quat_jt_controller.tools.soak --duration $(DURATION) --load $(LOAD)
+	$(PY) -m experiments.soak --duration $(DURATION) --load $(LOAD)
 
 # Goals must never delay a tick: 1000 singular goals/s for 3 s, with a no-goal control run
 # (the paper config), then a moving goal streamed at 30, 100 and 1000 Hz with the product
-# config, as a user streams it: the loop and the tracking error (tools/goal_stream.py).
+# config, as a user streams it: the loop and the tracking error (experiments/goal_stream.py).
 flood: $(STAMP)
-	$(PY) -m quat_jt_controller.tools.goal_flood
-	$(PY) -m quat_jt_controller.tools.goal_stream
+	$(PY) -m experiments.goal_flood
+	$(PY) -m experiments.goal_stream
 
 lint: $(STAMP)
 	$(VENV)/bin/ament_flake8 .

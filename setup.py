@@ -16,6 +16,8 @@ setup(
         ('share/' + package_name + '/config', glob('config/*.yaml')),
         ('share/' + package_name + '/launch', glob('launch/*.launch.py')),
         ('share/' + package_name + '/urdf', glob('urdf/*.urdf')),
+        # the docs the code and the configs point to (errata, model, stability, gain design)
+        ('share/' + package_name + '/docs', glob('docs/*.md')),
     ],
     # Under colcon, dependencies come from package.xml (rosdep); under pip, from the extras.
     install_requires=['setuptools'],

@@ -7,7 +7,7 @@ The wrist demo: the simulated spherical wrist and the transpose-Jacobian regulat
                                                       [namespace:=left]
 
 The nodes read their parameters from this package's ``config/wrist_sim.yaml`` and
-``config/wrist_controller.yaml`` (gains from the robot with the issue-10 extensions;
+``config/wrist_controller.yaml`` (gains from the robot with the extensions;
 ``config/paper_wrist_controller.yaml`` is the paper's experiment). The files are keyed ``/**``,
 so a namespace (``namespace:=left``, or ``-r __ns:=/left`` with ``ros2 run``) keeps them; the
 launch remaps ``/clock`` into the namespace too. ``potential`` overrides the controller's,

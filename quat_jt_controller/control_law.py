@@ -5,7 +5,7 @@ The transpose-Jacobian regulators of Campa and Kelly, Eq. (22), with two potenti
 
 * quadratic potential  U_a = 1/2 y^T K_p y                      -> grad = K_p y        (23, 24)
 * log-cosh potential   U_a = sum k_pi / l_i ln cosh(l_i y_i)    -> grad = K_p tanh(L y) (31, 32)
-* either, plus the optional large-error term k_L B(||e||) of issue 10 (docs/lyapunov.md,
+* either, plus the optional large-error term k_L B(||e||) (docs/lyapunov.md,
   section 3), which keeps the orientation torque from fading towards 180 degrees
 
 Two tasks share one implementation:

@@ -62,7 +62,7 @@ class QuatJtController(Node):
         self._max_age_ns = int(cfg.max_state_age_s * 1e9)
         self._goal_checker = GoalCheckWorker(ModelSpec(
             cfg.robot_description, cfg.base_link, cfg.tip_link, cfg.joints, cfg.task))
-        # Issue 10: the extensions (live, whole) and stall detection for /diagnostics.
+        # The extensions (live, whole) and stall detection for /diagnostics.
         self.shaping = declare_shaping(self, cfg, check=self.regulator.check_shaping,
                                        on_apply=self._apply_shaping)
         self.regulator.set_shaping(self.shaping.current)
@@ -355,7 +355,7 @@ class QuatJtController(Node):
             ('goal', diagnostics.goal_status(
                 self._goal_source, self.regulator.goal, self._goal_warning, self._last,
                 self._last_qdot, self.config.task is Task.POSE, self.counters,
-                self._goal_checker.unavailable_reason)),
+                self._goal_checker.unavailable_reason, self._goal_checker.ready)),
             ('stall', self.stall.status()),
         )
         arr = DiagnosticArray(status=[

@@ -81,11 +81,12 @@ def loop_status(figures: dict, waiting: bool, stopped: bool, counters: Counters,
 
 def goal_status(source: str, goal: Optional[Goal], warning: str, last: Optional[TickOutput],
                 qdot: Optional[Sequence[float]], pose_task: bool, counters: Counters,
-                goal_check_unavailable: str = '') -> Status:
+                goal_check_unavailable: str = '', goal_check_ready: bool = True) -> Status:
     """
     Report the goal: its source, the A1/A2 advice, the errors, a near-180-degree warning.
 
-    ``goal_check_unavailable`` says why goal checks are not being made ('' when they are).
+    ``goal_check_unavailable`` says why goal checks are not being made ('' when they are);
+    ``goal_check_ready`` is False while the worker is still building its model ('starting').
     """
     level = OK
     messages = [{'none': 'no goal (no joint state yet)',
@@ -107,7 +108,8 @@ def goal_status(source: str, goal: Optional[Goal], warning: str, last: Optional[
         ('eta_e', f'{eta_e:.6g}'),
         ('max_joint_speed_rad_s', f'{max(abs(x) for x in qdot):.4g}' if qdot else 'nan'),
         ('goal_source', source),
-        ('goal_check', 'unavailable' if goal_check_unavailable else 'available'),
+        ('goal_check', 'unavailable' if goal_check_unavailable else
+         'available' if goal_check_ready else 'starting'),
         ('goal_xyzw', str([round(c, 6) for c in goal.xyzw()]) if goal else ''),
     ]
     if pose_task:

@@ -10,7 +10,7 @@ give the same verdict on any host. At the solution, the smallest singular value 
 (orientation task) or J_G (pose task) tells whether it is singular.
 
 The verdict is advice for the user. The same inverse kinematics also gives, on request, the
-goal configuration q* that the goal-configuration term of issue 10 pulls towards
+goal configuration q* that the goal-configuration term pulls towards
 (:func:`goal_configuration`, docs/lyapunov.md section 5). It costs milliseconds, so the
 controller runs it in :class:`GoalCheckWorker`, a separate process, never on the control thread.
 """
@@ -146,7 +146,7 @@ def goal_configuration(model: RobotModel, q_measured: Optional[Sequence[float]],
     """
     Return q*, a regular joint configuration within the limits that reaches the goal, or None.
 
-    The goal-configuration potential of issue 10 (docs/lyapunov.md, section 5) pulls towards
+    The goal-configuration potential (docs/lyapunov.md, section 5) pulls towards
     it. The starts of :func:`check_goal` (a robot has several IK branches, so at least
     ``starts_range[0]`` of them, and more, up to ``starts_range[1]``, until a solution outside
     the joint-limit bands is found); among the solutions with ``sigma_min(J) >=
@@ -274,6 +274,11 @@ class GoalCheckWorker:
         return self._restart_at is None
 
     @property
+    def ready(self) -> bool:
+        """Tell whether the worker has built its model and answers checks at once."""
+        return self._ready and self.available
+
+    @property
     def unavailable_reason(self) -> str:
         """Say why checks are unavailable, and when the worker restarts ('' if available)."""
         if self._restart_at is None:
@@ -282,6 +287,7 @@ class GoalCheckWorker:
         return f'{self._last_exit}; restarting in {wait_s:.1f} s'
 
     def _start_process(self) -> None:
+        self._ready = False  # until the new worker says it has built its model
         # SIGINT blocked from its first instruction (a blocked mask survives exec) until it
         # ignores it (_serve), and out of the terminal's process group: Ctrl-C is the node's.
         # Here a SIGINT only waits until the mask is restored.
@@ -360,6 +366,9 @@ class GoalCheckWorker:
             if 'exited' in reply:
                 if reply['exited'] is self._proc and not self._closed:
                     self._on_exit()
+                continue
+            if reply.get('ready'):
+                self._ready = True
                 continue
             key = self._keys.pop(reply.get('id'), None)
             self._requests.pop(reply.get('id'), None)
@@ -447,6 +456,8 @@ def _serve() -> None:
     model = RobotModel(spec['urdf_xml'], spec['base_link'], spec['tip_link'],
                        spec['joint_names'])
     task = Task(spec['task'])
+    sys.stdout.write(json.dumps({'ready': True}) + '\n')  # checks are answered at once now
+    sys.stdout.flush()
     q_last: Optional[list[float]] = None  # the last q*: the warm start of the next search
     for line in lines:
         request = json.loads(line)

@@ -94,8 +94,9 @@ class StateLayout:
         return q, qdot
 
 
-# Watchdog defaults of the controller (state_timeout, max_state_age), chosen with tools/soak.py
-# on a loaded host (README, 'Watchdog timeouts'): 0.1 s tripped in normal running there.
+# Watchdog defaults of the controller (state_timeout, max_state_age), chosen with
+# experiments/soak.py on a loaded host (docs/ros.md, 'Watchdog timeouts'): 0.1 s tripped in
+# normal running there.
 DEFAULT_STATE_TIMEOUT_S = 0.5
 DEFAULT_MAX_STATE_AGE_S = 0.5
 

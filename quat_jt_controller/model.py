@@ -10,7 +10,13 @@ are locked at zero.
 from typing import Optional, Sequence
 
 import numpy as np
-import pinocchio as pin
+try:
+    import pinocchio as pin
+except ModuleNotFoundError as exc:  # e.g. a colcon workspace whose rosdep skipped it
+    raise ModuleNotFoundError(
+        f"{exc}: install Pinocchio, e.g. 'pip install pin' (the PyPI name; the 'pinocchio' "
+        'package on PyPI is another project) or ros-jazzy-pinocchio from the ROS apt '
+        'repository') from exc
 
 from quat_jt_controller.joints import movable_joints, select_joints
 

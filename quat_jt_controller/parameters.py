@@ -234,7 +234,7 @@ def declare_structural(node: Node) -> StructuralConfig:
                     'at which the controller runs a throwaway tick, so that the real tick finds '
                     'its code and data in the CPU caches another process evicted, and its CPU '
                     'awake; costs one wake-up per state. 0 = off. Not used on simulated time '
-                    'or composed (README, Real-time settings).',
+                    'or composed (docs/ros.md, Real-time settings).',
                     ParameterType.PARAMETER_DOUBLE, read_only=True,
                     float_range=(0.0, 0.01))).value
     if not joints or any(not j for j in joints):
@@ -259,7 +259,8 @@ def declare_cpu_affinity(node: Node) -> tuple[int, ...]:
     descriptor = _descriptor(
         'CPUs to pin this process to (all its threads), e.g. [1]; [] (the default) = not '
         'pinned. A 1 kHz node on a CPU of its own keeps its caches warm between ticks '
-        '(README, Real-time settings).', ParameterType.PARAMETER_INTEGER_ARRAY, read_only=True)
+        '(docs/ros.md, Real-time settings).', ParameterType.PARAMETER_INTEGER_ARRAY,
+        read_only=True)
     return check_cpus(declare_array(node, 'cpu_affinity', Parameter.Type.INTEGER_ARRAY,
                                     descriptor))
 
@@ -352,7 +353,7 @@ def build_gains(values: Mapping[str, Any], config: StructuralConfig,
                         effort_limits_nm)
 
 
-# Issue 10: the extensions of the regulator (shaping.Shaping), live, applied whole. Defaults
+# The extensions of the regulator (shaping.Shaping), live, applied whole. Defaults
 # are all off, the paper's law; config/wrist_controller.yaml and config/xarm6_controller.yaml
 # turn them on with the values of quat_jt_controller.gain_design.
 SHAPING_PARAMETERS = ('joint_limit_margin', 'joint_limit_gain', 'large_error_gain',

@@ -8,7 +8,7 @@ real-time deployment of a 1 kHz loop sets (ros2_control's controller_manager has
 * **CPU affinity.** A node pinned to a CPU of its own keeps its caches warm between ticks. On
   the 2-core test machine, pinning the simulator and the controller to different CPUs halved
   the controller's compute time in the loop in a quiet second, but missed more ticks than not
-  pinning in most runs (README, 'Real-time settings' and 'Benchmark'). Every thread of the
+  pinning in most runs (docs/ros.md, 'Real-time settings'; docs/benchmark.md). Every thread of the
   process is pinned (the DDS threads too); threads started later inherit it. Child processes
   started before (the controller's goal-check worker) are not.
 * **Timer slack.** Linux lets a sleeping thread wake up to 50 us late (the default slack) so
@@ -19,7 +19,7 @@ real-time deployment of a 1 kHz loop sets (ros2_control's controller_manager has
   rules, shared with the benchmark's minimal pair so that the two compare one to one.
 * **Prewarm** (:class:`Prewarm`): the controller runs a throwaway tick shortly before each
   state is due, so that the real tick finds its code and data in the caches and its CPU awake.
-  On the test machine (README, 'Real-time settings'): not pinned, the compute time in the loop
+  On the test machine (docs/ros.md, 'Real-time settings'): not pinned, the compute time in the loop
   went from about 43 us to about 25 us and the state-to-command latency p50 dropped by about
   40 us; pinned, the missed ticks fell by about half; for about 5 points more CPU.
 * :class:`RunCheck`: the nodes' "keep running?" check, cheap enough to ask after every event.
@@ -33,7 +33,7 @@ from typing import Any, Callable, Iterable, Optional
 PR_SET_TIMERSLACK = 29  # <linux/prctl.h>
 PR_GET_TIMERSLACK = 30
 # The real-time loop sleeps (timer slack 1 ns) until this long before a tick, then busy-waits
-# (tools/tick_profile.py: such a sleep wakes ~50 us late p50).
+# (experiments/tick_profile.py: such a sleep wakes ~50 us late p50).
 BUSY_WAIT_S = 1.0e-4
 # Step with the last command (a stale tick) if no answer came this long before the tick. A
 # step that runs past the tick only delays that state's publication; a stale tick applies an

@@ -3,7 +3,7 @@ The ideal closed loop, Eq. (25) / (33): robot dynamics (1) + control law (24) / 
 
 Integrated with classic RK4 on Pinocchio's dynamics, the law evaluated continuously at every
 stage (no sampling, no delay, no torque limits, and no friction unless asked for), so the
-Lyapunov function of Eq. (27) / (34) -- with the joint-limit and large-error terms of issue 10
+Lyapunov function of Eq. (27) / (34) -- with the joint-limit and large-error terms
 when they are on (docs/lyapunov.md) -- is non-increasing up to integration error (Eq. 28 / 35).
 It is the reference the PyBullet + ROS runs are compared with, and a test of the control law's
 theory.
@@ -41,7 +41,7 @@ class ClosedLoop:
     (:meth:`run`) gives it no effort limits, the sampled loop (:func:`run_sampled`) the URDF's.
     ``coulomb_nm`` adds plant friction ``-f tanh(qdot / coulomb_velocity_rad_s)`` to the ideal
     loop (the sampled loop takes its friction from the simulator). ``shaping`` turns on the
-    issue-10 extensions, ``q_star`` gives the goal configuration to their joint-space term.
+    extensions, ``q_star`` gives the goal configuration to their joint-space term.
     """
 
     def __init__(self, model: RobotModel, gains: cl.Gains, task: cl.Task,

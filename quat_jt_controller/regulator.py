@@ -3,7 +3,7 @@ The control tick, written once: joint state in, clamped joint torque out (Eq. 22
 
     tau = J^T Q(eta_e, e)^T grad U_a(y_tilde) - K_v qdot + g(q),  clamped to the effort limits
 
-With the issue-10 extensions of ``gains.shaping`` (``shaping.py``, docs/lyapunov.md) it is
+With the extensions of ``gains.shaping`` (``shaping.py``, docs/lyapunov.md) it is
 
     tau = J^T Q^T grad U_a - grad U_lim(q) - K_v qdot + g(q) + tau_fc,  clamped
 
@@ -143,7 +143,7 @@ class Regulator:
     :param effort_limits_nm: clamp per joint; default the URDF's. Pass ``[inf] * n`` for the
         ideal loop of the paper's analysis (no saturation).
     :param goal: the initial goal; None until :meth:`set_goal` or :meth:`hold`.
-    :param shaping: the issue-10 extensions (``shaping.Shaping``); default all off, the
+    :param shaping: the extensions (``shaping.Shaping``); default all off, the
         paper's law.
 
     Two snapshots, each one reference swapped whole: the law ``(gains, shaping, limit band)``
@@ -179,7 +179,7 @@ class Regulator:
 
     @property
     def shaping(self) -> sh.Shaping:
-        """Return the issue-10 extensions in force (immutable)."""
+        """Return the extensions in force (immutable)."""
         return self._law[1]
 
     @property

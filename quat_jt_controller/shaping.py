@@ -1,5 +1,5 @@
 """
-Issue 10: extensions of the regulator that stay in the energy-shaping frame (docs/lyapunov.md).
+Extensions of the regulator that stay in the energy-shaping frame (docs/lyapunov.md).
 
 The law of Eq. (22) becomes
 
@@ -88,7 +88,7 @@ def _per_joint(name: str, values: Optional[Sequence[float]], n: int) -> tuple[fl
 @dataclass(frozen=True)
 class Shaping:
     """
-    The issue-10 extensions, validated and immutable; part of the Gains snapshot.
+    The extensions, validated and immutable; part of the Gains snapshot.
 
     Units: ``joint_limit_margin_rad`` rad (band width inside each limit), ``joint_limit_gain``
     N m/rad per joint (stiffness in the band; 0 = no limit term for that joint),

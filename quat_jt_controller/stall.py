@@ -1,5 +1,5 @@
 """
-Stall detection for /diagnostics (issue 10): at rest, away from the goal, and why.
+Stall detection for /diagnostics: at rest, away from the goal, and why.
 
 The regulator's Lyapunov function only decreases (docs/lyapunov.md), so the robot can come to
 rest before the goal: against a joint limit, where the potential's torque is below the

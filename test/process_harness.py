@@ -2,8 +2,8 @@
 import time
 from typing import Callable
 
+from experiments import local_ros
 import pytest
-from quat_jt_controller.tools import local_ros
 import rclpy
 
 

@@ -1,4 +1,5 @@
 """The offscreen animation: a few frames of a synthetic wrist trajectory, checked by pixel."""
+from experiments import animation
 import numpy as np
 from PIL import Image, ImageSequence
 import pytest
@@ -6,7 +7,6 @@ from quat_jt_controller import paper
 from quat_jt_controller import quaternion as quat
 from quat_jt_controller.model import RobotModel
 from quat_jt_controller.resources import default_urdf_xml
-from quat_jt_controller.tools import animation
 
 pytestmark = pytest.mark.unit
 

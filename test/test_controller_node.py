@@ -23,6 +23,7 @@ import time
 from typing import Callable, Optional, Sequence
 
 from diagnostic_msgs.msg import DiagnosticArray
+from experiments import local_ros
 from geometry_msgs.msg import PoseStamped
 from process_harness import call_service, ProcessHarnessMixin
 import pytest
@@ -32,7 +33,6 @@ from quat_jt_controller.control_law import Gains, Task
 from quat_jt_controller.model import RobotModel
 from quat_jt_controller.regulator import Goal, Regulator
 from quat_jt_controller.resources import default_urdf_xml
-from quat_jt_controller.tools import local_ros
 from rcl_interfaces.msg import Log
 import rclpy
 from rclpy.experimental import EventsExecutor

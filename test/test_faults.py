@@ -15,13 +15,13 @@ import subprocess
 import time
 from typing import Callable
 
+from experiments import local_ros
 from geometry_msgs.msg import PoseStamped
 from process_harness import call_service, ProcessHarnessMixin
 import pytest
 from quat_jt_controller import paper
 from quat_jt_controller import quaternion as quat
 from quat_jt_controller.resources import share_path
-from quat_jt_controller.tools import local_ros
 from rcl_interfaces.msg import Parameter as ParameterMsg, ParameterType
 import rclpy
 from rclpy.experimental import EventsExecutor

@@ -1,8 +1,8 @@
 """MCAP files written from raw CDR decode with the standard ROS 2 MCAP reader."""
+from experiments.mcap_log import McapLog, message_definition
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 import pytest
-from quat_jt_controller.tools.mcap_log import McapLog, message_definition
 from rclpy.serialization import serialize_message
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
@@ -47,7 +47,7 @@ def test_own_cdr_matches_rclpy():
     Byte for byte where CDR has no padding (String); elsewhere rclpy reads ours back to the same
     message (rclpy leaves its padding bytes uninitialised and pads the end to 8 bytes).
     """
-    from quat_jt_controller.tools.mcap_log import cdr_joint_state, cdr_string
+    from experiments.mcap_log import cdr_joint_state, cdr_string
     from rclpy.serialization import deserialize_message
     from std_msgs.msg import String
     for text in ('', 'a', '<robot name="x"/>\n' * 3):

@@ -1,6 +1,7 @@
 """The repo is an ament_python package: colcon builds it into a workspace as a Jazzy user would."""
 import os
 from pathlib import Path
+import re
 import shutil
 import subprocess
 import sys
@@ -54,3 +55,14 @@ def test_installed_package_finds_its_data_through_the_ament_prefix(colcon_instal
     module_file, urdf = out.stdout.split()
     assert Path(module_file).is_relative_to(site)
     assert Path(urdf) == colcon_install / 'share/quat_jt_controller/urdf/spherical_wrist.urdf'
+
+
+def test_the_experiments_are_not_installed(colcon_install):
+    """What runs on a robot is installed; the experiments and benchmarks stay in the repo."""
+    site = next((colcon_install / 'lib').glob('python3*/site-packages'))
+    assert (site / 'quat_jt_controller' / 'regulator.py').is_file()
+    assert not (site / 'quat_jt_controller' / 'tools').exists()
+    assert not (site / 'experiments').exists()
+    importing = [p.name for p in (site / 'quat_jt_controller').rglob('*.py')
+                 if re.search(r'^\s*(from|import) experiments\b', p.read_text(), re.M)]
+    assert not importing, importing  # the arrows point one way

@@ -18,13 +18,13 @@ from pathlib import Path
 import subprocess
 import time
 
+from experiments import local_ros
 from geometry_msgs.msg import PoseStamped, Vector3Stamped
 from process_harness import call_service, ProcessHarnessMixin
 import pytest
 from quat_jt_controller import paper
 from quat_jt_controller import quaternion as quat
 from quat_jt_controller.model import RobotModel
-from quat_jt_controller.tools import local_ros
 from rcl_interfaces.msg import Log
 import rclpy
 from rclpy.experimental import EventsExecutor

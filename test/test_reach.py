@@ -1,18 +1,18 @@
 """
 Issue 10 end to end on the simulator core: a handful of the reach experiment's cases.
 
-tools/reach_experiment.py runs hundreds (README); here a few of each robot and potential, with
-the package's configs, PyBullet, friction and a tick of delay: every one reached, no stop
+experiments/reach_experiment.py runs hundreds (README); here a few of each robot and potential,
+with the package's configs, PyBullet, friction and a tick of delay: every one reached, no stop
 touched. And the stall classification names the cause of a case made to fail.
 """
 import dataclasses
 
+from experiments import reach_experiment as rx
 import numpy as np
 import pytest
 from quat_jt_controller import quaternion as quat
 from quat_jt_controller.goal_check import goal_configuration
 from quat_jt_controller.reference_sim import ClosedLoop, run_sampled
-from quat_jt_controller.tools import reach_experiment as rx
 from wrist_sim.simulator import WristSimulator
 
 pytestmark = pytest.mark.unit

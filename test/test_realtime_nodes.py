@@ -10,11 +10,11 @@ import random
 import subprocess
 
 from cpus import linux_only, thread_cpus, two_cpus
+from experiments import local_ros
 from process_harness import ProcessHarnessMixin
 import pytest
 from quat_jt_controller import lifecycle
 from quat_jt_controller import realtime
-from quat_jt_controller.tools import local_ros
 import rclpy
 from rclpy.experimental import EventsExecutor
 from rclpy.parameter import Parameter
@@ -98,7 +98,7 @@ def test_unavailable_cpu_is_a_clear_start_up_error(tmp_path):
 @pytest.mark.node
 def test_the_tools_own_node_discovers_on_loopback_only(monkeypatch, tmp_path):
     """The recorder/probe of the tools must not discover over the subnet (Jazzy's default)."""
-    from quat_jt_controller.tools.probe import ProbeNode
+    from experiments.probe import ProbeNode
     monkeypatch.delenv('ROS_AUTOMATIC_DISCOVERY_RANGE', raising=False)
     monkeypatch.setenv('ROS_STATIC_PEERS', '192.0.2.1')
     monkeypatch.setenv('ROS_LOG_DIR', str(tmp_path))

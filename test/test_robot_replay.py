@@ -4,6 +4,9 @@ The 3D replay topics of an MCAP, read back with the standard ROS 2 MCAP decoder.
 Every channel decodes, and the decoded transforms compose to the model's forward kinematics of
 the tip link.
 """
+from experiments.mcap_log import (cdr_joint_state, LATCHED_QOS_YAML, McapLog,
+                                  message_definition, SEPARATOR)
+from experiments.robot_tf import write_robot_replay
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 import numpy as np
@@ -11,9 +14,6 @@ import pytest
 from quat_jt_controller import paper
 from quat_jt_controller import quaternion as quat
 from quat_jt_controller.resources import default_urdf_xml
-from quat_jt_controller.tools.mcap_log import (cdr_joint_state, LATCHED_QOS_YAML, McapLog,
-                                               message_definition, SEPARATOR)
-from quat_jt_controller.tools.robot_tf import write_robot_replay
 from robots import wrist_model, xarm6_model, XARM6_URDF
 
 pytestmark = pytest.mark.unit

@@ -11,10 +11,10 @@ from pathlib import Path
 import random
 import time
 
+from experiments import local_ros
 import numpy as np
 from process_harness import call_service
 import pytest
-from quat_jt_controller.tools import local_ros
 import rclpy
 from rclpy.experimental import EventsExecutor
 from rclpy.parameter import Parameter
@@ -379,3 +379,11 @@ def test_joints_are_held_until_the_first_command(tmp_path):
     finally:
         p.destroy()
         s.close()
+
+
+@pytest.mark.dds
+def test_start_up_prints_only_the_nodes_own_lines(sim, probe):
+    """The banner of PyBullet (its build time, 'argv[0]=') does not open the output."""
+    text = sim.log()
+    assert '[wrist_sim]: simulating joints' in text, text[-2000:]
+    assert 'build time' not in text and 'argv[0]=' not in text, text[:2000]

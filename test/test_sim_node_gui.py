@@ -8,9 +8,9 @@ import os
 import random
 import time
 
+from experiments import local_ros
 import numpy as np
 import pytest
-from quat_jt_controller.tools import local_ros
 import rclpy
 from rclpy.experimental import EventsExecutor
 from sensor_msgs.msg import JointState

@@ -207,3 +207,23 @@ def test_fresh_command_figures_find_the_lowest_window_and_the_largest_gap():
     figures = fresh_command_figures(t[::-1].copy(), fresh[::-1].copy())  # any order
     assert figures['fresh_rate_hz_min'] == pytest.approx((250 - 40) / 0.25)
     assert figures['fresh_gap_ms_max'] == pytest.approx(41.0)
+
+
+def test_goal_check_worker_says_when_it_is_ready():
+    """The worker answers checks once it has built its model: 'starting' until then."""
+    from quat_jt_controller import diagnostics
+    model = wrist_model()
+    worker = GoalCheckWorker(ModelSpec(default_urdf_xml(), 'base_link', 'tool0',
+                                       model.joint_names, Task.ORIENTATION))
+    try:
+        assert not worker.ready
+        _, _, values = diagnostics.goal_status('hold', None, '', None, None, False,
+                                               diagnostics.Counters(), '', worker.ready)
+        assert ('goal_check', 'starting') in values
+        deadline = time.monotonic() + 30.0
+        while not worker.ready and time.monotonic() < deadline:
+            assert worker.poll() == []
+            time.sleep(0.01)
+        assert worker.ready
+    finally:
+        worker.close()

@@ -30,7 +30,7 @@ def test_paper_experiment_reproduces_the_qualitative_result(tmp_path, mode):
     Lockstep (simulated clock), so the outcome does not depend on how busy the machine is; the
     nodes as two processes, or composed in one.
     """
-    stdout = run_tool('quat_jt_controller.tools.paper_experiment', '--out', str(tmp_path),
+    stdout = run_tool('experiments.paper_experiment', '--out', str(tmp_path),
                       '--duration', '2.5', '--lockstep',
                       *(['--composed'] if mode == 'composed' else []))
     assert f'({mode if mode == "two processes" else "composed (one process)"}):' in stdout
@@ -65,7 +65,7 @@ def test_paper_experiment_reproduces_the_qualitative_result(tmp_path, mode):
 
 
 def test_benchmark_reports_every_figure(tmp_path):
-    stdout = run_tool('quat_jt_controller.tools.benchmark', '--out', str(tmp_path),
+    stdout = run_tool('experiments.benchmark', '--out', str(tmp_path),
                       '--duration', '3', '--composed-duration', '3', '--lockstep-duration', '3',
                       '--warmup', '1')
     two_cpus = len(realtime.allowed_cpus()) >= 2  # else there is no pinned run
@@ -103,7 +103,7 @@ def test_benchmark_reports_every_figure(tmp_path):
 
 
 def test_benchmark_compares_prewarm_off_and_on(tmp_path):
-    stdout = run_tool('quat_jt_controller.tools.benchmark', '--out', str(tmp_path),
+    stdout = run_tool('experiments.benchmark', '--out', str(tmp_path),
                       '--prewarm-pairs', '1', '--duration', '4', '--warmup', '1')
     modes = ('not pinned', 'pinned') if len(realtime.allowed_cpus()) >= 2 else ('not pinned',)
     table = stdout[stdout.index('| mode | pair |'):].strip().splitlines()
@@ -116,7 +116,7 @@ def test_benchmark_compares_prewarm_off_and_on(tmp_path):
 
 
 def test_tick_profile_times_every_piece_of_both_ticks():
-    stdout = run_tool('quat_jt_controller.tools.tick_profile', '--calls', '500')
+    stdout = run_tool('experiments.tick_profile', '--calls', '500')
     pieces_table, sleep_table = stdout[stdout.index('| controller'):].split('\n\n')[:2]
     rows = [line.split('|') for line in pieces_table.splitlines()[2:]]
     pieces = {cells[1].strip(): cells[2].strip() for cells in rows}
@@ -130,7 +130,7 @@ def test_tick_profile_times_every_piece_of_both_ticks():
 
 
 def test_friction_trace_shows_a_steady_torque_at_rest(tmp_path):
-    stdout = run_tool('quat_jt_controller.tools.friction_trace', '--duration', '2.5',
+    stdout = run_tool('experiments.friction_trace', '--duration', '2.5',
                       '--plot', str(tmp_path / 'trace.png'))
     assert 'paper gains, quadratic, exact estimate:' in stdout
     assert stdout.count('sign changes [0, 0, 0]') == 7
@@ -148,7 +148,7 @@ def test_design_gains_entry_point_is_installed():
 
 def test_goal_stream_reports_the_loop_and_the_tracking_error(tmp_path):
     """Short streams: every figure is there and finite, from the simulator's own statistics."""
-    out = subprocess.run([sys.executable, '-m', 'quat_jt_controller.tools.goal_stream',
+    out = subprocess.run([sys.executable, '-m', 'experiments.goal_stream',
                           '--rates', '100', '--duration', '2', '--out', str(tmp_path)],
                          capture_output=True, text=True, timeout=300)
     assert out.returncode == 0, out.stdout + out.stderr

@@ -11,7 +11,7 @@ pytestmark = pytest.mark.e2e
 
 
 def test_xarm6_demo_writes_replayable_mcap_animation_and_figure(tmp_path):
-    out = subprocess.run([sys.executable, '-m', 'quat_jt_controller.tools.xarm6_demo', '--out',
+    out = subprocess.run([sys.executable, '-m', 'experiments.xarm6_demo', '--out',
                           str(tmp_path), '--duration', '1.0'], capture_output=True, text=True,
                          timeout=180)
     assert out.returncode == 0, out.stdout[-3000:] + out.stderr[-3000:]

@@ -45,8 +45,8 @@ import tempfile
 from typing import Optional, Sequence, Union
 
 import numpy as np
-import pybullet
-import pybullet_data
+from wrist_sim.quiet import c_output_silenced, pybullet  # imported without its banner
+import pybullet_data  # noqa: I100 - after pybullet, which wrist_sim.quiet imports silenced
 from pybullet_utils.bullet_client import BulletClient
 from quat_jt_controller.joints import movable_joints, select_joints
 
@@ -162,7 +162,9 @@ class WristSimulator:
                 'use_gui is true but DISPLAY is not set, so the PyBullet window cannot open: '
                 'run without use_gui (headless), on a desktop session, or under a virtual '
                 "display, e.g. 'xvfb-run -a ros2 launch ...'")
-        self._client = BulletClient(connection_mode=pybullet.GUI if use_gui else pybullet.DIRECT)
+        with c_output_silenced():  # PyBullet prints 'argv[0]=' on each connection
+            self._client = BulletClient(
+                connection_mode=pybullet.GUI if use_gui else pybullet.DIRECT)
         try:
             self._setup(xml, dirs, joint_names, solver_iterations, enforce_velocity_limits)
         except Exception:

@@ -1,5 +1,5 @@
 """A node of the tools' own on a private domain: its context, its EventsExecutor, teardown."""
-from quat_jt_controller.tools.local_ros import keep_this_process_local
+from experiments.local_ros import keep_this_process_local
 import rclpy
 from rclpy.experimental import EventsExecutor
 

@@ -9,16 +9,15 @@ joint's transform is the relative placement of its child link's frame in its par
 
 :func:`write_robot_replay` adds ``/robot_description``, ``/tf_static`` (the fixed joints and a
 goal frame) and ``/tf`` (decimated to ``tf_rate_hz`` of the joint-state stamps) to a
-:class:`~quat_jt_controller.tools.mcap_log.McapLog`. ROS-free.
+:class:`~experiments.mcap_log.McapLog`. ROS-free.
 """
 from typing import Optional, Sequence
 from xml.etree import ElementTree
 
+from experiments.mcap_log import cdr_string, cdr_tf_message, McapLog
 import numpy as np
 import pinocchio as pin
-
 from quat_jt_controller import quaternion as quat
-from quat_jt_controller.tools.mcap_log import cdr_string, cdr_tf_message, McapLog
 
 # (parent frame, child frame, translation xyz in m, rotation quaternion x, y, z, w)
 Transform = tuple[str, str, tuple[float, float, float], tuple[float, float, float, float]]

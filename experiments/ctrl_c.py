@@ -9,7 +9,7 @@ second SIGINT follows within 0.3 s, as ``ros2 launch`` sends one when another pr
 (``on_exit=Shutdown``). It counts the processes that exit with status 0, and those whose log has
 a traceback. Target (streamed-goals issue): 0 and no traceback, every time.
 
-    python -m quat_jt_controller.tools.ctrl_c [--rounds 20] [--within 3]
+    python -m experiments.ctrl_c [--rounds 20] [--within 3]
 """
 import argparse
 from pathlib import Path
@@ -19,8 +19,8 @@ import tempfile
 import time
 from typing import Optional
 
+from experiments import local_ros
 from quat_jt_controller.resources import share_path
-from quat_jt_controller.tools import local_ros
 
 
 def one_round(mode: str, within_s: float, work_dir: Path, rng: random.Random) -> list[dict]:

@@ -17,13 +17,15 @@ from typing import Any, Mapping, Optional
 
 from quat_jt_controller.resources import share_path
 
+REPOSITORY = Path(__file__).resolve().parent.parent  # the folder that holds experiments/
+
 # How each executable starts: the package's nodes through their console-script entry points
 # (the stop flag before the slow imports, as ``ros2 run`` does), the baseline as a module.
 NODE_COMMANDS = {
     'controller_node': ('-m', 'quat_jt_controller.entry_points', 'controller_node'),
     'wrist_sim_node': ('-m', 'quat_jt_controller.entry_points', 'wrist_sim_node'),
     'composed': ('-m', 'quat_jt_controller.entry_points', 'composed'),  # both in one process
-    'minimal_pair': ('-m', 'quat_jt_controller.tools.minimal_pair'),  # the benchmark's baseline
+    'minimal_pair': ('-m', 'experiments.minimal_pair'),  # the benchmark's baseline
 }
 
 
@@ -32,9 +34,13 @@ def isolated_env(work_dir: Path, domain_id: Optional[int] = None,
     """
     Build the environment of a private ROS graph.
 
-    Localhost-only discovery, its own domain id, ROS_HOME and ROS_LOG_DIR under ``work_dir``.
+    Localhost-only discovery, its own domain id, ROS_HOME and ROS_LOG_DIR under ``work_dir``,
+    and the repository on PYTHONPATH (``experiments`` is not installed; the minimal pair and
+    the tools' subprocesses import it from any working directory).
     """
     env = dict(os.environ if base is None else base)
+    env['PYTHONPATH'] = os.pathsep.join(
+        p for p in (str(REPOSITORY), env.get('PYTHONPATH', '')) if p)
     work_dir = Path(work_dir)
     (work_dir / 'log').mkdir(parents=True, exist_ok=True)
     env.update({
@@ -98,7 +104,7 @@ def spawn_node(executable: str, env: Mapping[str, str], work_dir: Path,
 
 
 PAPER_CONTROLLER_CONFIG = 'config/paper_wrist_controller.yaml'  # the paper's experiment
-PRODUCT_CONTROLLER_CONFIG = 'config/wrist_controller.yaml'  # designed gains, issue-10 terms
+PRODUCT_CONTROLLER_CONFIG = 'config/wrist_controller.yaml'  # designed gains, the extensions
 
 
 def spawn_wrist_pair(env: Mapping[str, str], work_dir: Path,

@@ -9,7 +9,7 @@ corrected goal, gains Eq. 43-45) and the final ||e|| is compared with the paper'
 (quadratic, Eq. 37) and 5.3184e-3 (tanh, Eq. 38) by
 ``|ln(e_quad / 0.2043)| + |ln(e_tanh / 5.3184e-3)|``. The README's friction values come from
 
-    python -m quat_jt_controller.tools.friction_sweep
+    python -m experiments.friction_sweep
 """
 import argparse
 import itertools

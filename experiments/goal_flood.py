@@ -26,7 +26,7 @@ short of the target by as much in the control is the host's.
 It runs the product config (``config/wrist_controller.yaml``, what a user gets) and then the
 paper's (``config/paper_wrist_controller.yaml``).
 
-    python -m quat_jt_controller.tools.goal_flood [--rate 1000] [--duration 3] [--invalid]
+    python -m experiments.goal_flood [--rate 1000] [--duration 3] [--invalid]
 """
 import argparse
 import json
@@ -37,9 +37,9 @@ import sys
 import time
 from typing import Optional
 
+from experiments import local_ros
+from experiments.probe import ProbeNode
 from geometry_msgs.msg import PoseStamped
-from quat_jt_controller.tools import local_ros
-from quat_jt_controller.tools.probe import ProbeNode
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 

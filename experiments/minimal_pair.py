@@ -10,8 +10,8 @@ The sim's figures use the simulator's own ``LoopStats``, so they compare one to 
 ``wrist_sim_node``'s: whatever the real nodes add beyond this pair is theirs, the rest is the
 machine.
 
-    python -m quat_jt_controller.tools.minimal_pair --role controller &
-    python -m quat_jt_controller.tools.minimal_pair --role sim --duration 30 --stats out.json
+    python -m experiments.minimal_pair --role controller &
+    python -m experiments.minimal_pair --role sim --duration 30 --stats out.json
 """
 import argparse
 import json

@@ -19,7 +19,7 @@ also gives the simulator's largest period, from the stamps of its states (its pu
 times, so this process's own delays do not count). Target (streamed-goals issue): under 10 ms
 with a CLI process every 10 s.
 
-    python -m quat_jt_controller.tools.soak [--duration 600] [--load 0] [--churn 10]
+    python -m experiments.soak [--duration 600] [--load 0] [--churn 10]
 """
 import argparse
 import collections
@@ -35,13 +35,13 @@ import time
 from typing import Optional
 
 from diagnostic_msgs.msg import DiagnosticArray
+from experiments import local_ros
+from experiments.probe import ProbeNode
 from geometry_msgs.msg import PoseStamped
 from quat_jt_controller import paper
 from quat_jt_controller import quaternion as quat
 from quat_jt_controller.model import RobotModel
 from quat_jt_controller.resources import default_urdf_xml
-from quat_jt_controller.tools import local_ros
-from quat_jt_controller.tools.probe import ProbeNode
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 

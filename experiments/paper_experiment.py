@@ -6,13 +6,13 @@ For each controller, quadratic (Eq. 37) and tanh (Eq. 38): start ``wrist_sim_nod
 config files (gains Eq. 43-45, q(0) = 0, the simulated Coulomb friction), publish the corrected
 goal of docs/errata.md (Eq. 40) on ``/quat_jt_controller/target_pose``, and record joint states,
 commands and the controller's error to MCAP, with what a 3D viewer needs to replay the robot
-(``/robot_description``, ``/tf_static`` with the goal frame, ``/tf``; ``tools/robot_tf.py``).
+(``/robot_description``, ``/tf_static`` with the goal frame, ``/tf``; ``experiments/robot_tf.py``).
 Then write a CSV, a figure like the paper's Fig. 2 (||e|| against time, linear and log) with
 the joint torques and angles against their URDF limits, an animated GIF of each run rendered
-offscreen from the recorded joint states (``tools/animation.py``) and print the comparison
-table. ``--xarm6`` also runs the xArm6 demo goal (``tools/xarm6_demo.py``, ROS-free).
+offscreen from the recorded joint states (``experiments/animation.py``) and print the comparison
+table. ``--xarm6`` also runs the xArm6 demo goal (``experiments/xarm6_demo.py``, ROS-free).
 
-    python -m quat_jt_controller.tools.paper_experiment [--out results/paper] [--duration 6]
+    python -m experiments.paper_experiment [--out results/paper] [--duration 6]
                                                         [--lockstep] [--composed]
                                                         [--no-animation] [--xarm6]
 
@@ -33,8 +33,10 @@ import sys
 import time
 from typing import Optional
 
+from diagnostic_msgs.msg import DiagnosticArray
+from experiments import local_ros
+from experiments.robot_tf import write_robot_replay
 import numpy as np
-
 from quat_jt_controller import control_law as cl
 from quat_jt_controller import paper
 from quat_jt_controller import quaternion as quat
@@ -42,8 +44,6 @@ from quat_jt_controller.model import RobotModel
 from quat_jt_controller.parameters import history_qos
 from quat_jt_controller.reference_sim import ClosedLoop
 from quat_jt_controller.resources import default_urdf_xml
-from quat_jt_controller.tools import local_ros
-from quat_jt_controller.tools.robot_tf import write_robot_replay
 
 POTENTIALS = ('quadratic', 'tanh')
 EQUATION = {'quadratic': 'Eq. 37', 'tanh': 'Eq. 38'}
@@ -122,12 +122,12 @@ def run_once(potential: str, duration_s: float, out_dir: Path, model: RobotModel
     """
     from rclpy.serialization import deserialize_message
 
-    from quat_jt_controller.tools.probe import ProbeNode
+    from experiments.probe import ProbeNode
     from geometry_msgs.msg import PoseStamped, Vector3Stamped
     from sensor_msgs.msg import JointState
     from std_msgs.msg import Float64MultiArray
 
-    from quat_jt_controller.tools.mcap_log import McapLog
+    from experiments.mcap_log import McapLog
 
     work = out_dir / potential
     work.mkdir(parents=True, exist_ok=True)
@@ -168,6 +168,14 @@ def run_once(potential: str, duration_s: float, out_dir: Path, model: RobotModel
         node.create_subscription(msg, topic, recorder(topic, type_name, key),
                                  history_qos(lockstep), raw=True)
     goal_pub = node.create_publisher(PoseStamped, f'/{CONTROLLER}/target_pose', 10)
+    checks_ready = [False]  # the controller's goal-check worker has built its model
+
+    def on_diagnostics(msg: DiagnosticArray) -> None:
+        for status in msg.status:
+            if status.name.endswith(f'{CONTROLLER}: goal') and any(
+                    kv.key == 'goal_check' and kv.value == 'available' for kv in status.values):
+                checks_ready[0] = True
+    node.create_subscription(DiagnosticArray, '/diagnostics', on_diagnostics, 10)
     goal = PoseStamped()
     goal.header.frame_id = 'base_link'
     (goal.pose.orientation.x, goal.pose.orientation.y, goal.pose.orientation.z,
@@ -219,6 +227,9 @@ def run_once(potential: str, duration_s: float, out_dir: Path, model: RobotModel
                  f'{domain_id})')
         spin_until(lambda: len(records['states']) > 100 and len(records['commands']) > 100
                    and records['errors'], 60.0, 'waiting for the nodes to run')
+        # The goal's q* comes from the worker (the product config's goal-configuration term):
+        # in lockstep, a worker still starting would answer seconds of simulated time late.
+        spin_until(lambda: checks_ready[0], 60.0, 'waiting for the goal check to be ready')
         # The controller holds q(0) until the goal arrives: ||e|| ~ 0 there, ~0.9 after.
         # t = 0 is the stamp of the last state before the goal was sent.
         t_goal_s = last_state_time_s()
@@ -383,7 +394,7 @@ def plot(runs: list[Run], ideal: dict, path: Path, model: Optional[RobotModel] =
 
 def animate_run(run: Run, model: RobotModel, fps: float = ANIMATION_FPS):
     """Render ``run`` (its recorded joint states) to ``<potential>.gif`` next to its MCAP."""
-    from quat_jt_controller.tools.animation import animate
+    from experiments.animation import animate
 
     label = f'{run.potential} ({EQUATION[run.potential]})'
     return animate(
@@ -424,7 +435,7 @@ def main(argv: Optional[list] = None) -> int:
     parser.add_argument('--no-animation', action='store_true',
                         help='skip the GIFs rendered from the recorded joint states')
     parser.add_argument('--xarm6', action='store_true',
-                        help='also run the xArm6 demo goal (tools/xarm6_demo.py, ROS-free) '
+                        help='also run the xArm6 demo goal (experiments/xarm6_demo.py, ROS-free) '
                              'into <out>/xarm6')
     args = parser.parse_args(argv)
     args.out.mkdir(parents=True, exist_ok=True)
@@ -471,7 +482,7 @@ def main(argv: Optional[list] = None) -> int:
                   f'320x240) rendered in {a.render_s:.1f} s, {a.size_bytes / 1e3:.0f} kB; '
                   f'still frame {a.still_path}')
     if args.xarm6:
-        from quat_jt_controller.tools import xarm6_demo
+        from experiments import xarm6_demo
         xarm6_demo.main(['--out', str(args.out / 'xarm6')]
                         + (['--no-animation'] if args.no_animation else []))
     print(f'Done in {time.monotonic() - t_start:.0f} s.')

@@ -1,5 +1,5 @@
 """
-Reach any reachable goal from any start (issue 10): the figures, from the package's configs.
+Reach any reachable goal from any start: the figures, from the package's configs.
 
 For random (start, goal) pairs, seeded, the regulator of ``config/wrist_controller.yaml`` or
 ``config/xarm6_controller.yaml`` runs as the nodes run it: on the PyBullet simulator core, with
@@ -16,7 +16,7 @@ effort limits (``reference_sim.run_sampled``). The goal configuration q* reaches
 A stop is touched if a joint comes within 1e-3 rad of a URDF limit. Failures are listed with
 their likely cause (``stall.StallDetector.diagnose`` at the final state).
 
-    python -m quat_jt_controller.tools.reach_experiment [--robot wrist xarm6]
+    python -m experiments.reach_experiment [--robot wrist xarm6]
         [--potential tanh quadratic] [--cases N] [--seed S] [--dds K]
         [--without configuration|friction|limits]
 
@@ -266,8 +266,8 @@ def run_dds(count: int, seed: int, progress=print) -> str:
     from geometry_msgs.msg import PoseStamped
     from sensor_msgs.msg import JointState
 
-    from quat_jt_controller.tools import local_ros
-    from quat_jt_controller.tools.probe import ProbeNode
+    from experiments import local_ros
+    from experiments.probe import ProbeNode
 
     robot = ROBOTS['wrist']
     model, _, _ = load_controller(robot)

@@ -15,7 +15,7 @@ frame, ``/tf``), an animated GIF and one still frame rendered offscreen after th
 figure: position error, ||e||, joint torques against the effort limits and joint angles against
 the position limits.
 
-    python -m quat_jt_controller.tools.xarm6_demo [--out results/xarm6] [--duration 5]
+    python -m experiments.xarm6_demo [--out results/xarm6] [--duration 5]
                                                   [--no-animation]
 """
 import argparse
@@ -25,9 +25,10 @@ import sys
 import time
 from typing import Optional
 
+from experiments.mcap_log import cdr_joint_state, McapLog
+from experiments.robot_tf import write_robot_replay
 import numpy as np
 import pybullet_data
-
 from quat_jt_controller import control_law as cl
 from quat_jt_controller import quaternion as quat
 from quat_jt_controller import shaping as sh
@@ -35,8 +36,6 @@ from quat_jt_controller.goal_check import goal_configuration
 from quat_jt_controller.model import RobotModel
 from quat_jt_controller.reference_sim import ClosedLoop
 from quat_jt_controller.resources import config_parameters
-from quat_jt_controller.tools.mcap_log import cdr_joint_state, McapLog
-from quat_jt_controller.tools.robot_tf import write_robot_replay
 from wrist_sim.simulator import WristSimulator
 
 XARM6_URDF = Path(pybullet_data.getDataPath()) / 'xarm' / 'xarm6_robot.urdf'
@@ -118,7 +117,7 @@ def plot(runs: list[PoseRun], model: RobotModel, path: Path) -> None:
     matplotlib.use('Agg')
     import matplotlib.pyplot as plt
 
-    from quat_jt_controller.tools.paper_experiment import plot_angles, plot_torques
+    from experiments.paper_experiment import plot_angles, plot_torques
 
     fig, axes = plt.subplots(3, 2, figsize=(11, 12.6), squeeze=False)
     colors = {'quadratic': 'tab:blue', 'tanh': 'tab:red'}
@@ -167,7 +166,7 @@ def main(argv: Optional[list] = None) -> int:
               f'{1e3 * r.position_error_m[-1]:.3f} mm, ||e|| = {r.orientation_error[-1]:.2e}, '
               f'peak |tau| = {np.abs(r.effort_nm).max():.1f} N m; MCAP {mcap_path}')
         if not args.no_animation:
-            from quat_jt_controller.tools.animation import animate
+            from experiments.animation import animate
             label = f'xArm6 {potential} ({EQUATION[potential]})'
             a = animate(urdf_xml, model.joint_names, r.t_s, r.q_rad,
                         args.out / f'xarm6_{potential}.gif', tip_link=model.tip_link,

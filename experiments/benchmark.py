@@ -22,15 +22,15 @@ where they come from:
   figure with it.
 
 Baseline: the same loop figures for a minimal rclpy pair with nothing to compute
-(``tools/minimal_pair.py``), run just before each two-process run, pinned the same way, for the
-same duration: the floor this machine sets at that moment. What the real nodes show beyond it
-is theirs.
+(``experiments/minimal_pair.py``), run just before each two-process run, pinned the same way,
+for the same duration: the floor this machine sets at that moment. What the real nodes show
+beyond it is theirs.
 
 Core: ticks per second of the node's own tick, ``Regulator.update`` (kinematics, Jacobian, g(q),
 error, law, finite check, clamp), for the wrist (3-DOF, orientation task) and the xArm6 (6-DOF,
 pose task), in one process.
 
-    python -m quat_jt_controller.tools.benchmark [--duration 30] [--composed-duration 60]
+    python -m experiments.benchmark [--duration 30] [--composed-duration 60]
         [--prewarm-lead S] [--out results/bench]
 
 ``--prewarm-pairs N`` runs only the comparison behind the controller's ``prewarm_lead``: N pairs
@@ -47,6 +47,7 @@ import sys
 import time
 from typing import Optional
 
+from experiments import local_ros
 from quat_jt_controller import control_law as cl
 from quat_jt_controller import paper
 from quat_jt_controller import quaternion as quat
@@ -54,7 +55,6 @@ from quat_jt_controller import realtime
 from quat_jt_controller.model import RobotModel
 from quat_jt_controller.regulator import Goal, Regulator
 from quat_jt_controller.resources import default_urdf_xml
-from quat_jt_controller.tools import local_ros
 
 CONTROLLER = 'quat_jt_controller'
 TARGETS = {'command rate (Hz)': '>= 995', 'missed ticks (%)': 'two: floor + 0.1 pt; composed: 0',
@@ -147,7 +147,7 @@ def loop_benchmark(duration_s: float, warmup_s: float, out: Path, composed: bool
     pinned to both); empty = not pinned. ``controller_params`` override the paper's config.
     """
     from diagnostic_msgs.msg import DiagnosticArray
-    from quat_jt_controller.tools.probe import ProbeNode
+    from experiments.probe import ProbeNode
     from geometry_msgs.msg import PoseStamped
 
     out = out / ('composed' if composed else
@@ -247,7 +247,7 @@ def _loop_rows(s: dict) -> list[str]:
 
 def lockstep_benchmark(out: Path, duration_s: float = 20.0) -> dict:
     """Run the paper experiment (tanh) in lockstep in both modes: how many times real time."""
-    from quat_jt_controller.tools.paper_experiment import run_once
+    from experiments.paper_experiment import run_once
 
     model = RobotModel(default_urdf_xml(), 'base_link', 'tool0')
     factors = {}

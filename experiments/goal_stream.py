@@ -22,7 +22,7 @@ Targets (issue: streamed goals): at 100 goals/s the lowest window within 2% of t
 the largest gap within 2 ms of it; at 1000 goals/s within 5% and 5 ms. Tracking at 100 Hz:
 median ||e|| <= 0.02 and max <= 0.05.
 
-    python -m quat_jt_controller.tools.goal_stream [--rates 30 100 1000] [--duration 10]
+    python -m experiments.goal_stream [--rates 30 100 1000] [--duration 10]
 """
 import argparse
 import json
@@ -34,13 +34,13 @@ import sys
 import time
 from typing import Callable, Optional
 
+from experiments import local_ros
+from experiments.probe import ProbeNode
 from geometry_msgs.msg import PoseStamped
 from quat_jt_controller import paper
 from quat_jt_controller import quaternion as quat
 from quat_jt_controller.model import RobotModel
 from quat_jt_controller.resources import default_urdf_xml
-from quat_jt_controller.tools import local_ros
-from quat_jt_controller.tools.probe import ProbeNode
 from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import JointState
 

@@ -8,7 +8,7 @@ the transport). The benchmark gives the same tick in the loop, where caches are 
 (``make bench``); the difference between the two is the price of running 1000 times a second
 beside another process.
 
-    python -m quat_jt_controller.tools.tick_profile [--calls 20000]
+    python -m experiments.tick_profile [--calls 20000]
 """
 import argparse
 import random
@@ -75,7 +75,7 @@ def profile(calls: int) -> dict[str, dict[str, float]]:
     from std_msgs.msg import Float64MultiArray
     from wrist_sim.simulator import WristSimulator
 
-    from quat_jt_controller.tools.probe import ProbeNode
+    from experiments.probe import ProbeNode
 
     urdf = default_urdf_xml()
     model = RobotModel(urdf, 'base_link', 'tool0')

@@ -1,5 +1,5 @@
 """
-Traces of ||e|| and torque with and without Coulomb friction compensation (issue 10).
+Traces of ||e|| and torque with and without Coulomb friction compensation.
 
 The paper's experiment (q(0) = 0, the corrected goal, the paper's gains) on the PyBullet core
 with the wrist's Coulomb friction of config/wrist_sim.yaml, sampled at 1 kHz with a tick of
@@ -8,23 +8,22 @@ of it. Then the product config (config/wrist_controller.yaml), tanh. Prints ||e|
 torque over time, and at rest (the last second) the range of each joint's torque and its sign
 changes: steady torque, no sign flips, no motion means no chattering and no limit cycle.
 
-    python -m quat_jt_controller.tools.friction_trace [--duration 6] [--plot trace.png]
+    python -m experiments.friction_trace [--duration 6] [--plot trace.png]
 """
 import argparse
 from pathlib import Path
 import sys
 from typing import Optional
 
+from experiments.reach_experiment import (config_parameters, load_controller,
+                                          Q_STAR_AFTER_S, quiet, ROBOTS)
 import numpy as np
-
 from quat_jt_controller import control_law as cl
 from quat_jt_controller import paper
 from quat_jt_controller import shaping as sh
 from quat_jt_controller.goal_check import goal_configuration
 from quat_jt_controller.reference_sim import ClosedLoop, run_sampled, SampledRun
 from quat_jt_controller.resources import default_urdf_xml
-from quat_jt_controller.tools.reach_experiment import (config_parameters, load_controller,
-                                                       Q_STAR_AFTER_S, quiet, ROBOTS)
 
 TIMES_S = (0.25, 0.5, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0)
 

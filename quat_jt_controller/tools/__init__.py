@@ -1,1 +1,0 @@
-"""Tools around the nodes: MCAP recording, the paper experiment and the 1 kHz benchmark."""
