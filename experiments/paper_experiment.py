@@ -230,6 +230,10 @@ def run_once(potential: str, duration_s: float, out_dir: Path, model: RobotModel
         # The goal's q* comes from the worker (the product config's goal-configuration term):
         # in lockstep, a worker still starting would answer seconds of simulated time late.
         spin_until(lambda: checks_ready[0], 60.0, 'waiting for the goal check to be ready')
+        # The goal must go out at once: in lockstep the simulation runs on while a goal waits
+        # for discovery, so t = 0 below would come seconds of simulated time too early.
+        spin_until(lambda: goal_pub.get_subscription_count() > 0, 60.0,
+                   'waiting for the controller to subscribe to goals')
         # The controller holds q(0) until the goal arrives: ||e|| ~ 0 there, ~0.9 after.
         # t = 0 is the stamp of the last state before the goal was sent.
         t_goal_s = last_state_time_s()

@@ -23,6 +23,7 @@ from math import asin, exp, isfinite, log, log1p, sqrt, tanh
 from typing import Optional, Sequence
 
 from quat_jt_controller import quaternion as quat
+from quat_jt_controller.errors import QuatJtError
 from quat_jt_controller.shaping import LARGE_ERROR_DELTA
 
 LN2 = log(2.0)
@@ -46,7 +47,7 @@ class Task(str, enum.Enum):
         return 3 if self is Task.ORIENTATION else 6
 
 
-class GainsError(ValueError):
+class GainsError(QuatJtError):
     """An invalid gain; the message names the parameter and the offending value."""
 
 

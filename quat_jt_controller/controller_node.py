@@ -2,10 +2,13 @@
 The regulator as a ROS 2 node: marshalling around ``regulator.Regulator`` (Eq. 22 + g(q)).
 
 Each valid ``joint_states`` message is one tick: the command computed from it is published at
-once on ``effort_controller/commands``. ``~/target_pose`` goals are validated like tf2 and in
-force at once; the A1/A2 advice comes later from a worker process. Feedback (``~/current_pose``,
-``~/orientation_error``, ``~/position_error``) is decimated; ``/diagnostics`` at 1 Hz. The gains
-are live parameters, applied as one immutable Gains (``parameters.py``).
+once on ``effort_controller/commands``. What to do around the law (hold the first pose, a
+stream's velocity, the state watchdog, when feedback and diagnostics are due) is decided by the
+ROS-free ``supervision.Supervisor``; this node marshals. ``~/target_pose`` goals are validated
+like tf2 and in force at once; the A1/A2 advice comes later from a worker process. Feedback
+(``~/current_pose``, ``~/orientation_error``, ``~/position_error``) is decimated;
+``/diagnostics`` at 1 Hz. The gains are live parameters, applied as one immutable Gains
+(``parameters.py``).
 """
 import time
 from typing import Optional
@@ -18,7 +21,6 @@ from quat_jt_controller import quaternion as quat
 from quat_jt_controller import realtime
 from quat_jt_controller.control_law import Gains, GainsError, Task
 from quat_jt_controller.goal_check import GoalCheckWorker, ModelSpec
-from quat_jt_controller.goal_motion import GoalVelocityEstimator
 from quat_jt_controller.joints import stamp_problem, StateLayout
 from quat_jt_controller.loop_stats import TickStats
 from quat_jt_controller.model import ModelError, RobotModel
@@ -30,6 +32,7 @@ from quat_jt_controller.regulator import Goal, Regulator, TickOutput
 from quat_jt_controller.resources import bundled_urdf_hint
 from quat_jt_controller.shaping import describe as describe_shaping
 from quat_jt_controller.stall import StallDetector
+from quat_jt_controller.supervision import Supervisor
 from quat_jt_controller.throttle import cause, Throttle
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
@@ -39,8 +42,6 @@ from std_msgs.msg import Float64MultiArray
 NODE_NAME = 'quat_jt_controller'
 THROTTLE_S = 1.0  # rejected goals and states: at most one log line per second and cause
 GOAL_LOG_PERIOD_S = 0.2  # accepted distinct goals: one line each, at most 5 a second
-# /diagnostics wait for the next tick while states come at least this often (else: at once)
-DIAGNOSTICS_WAIT_NS = 20_000_000
 
 
 class QuatJtController(Node):
@@ -73,9 +74,8 @@ class QuatJtController(Node):
              lambda: f'extensions: {describe_shaping(self.regulator.shaping)}')))
         self.get_logger().info(f'extensions: {describe_shaping(self.shaping.current)}')
 
-        self._goal_source = 'none'  # 'none' | 'hold' (initial pose) | 'target_pose'
-        self._goal_motion = GoalVelocityEstimator(cfg.task is Task.POSE)
-        self._goal_velocity_until_ns = 0  # perf_counter ns; 0: not a stream (a fixed goal)
+        self.supervisor = Supervisor(self.regulator, cfg.state_timeout_s,
+                                     cfg.publish_rate_divider, cfg.task is Task.POSE)
         self._goal_warning = ''
         self._reject_log = Throttle(THROTTLE_S)  # per cause (the reason without numbers)
         self._goal_log = Throttle(GOAL_LOG_PERIOD_S)
@@ -85,11 +85,7 @@ class QuatJtController(Node):
         self._last: Optional[TickOutput] = None
         self._last_q: Optional[list[float]] = None
         self._last_qdot: Optional[list[float]] = None
-        self._last_state_ns = 0  # monotonic time of the last valid state
-        self._stopped = False  # commanding zeros after a state timeout
         self._window_start_ns = time.monotonic_ns()
-        self._decimation = 0
-        self._published_q: quat.Quaternion = (1.0, 0.0, 0.0, 0.0)
 
         self._cmd_msg = Float64MultiArray(data=[0.0] * model.n)
         self._pose_msg, self._eo_msg, self._ep_msg = (
@@ -107,7 +103,6 @@ class QuatJtController(Node):
         self.create_subscription(PoseStamped, '~/target_pose', self._on_target_pose, 10)
         self.create_timer(min(0.05, cfg.state_timeout_s / 4.0), self._on_watchdog)
         self.create_timer(0.05, self._on_goal_checks)
-        self._diagnostics_due = False
         self.create_timer(1.0, self._on_diagnostics_timer)
         self._prewarm, self._prewarm_timer, self._prewarm_delay_ns = None, None, 0
         lead_ns = int(cfg.prewarm_lead_s * 1e9)
@@ -161,11 +156,11 @@ class QuatJtController(Node):
             self.counters.stale_states += 1
             self._log_rejection('joint_states', problem)
             return
-        if self.regulator.goal is None:
-            self._hold(q)
-        elif self._goal_velocity_until_ns and t0 > self._goal_velocity_until_ns:
-            self._goal_velocity_until_ns = 0  # the stream stopped: a fixed goal again
-            self.regulator.set_goal_joint_velocity(None)
+        now_mono_ns = time.monotonic_ns()
+        held = self.supervisor.before_tick(q, now_mono_ns)
+        if held is not None:
+            self.get_logger().info(
+                f'first joint state: holding the measured pose, {held.describe()}')
         out = self.regulator.update(q, qdot)
         self._cmd_msg.data = out.tau_nm
         t1 = time.perf_counter_ns()
@@ -174,7 +169,6 @@ class QuatJtController(Node):
         self.stats.record(t0, t1, t2, (now_ns - stamp_ns) * 1e-3 if stamp_ns else float('nan'),
                           out.saturated)
         self._last, self._last_q, self._last_qdot = out, q, qdot
-        self._last_state_ns = time.monotonic_ns()
         if self._prewarm is not None:
             self._arm_prewarm(t0, t2)
         self.stall.feed(t0 * 1e-9, q, qdot, out)
@@ -183,15 +177,12 @@ class QuatJtController(Node):
             self.get_logger().error(
                 f'the law gave a non-finite torque at q = {q} (gains {self.gains}): published '
                 'zero torque', throttle_duration_sec=THROTTLE_S)
-        if self._stopped:
-            self._stopped = False
+        resumed, feedback, diagnostics_due = self.supervisor.after_tick(now_mono_ns)
+        if resumed:
             self.get_logger().info('joint_states are back: commanding torque again')
-        self._decimation += 1
-        if self._decimation >= self.config.publish_rate_divider:
-            self._decimation = 0
+        if feedback:
             self._publish_feedback(stamp, out)
-        if self._diagnostics_due:  # now: the command is out, the next state ~1 period away
-            self._diagnostics_due = False
+        if diagnostics_due:  # now: the command is out, the next state ~1 period away
             self._publish_diagnostics()
 
     def _arm_prewarm(self, arrival_ns: int, now_ns: int) -> None:
@@ -215,21 +206,12 @@ class QuatJtController(Node):
             self.regulator.update(self._last_q, self._last_qdot)
             self.counters.prewarm_passes += 1
 
-    def _hold(self, q: list[float]) -> None:
-        """Until the first goal: hold the pose measured on the first joint state."""
-        goal = self.regulator.hold(q)
-        self._goal_source = 'hold'
-        self.get_logger().info(f'first joint state: holding the measured pose, {goal.describe()}')
-
     def _publish_feedback(self, stamp, out: TickOutput) -> None:
         pose = self._pose_msg
         pose.header.stamp = stamp
         pose.pose.position.x, pose.pose.position.y, pose.pose.position.z = out.p_tip_base
-        # The same rotation as the last sample's hemisphere: no sign flip between samples.
-        q = quat.same_hemisphere(quat.from_rotation_matrix(out.R_tip_base), self._published_q)
-        self._published_q = q
-        o = pose.pose.orientation
-        o.x, o.y, o.z, o.w = quat.to_xyzw(q)
+        o = pose.pose.orientation  # in the last one's hemisphere: no sign flip between samples
+        o.x, o.y, o.z, o.w = quat.to_xyzw(self.supervisor.published_quaternion(out.R_tip_base))
         self._pose_pub.publish(pose)
         self._eo_msg.header.stamp = stamp
         self._eo_msg.vector.x, self._eo_msg.vector.y, self._eo_msg.vector.z = out.y_tilde[-3:]
@@ -242,11 +224,8 @@ class QuatJtController(Node):
 
     def _on_watchdog(self) -> None:
         """Zero the command once when valid joint states stop for longer than state_timeout."""
-        if self._stopped or not self._last_state_ns:
-            return
-        silent_s = (time.monotonic_ns() - self._last_state_ns) * 1e-9
-        if silent_s > self.config.state_timeout_s:
-            self._stopped = True
+        silent_s = self.supervisor.on_silence(time.monotonic_ns())
+        if silent_s is not None:
             self._cmd_msg.data = [0.0] * self.regulator.n
             self._cmd_pub.publish(self._cmd_msg)
             self.get_logger().error(
@@ -265,20 +244,12 @@ class QuatJtController(Node):
             self._log_rejection('target_pose', f'previous goal stays in force: {exc}')
             return
         self.counters.accepted_goals += 1
-        previous = self.regulator.goal
-        self.regulator.set_goal(goal)
-        self._goal_source = 'target_pose'
         stamp = msg.header.stamp
-        nu_desired = self._goal_motion.update(stamp.sec + 1e-9 * stamp.nanosec,
-                                              goal.q_desired_base, goal.p_desired_base)
-        if nu_desired is None:  # a fixed goal, or the first of a stream
-            self._goal_velocity_until_ns = 0
-            self.regulator.set_goal_joint_velocity(None)
-        else:  # a stream: its joint velocity comes from the worker, until the stream stops
-            self._goal_velocity_until_ns = (time.perf_counter_ns()
-                                            + int(self._goal_motion.hold_s() * 1e9))
-        if goal == previous:
+        taken = self.supervisor.on_goal(goal, stamp.sec + 1e-9 * stamp.nanosec,
+                                        time.monotonic_ns())
+        if not taken.new:
             return
+        nu_desired = taken.nu_desired_base
         self._goal_warning = ''
         shaping = self.regulator.shaping
         tracking = shaping.goal_velocity_gain > 0.0 and nu_desired is not None
@@ -317,8 +288,8 @@ class QuatJtController(Node):
             if q_star is not None:  # the goal-configuration term pulls towards it
                 self.regulator.set_goal_configuration(goal, q_star)
             qdot_star = checker.take_configuration_velocity(goal)
-            if qdot_star is not None and self._goal_velocity_until_ns:  # the stream goes on
-                self.regulator.set_goal_joint_velocity(qdot_star)
+            if qdot_star is not None:  # taken while the stream goes on
+                self.supervisor.on_goal_velocity(qdot_star)
             if goal is self.regulator.goal and verdict != self._goal_warning:
                 self._goal_warning = verdict
                 if verdict:
@@ -335,12 +306,7 @@ class QuatJtController(Node):
         this, within its answer window.) A timer could instead fire just as a state arrives.
         If the last second's are still owed (no valid tick since), they go out now.
         """
-        flowing = (self._last_state_ns
-                   and time.monotonic_ns() - self._last_state_ns < DIAGNOSTICS_WAIT_NS)
-        if flowing and not self._diagnostics_due:
-            self._diagnostics_due = True
-        else:
-            self._diagnostics_due = False
+        if self.supervisor.on_diagnostics_timer(time.monotonic_ns()):
             self._publish_diagnostics()
 
     def _publish_diagnostics(self) -> None:
@@ -350,10 +316,11 @@ class QuatJtController(Node):
         self._window_start_ns = now
         statuses = (
             ('control loop', diagnostics.loop_status(
-                figures, self._last_state_ns == 0, self._stopped, self.counters,
+                figures, self.supervisor.last_state_ns == 0, self.supervisor.stopped,
+                self.counters,
                 self._graph_warnings())),
             ('goal', diagnostics.goal_status(
-                self._goal_source, self.regulator.goal, self._goal_warning, self._last,
+                self.supervisor.goal_source, self.regulator.goal, self._goal_warning, self._last,
                 self._last_qdot, self.config.task is Task.POSE, self.counters,
                 self._goal_checker.unavailable_reason, self._goal_checker.ready)),
             ('stall', self.stall.status()),

@@ -18,10 +18,11 @@ except ModuleNotFoundError as exc:  # e.g. a colcon workspace whose rosdep skipp
         'package on PyPI is another project) or ros-jazzy-pinocchio from the ROS apt '
         'repository') from exc
 
+from quat_jt_controller.errors import QuatJtError
 from quat_jt_controller.joints import movable_joints, select_joints
 
 
-class ModelError(ValueError):
+class ModelError(QuatJtError):
     """The URDF, or the links and joints asked of it, cannot make a controllable model."""
 
 

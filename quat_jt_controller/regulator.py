@@ -118,6 +118,14 @@ class TickOutput(NamedTuple):
         return sqrt(p[0] * p[0] + p[1] * p[1] + p[2] * p[2])
 
 
+class Law(NamedTuple):
+    """The law in force, swapped whole: the gains, the extensions and their limit band."""
+
+    gains: cl.Gains
+    shaping: sh.Shaping
+    band: Optional[sh.LimitBand]
+
+
 class Target(NamedTuple):
     """What the regulator drives to, swapped whole: the goal and its q* (None until known)."""
 
@@ -164,8 +172,7 @@ class Regulator:
                            for v in model.velocity_limits]
         self._check_gains(gains)
         shaping = sh.Shaping() if shaping is None else shaping
-        self._law: tuple[cl.Gains, sh.Shaping, Optional[sh.LimitBand]] = (
-            gains, shaping, self._band(shaping))
+        self._law = Law(gains, shaping, self._band(shaping))
         self._target = Target(goal)
         # qdot*_d of a streamed goal (rad/s), or None: independent of the goal, which a stream
         # replaces at every sample while its velocity stays
@@ -175,17 +182,17 @@ class Regulator:
     @property
     def gains(self) -> cl.Gains:
         """Return the gains in force (immutable)."""
-        return self._law[0]
+        return self._law.gains
 
     @property
     def shaping(self) -> sh.Shaping:
         """Return the extensions in force (immutable)."""
-        return self._law[1]
+        return self._law.shaping
 
     @property
     def limit_band(self) -> Optional[sh.LimitBand]:
         """Return the joint-limit potential in force, or None if it is off."""
-        return self._law[2]
+        return self._law.band
 
     def _check_gains(self, gains: cl.Gains) -> None:
         if len(gains.kp) != self.task.dim or len(gains.lam) != self.task.dim:
@@ -201,8 +208,7 @@ class Regulator:
     def set_gains(self, gains: cl.Gains) -> None:
         """Swap in new gains, whole; raise GainsError if their sizes do not fit."""
         self._check_gains(gains)
-        _, shaping, band = self._law
-        self._law = (gains, shaping, band)
+        self._law = self._law._replace(gains=gains)
 
     def check_shaping(self, shaping: sh.Shaping) -> sh.Shaping:
         """Return ``shaping`` if it fits this robot; raise ShapingError saying why not."""
@@ -212,7 +218,7 @@ class Regulator:
     def set_shaping(self, shaping: sh.Shaping) -> None:
         """Swap in new extensions (and their limit band), whole; raise ShapingError if unfit."""
         band = self._band(shaping)
-        self._law = (self._law[0], shaping, band)
+        self._law = self._law._replace(shaping=shaping, band=band)
 
     @property
     def goal(self) -> Optional[Goal]:

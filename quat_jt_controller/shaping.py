@@ -37,6 +37,8 @@ from functools import cached_property
 from math import isfinite, pi, sqrt, tanh
 from typing import Optional, Sequence
 
+from quat_jt_controller.errors import QuatJtError
+
 # A joint whose URDF range is at least this long turns freely: it gets no limit term.
 FULL_TURN_RAD = 2.0 * pi - 1e-6
 # t_p = tanh(tau_p / (TORQUE_BAND_FRACTION f)): the breakaway reaches 76% of f when the
@@ -48,7 +50,7 @@ LARGE_ERROR_DELTA = 0.1
 DEFAULT_SPEED_CAP_RAD_S = 2.0 * pi
 
 
-class ShapingError(ValueError):
+class ShapingError(QuatJtError):
     """An invalid extension parameter; the message names the parameter and the value."""
 
 

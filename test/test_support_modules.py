@@ -227,3 +227,16 @@ def test_goal_check_worker_says_when_it_is_ready():
         assert worker.ready
     finally:
         worker.close()
+
+
+def test_every_unusable_value_error_has_one_base_class():
+    """A caller can catch them all at once (QuatJtError, a ValueError) or each by its kind."""
+    from quat_jt_controller.control_law import GainsError
+    from quat_jt_controller.errors import QuatJtError
+    from quat_jt_controller.model import ModelError
+    from quat_jt_controller.shaping import ShapingError
+    for kind in (GainsError, ModelError, ShapingError, SimulatorError):
+        assert issubclass(kind, QuatJtError) and issubclass(kind, ValueError), kind
+    with pytest.raises(QuatJtError, match='goal_velocity_gain'):
+        from quat_jt_controller.shaping import Shaping
+        Shaping.create(3, goal_velocity_gain=2.0)

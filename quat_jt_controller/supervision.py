@@ -1,0 +1,133 @@
+"""
+What the controller decides around the law, ROS-free: the node only marshals.
+
+:class:`Supervisor` owns the decisions the controller node used to make inline, so that unit
+tests drive them with plain numbers:
+
+- until the first goal, hold the pose of the first valid joint state;
+- a stream of stamped goals: its velocity (``goal_motion``), which stops when the stream does;
+- a goal equal to the one in force is not a new goal (no log, no new check);
+- the state watchdog: after ``state_timeout`` without a valid state, zero the command once;
+- feedback every ``publish_rate_divider``-th tick, its quaternion kept in one hemisphere;
+- ``/diagnostics``: right after the next command while states flow, else at once.
+
+Times are integers of nanoseconds on one monotonic clock, given by the caller.
+"""
+from dataclasses import dataclass
+from typing import Optional, Sequence
+
+from quat_jt_controller import quaternion as quat
+from quat_jt_controller.goal_motion import GoalVelocityEstimator
+from quat_jt_controller.regulator import Goal, Regulator
+
+# /diagnostics wait for the next tick while states come at least this often (else: at once)
+DIAGNOSTICS_WAIT_NS = 20_000_000
+
+
+@dataclass
+class GoalTaken:
+    """What :meth:`Supervisor.on_goal` did with a goal."""
+
+    new: bool  # differs from the goal it replaced: log it, check it
+    nu_desired_base: Optional[tuple[float, ...]]  # the stream's task velocity, or None
+
+
+class Supervisor:
+    """The controller's decisions around :class:`Regulator`; one per node."""
+
+    def __init__(self, regulator: Regulator, state_timeout_s: float,
+                 publish_rate_divider: int, with_position: bool) -> None:
+        self.regulator = regulator
+        self.state_timeout_ns = int(state_timeout_s * 1e9)
+        self.publish_rate_divider = publish_rate_divider
+        self.goal_source = 'none'  # 'none' | 'hold' (initial pose) | 'target_pose'
+        self.stopped = False  # commanding zeros after a state timeout
+        self.last_state_ns = 0  # the last valid state; 0: none yet
+        self._motion = GoalVelocityEstimator(with_position)
+        self._goal_velocity_until_ns = 0  # 0: not a stream (a fixed goal)
+        self._decimation = 0
+        self._published_q: quat.Quaternion = (1.0, 0.0, 0.0, 0.0)
+        self.diagnostics_due = False
+
+    # -- states ---------------------------------------------------------------------------
+    def before_tick(self, q: Sequence[float], now_ns: int) -> Optional[Goal]:
+        """
+        Prepare the tick of a valid state at ``q``: return the held pose on the first state.
+
+        Until a goal arrives the regulator holds the pose measured here (q* = q). A stream
+        whose last goal is older than its hold becomes a fixed goal again.
+        """
+        if self.regulator.goal is None:
+            self.goal_source = 'hold'
+            return self.regulator.hold(q)
+        if self._goal_velocity_until_ns and now_ns > self._goal_velocity_until_ns:
+            self._goal_velocity_until_ns = 0  # the stream stopped: a fixed goal again
+            self.regulator.set_goal_joint_velocity(None)
+        return None
+
+    def after_tick(self, now_ns: int) -> tuple[bool, bool, bool]:
+        """
+        Close a tick: return (states are back after a stop, feedback due, diagnostics due).
+
+        Feedback is due every ``publish_rate_divider``-th tick; owed diagnostics now, with the
+        command out and the next state about a period away.
+        """
+        self.last_state_ns = now_ns
+        resumed, self.stopped = self.stopped, False
+        self._decimation += 1
+        feedback = self._decimation >= self.publish_rate_divider
+        if feedback:
+            self._decimation = 0
+        diagnostics, self.diagnostics_due = self.diagnostics_due, False
+        return resumed, feedback, diagnostics
+
+    def on_silence(self, now_ns: int) -> Optional[float]:
+        """Return the seconds without a valid state once they pass the timeout (once), or None."""
+        if self.stopped or not self.last_state_ns:
+            return None
+        silent_ns = now_ns - self.last_state_ns
+        if silent_ns <= self.state_timeout_ns:
+            return None
+        self.stopped = True
+        return silent_ns * 1e-9
+
+    def on_diagnostics_timer(self, now_ns: int) -> bool:
+        """At 1 Hz: return True to publish now; else they go out after the next command."""
+        flowing = self.last_state_ns and now_ns - self.last_state_ns < DIAGNOSTICS_WAIT_NS
+        if flowing and not self.diagnostics_due:
+            self.diagnostics_due = True
+            return False
+        self.diagnostics_due = False
+        return True
+
+    def published_quaternion(self, R_tip_base: Sequence[Sequence[float]]) -> quat.Quaternion:
+        """Return the measured orientation in the hemisphere of the last one published."""
+        q = quat.same_hemisphere(quat.from_rotation_matrix(R_tip_base), self._published_q)
+        self._published_q = q
+        return q
+
+    # -- goals ----------------------------------------------------------------------------
+    def on_goal(self, goal: Goal, stamp_s: float, now_ns: int) -> GoalTaken:
+        """Put a valid goal in force; estimate the stream's velocity from its stamp."""
+        previous = self.regulator.goal
+        self.regulator.set_goal(goal)
+        self.goal_source = 'target_pose'
+        nu_desired = self._motion.update(stamp_s, goal.q_desired_base, goal.p_desired_base)
+        if nu_desired is None:  # a fixed goal, or the first of a stream
+            self._goal_velocity_until_ns = 0
+            self.regulator.set_goal_joint_velocity(None)
+        else:  # a stream: its joint velocity comes from the worker, until the stream stops
+            self._goal_velocity_until_ns = now_ns + int(self._motion.hold_s() * 1e9)
+        return GoalTaken(goal != previous, nu_desired)
+
+    @property
+    def streaming(self) -> bool:
+        """Tell whether a stream of goals is in force (its velocity may be given)."""
+        return self._goal_velocity_until_ns != 0
+
+    def on_goal_velocity(self, qdot_desired: Sequence[float]) -> bool:
+        """Give the stream's joint velocity (from the worker) if the stream goes on."""
+        if not self.streaming:
+            return False
+        self.regulator.set_goal_joint_velocity(qdot_desired)
+        return True

@@ -1,0 +1,84 @@
+"""The controller's decisions around the law (quat_jt_controller.supervision), ROS-free."""
+import math
+
+import pytest
+from quat_jt_controller import control_law as cl
+from quat_jt_controller import paper
+from quat_jt_controller import quaternion as quat
+from quat_jt_controller.regulator import Goal, Regulator
+from quat_jt_controller.supervision import DIAGNOSTICS_WAIT_NS, Supervisor
+from robots import wrist_model
+
+pytestmark = pytest.mark.unit
+
+MS = 1_000_000  # ns
+
+
+def supervisor(divider: int = 3) -> Supervisor:
+    gains = cl.Gains.create('tanh', paper.KP, paper.KV, paper.LAMBDA, cl.Task.ORIENTATION, 3)
+    return Supervisor(Regulator(wrist_model(), cl.Task.ORIENTATION, gains), 0.5, divider, False)
+
+
+def turned(angle: float) -> Goal:
+    s = math.sin(0.5 * angle)
+    return Goal(quat.multiply((math.cos(0.5 * angle), 0.0, 0.0, s), paper.Q_DESIRED))
+
+
+def test_the_first_state_holds_its_pose_until_a_goal():
+    sup = supervisor()
+    held = sup.before_tick([0.1, 0.5, 0.2], 1 * MS)
+    assert held is not None and sup.goal_source == 'hold'
+    assert sup.regulator.goal_configuration == (0.1, 0.5, 0.2)
+    assert sup.before_tick([0.3, 0.5, 0.2], 2 * MS) is None  # held once
+    assert sup.on_goal(Goal(paper.Q_DESIRED), 0.0, 3 * MS).new
+    assert sup.goal_source == 'target_pose'
+    assert not sup.on_goal(Goal(paper.Q_DESIRED), 0.0, 4 * MS).new  # the same goal again
+
+
+def test_the_watchdog_trips_once_and_states_coming_back_say_so():
+    sup = supervisor()
+    assert sup.on_silence(10_000 * MS) is None  # no state yet: nothing to stop
+    sup.before_tick([0.0, 0.5, 0.0], 0)
+    sup.after_tick(100 * MS)
+    assert sup.on_silence(500 * MS) is None  # 0.4 s: within state_timeout
+    assert sup.on_silence(700 * MS) == pytest.approx(0.6)
+    assert sup.stopped and sup.on_silence(800 * MS) is None  # once
+    resumed, _, _ = sup.after_tick(900 * MS)
+    assert resumed and not sup.stopped
+
+
+def test_feedback_every_nth_tick_and_diagnostics_after_the_next_command():
+    sup = supervisor(divider=3)
+    sup.before_tick([0.0, 0.5, 0.0], 0)
+    feedback = [sup.after_tick(k * MS)[1] for k in range(1, 7)]
+    assert feedback == [False, False, True, False, False, True]
+    assert not sup.on_diagnostics_timer(6 * MS + DIAGNOSTICS_WAIT_NS // 2)  # states flow
+    assert sup.after_tick(7 * MS)[2]  # owed: published after this command
+    assert not sup.after_tick(8 * MS)[2]
+    assert sup.on_diagnostics_timer(8 * MS + 2 * DIAGNOSTICS_WAIT_NS)  # states stopped: now
+
+
+def test_a_stamped_stream_has_a_velocity_until_it_stops():
+    sup = supervisor()
+    sup.before_tick([0.0, 0.5, 0.0], 0)
+    taken = [sup.on_goal(turned(0.01 * k), 100.0 + 0.01 * k, k * 10 * MS) for k in range(5)]
+    assert taken[0].nu_desired_base is None  # the first of a stream is a fixed goal
+    omega = taken[-1].nu_desired_base
+    assert omega[2] == pytest.approx(1.0) and sup.streaming  # 0.01 rad per 10 ms about z
+    assert sup.on_goal_velocity([0.0, 0.0, 1.0])
+    assert sup.regulator.goal_joint_velocity == (0.0, 0.0, 1.0)
+    assert sup.before_tick([0.0, 0.5, 0.0], 60 * MS) is None  # within the hold
+    assert sup.regulator.goal_joint_velocity is not None
+    sup.before_tick([0.0, 0.5, 0.0], 200 * MS)  # no goal for longer than the hold
+    assert sup.regulator.goal_joint_velocity is None and not sup.streaming
+    assert not sup.on_goal_velocity([0.0, 0.0, 1.0])  # a late answer is not taken
+    sup.on_goal(turned(1.0), 0.0, 300 * MS)  # not stamped: fixed
+    assert not sup.streaming
+
+
+def test_the_published_quaternion_keeps_its_hemisphere():
+    sup = supervisor()
+    first = sup.published_quaternion(quat.to_rotation_matrix(paper.Q_DESIRED))
+    flipped = tuple(-c for c in paper.Q_DESIRED)  # the same rotation, the other sign
+    again = sup.published_quaternion(quat.to_rotation_matrix(flipped))
+    assert sum(a * b for a, b in zip(first, again)) > 0.0
