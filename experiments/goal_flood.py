@@ -29,10 +29,8 @@ paper's (``config/paper_wrist_controller.yaml``).
     python -m experiments.goal_flood [--rate 1000] [--duration 3] [--invalid]
 """
 import argparse
-import json
 import math
 from pathlib import Path
-import random
 import sys
 import time
 from typing import Optional
@@ -53,16 +51,11 @@ FIRST_ANGLE_RAD = 0.8  # the flood's goals are Rz(0.8 + 1e-4 k)
 def flood(rate_hz: float, duration_s: float, out: Path, invalid: bool = False,
           warmup_s: float = 2.0, config: str = local_ros.PAPER_CONTROLLER_CONFIG) -> dict:
     """Run the flood; return the figures (per-window rates, largest gap, counts)."""
-    out.mkdir(parents=True, exist_ok=True)
-    domain_id = random.randint(1, 100)
-    env = local_ros.isolated_env(out, domain_id)
-    stats_file = out / 'sim_stats.json'
-    stats_file.unlink(missing_ok=True)
-    sim, ctrl = local_ros.spawn_wrist_pair(
-        env, out, controller_config=config,
-        sim_params={'stats_file': str(stats_file),
-                    'stats_window_steps': int(duration_s * 1000)})
-    probe = ProbeNode('goal_flood', domain_id)
+    pair = local_ros.spawn_recorded_pair(
+        out, sim_params={'stats_window_steps': int(duration_s * 1000)},
+        controller_config=config)
+    sim, ctrl = pair.sim, pair.controller
+    probe = ProbeNode('goal_flood', pair.domain_id)
     arrivals: list[float] = []
     clock = time.perf_counter
     probe.node.create_subscription(Float64MultiArray, '/effort_controller/commands',
@@ -114,14 +107,12 @@ def flood(rate_hz: float, duration_s: float, out: Path, invalid: bool = False,
             probe.executor.spin_once(timeout_sec=min(0.01, max(0.0, next_goal - clock())))
         spin_until(lambda: clock() > t_end + 0.05, 1.0, 'collecting the last commands')
     finally:
-        for proc in (sim, ctrl):
-            local_ros.stop_node(proc)
+        sim_stats = pair.stop()
         probe.close()
     during = [t for t in arrivals if t0 <= t < t_end]
     windows = [sum(1 for t in during if t0 + k * WINDOW_S <= t < t0 + (k + 1) * WINDOW_S)
                / WINDOW_S for k in range(int(duration_s / WINDOW_S))]
     gaps_ms = [1e3 * (b - a) for a, b in zip(during, during[1:])]
-    sim_stats = json.loads(stats_file.read_text()) if stats_file.exists() else {}
     return {'goals_sent': sent, 'goal_rate_hz': sent / duration_s,
             'sim_fresh_rate_hz_min': sim_stats.get('fresh_rate_hz_min', math.nan),
             'sim_fresh_gap_ms_max': sim_stats.get('fresh_gap_ms_max', math.nan),

@@ -28,7 +28,6 @@ import argparse
 import json
 import math
 from pathlib import Path
-import random
 import statistics
 import sys
 import time
@@ -67,15 +66,12 @@ class StreamRun:
 
     def __init__(self, out: Path, config: str, steps: int,
                  overrides: Optional[dict] = None) -> None:
-        out.mkdir(parents=True, exist_ok=True)
         self.out = out
-        self.stats_file = out / 'sim_stats.json'
-        domain_id = random.randint(1, 100)
-        env = local_ros.isolated_env(out, domain_id)
-        self.procs = local_ros.spawn_wrist_pair(
-            env, out, controller_config=config, controller_params=overrides,
-            sim_params={'stats_file': str(self.stats_file), 'stats_window_steps': steps})
-        self.probe = ProbeNode('goal_stream', domain_id)
+        self.pair = local_ros.spawn_recorded_pair(
+            out, sim_params={'stats_window_steps': steps}, controller_config=config,
+            controller_params=overrides)
+        self.procs = (self.pair.sim, self.pair.controller)
+        self.probe = ProbeNode('goal_stream', self.pair.domain_id)
         self.states: list[tuple[float, bytes]] = []  # arrival, serialized JointState
         clock = self.clock = time.time  # the clock the simulator stamps its states with
         node = self.probe.node
@@ -170,13 +166,9 @@ class StreamRun:
 
     def close(self) -> dict:
         """Stop the nodes; return the simulator's statistics (its last ``steps`` steps)."""
-        for proc in self.procs:
-            local_ros.stop_node(proc)
+        stats = self.pair.stop()
         self.probe.close()
-        try:
-            return json.loads(self.stats_file.read_text())
-        except (OSError, ValueError):
-            return {}
+        return stats
 
 
 def measure(rate_hz: float, duration_s: float, out: Path, config: str,

@@ -5,6 +5,7 @@ Used by the multi-process tests, the paper experiment and the benchmark, standin
 ``ros2 launch`` (launch/launch_ros are not on PyPI). ROS-free: it only builds environments and
 starts processes; the nodes themselves talk over real DDS.
 """
+from dataclasses import dataclass
 import json
 import os
 from pathlib import Path
@@ -139,6 +140,45 @@ def interrupt_group(proc: subprocess.Popen) -> None:
         os.killpg(proc.pid, signal.SIGINT)  # spawn_node made it a group leader
     except ProcessLookupError:
         pass
+
+
+@dataclass
+class RecordedPair:
+    """A wrist pair on a private domain whose simulator writes its statistics at shutdown."""
+
+    domain_id: int
+    env: dict[str, str]
+    sim: subprocess.Popen
+    controller: subprocess.Popen
+    stats_file: Path
+
+    def stop(self) -> dict:
+        """Ctrl-C both (the simulator first); return its statistics ({} if none came)."""
+        for proc in (self.sim, self.controller):
+            stop_node(proc)
+        try:
+            return json.loads(self.stats_file.read_text())
+        except (OSError, ValueError):
+            return {}
+
+
+def spawn_recorded_pair(work_dir: Path, sim_params: Optional[Mapping[str, Any]] = None,
+                        **pair_options: Any) -> RecordedPair:
+    """
+    :func:`spawn_wrist_pair` in ``work_dir`` on a new private domain, with ``stats_file`` set.
+
+    ``pair_options`` go to :func:`spawn_wrist_pair` (controller params and config, composed).
+    """
+    work_dir = Path(work_dir)
+    work_dir.mkdir(parents=True, exist_ok=True)
+    domain_id = random.randint(1, 100)
+    env = isolated_env(work_dir, domain_id)
+    stats_file = work_dir / 'sim_stats.json'
+    stats_file.unlink(missing_ok=True)
+    sim, controller = spawn_wrist_pair(
+        env, work_dir, sim_params={'stats_file': str(stats_file), **(sim_params or {})},
+        **pair_options)
+    return RecordedPair(domain_id, env, sim, controller, stats_file)
 
 
 def stop_node(proc: subprocess.Popen, timeout: float = 10.0) -> int:

@@ -25,10 +25,8 @@ longer depends on how busy the machine is. Each run reports the simulator's timi
 import argparse
 import csv
 from dataclasses import dataclass
-import json
 import math
 from pathlib import Path
-import random
 import sys
 import time
 from typing import Optional
@@ -130,18 +128,13 @@ def run_once(potential: str, duration_s: float, out_dir: Path, model: RobotModel
     from experiments.mcap_log import McapLog
 
     work = out_dir / potential
-    work.mkdir(parents=True, exist_ok=True)
-    domain_id = random.randint(1, 100)
-    env = local_ros.isolated_env(work, domain_id)
-    stats_file = work / 'sim_stats.json'
-    stats_file.unlink(missing_ok=True)
-    sim, ctrl = local_ros.spawn_wrist_pair(
-        env, work, sim_params={'stats_file': str(stats_file), 'publish_clock': lockstep,
-                               'max_real_time_factor': max_rtf},
+    pair = local_ros.spawn_recorded_pair(
+        work, sim_params={'publish_clock': lockstep, 'max_real_time_factor': max_rtf},
         controller_params={'potential': 'tanh' if potential == EXTENDED else potential,
                            'use_sim_time': lockstep},
         controller_config=(local_ros.PRODUCT_CONTROLLER_CONFIG if potential == EXTENDED
                            else local_ros.PAPER_CONTROLLER_CONFIG), composed=composed)
+    sim, ctrl, domain_id = pair.sim, pair.controller, pair.domain_id
     probe = ProbeNode('paper_experiment_recorder', domain_id)
     node, executor = probe.node, probe.executor
     mcap = McapLog(work / f'{potential}.mcap')
@@ -251,8 +244,7 @@ def run_once(potential: str, duration_s: float, out_dir: Path, model: RobotModel
             report_at += 1.0
         recording_wall_s = time.monotonic() - t_recording
     finally:
-        for proc in (sim, ctrl):  # the sim first: its statistics end with the controller alive
-            local_ros.stop_node(proc)
+        sim_stats = pair.stop()  # the sim first: its statistics end with the controller alive
         probe.close()
         try:
             # The MCAP is written after the run, in time order, so recording costs little.
@@ -262,7 +254,6 @@ def run_once(potential: str, duration_s: float, out_dir: Path, model: RobotModel
             _write_replay(mcap, model, records['states'])
         finally:
             mcap.close()
-    sim_stats = json.loads(stats_file.read_text()) if stats_file.exists() else {}
 
     names = list(model.joint_names)
     states = [deserialize_message(d, JointState) for _, d in records['states']]
