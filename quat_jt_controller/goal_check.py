@@ -253,8 +253,7 @@ class GoalCheckWorker:
         self._spec = spec
         self._clock = clock
         self._done: queue.SimpleQueue = queue.SimpleQueue()
-        self._keys: dict[int, object] = {}
-        self._requests: dict[int, tuple[object, dict]] = {}
+        self._requests: dict[int, tuple[object, dict]] = {}  # id -> (key, request) sent
         self._configurations: dict[object, Optional[list[float]]] = {}
         self._velocities: dict[object, list[float]] = {}
         self._next_id = 0
@@ -348,7 +347,6 @@ class GoalCheckWorker:
         key, request = self._next
         self._next = None
         self._next_id += 1
-        self._keys[self._next_id] = key
         self._requests[self._next_id] = (key, request)
         self._running = self._next_id
         self._send({'id': self._next_id, **request})
@@ -370,8 +368,7 @@ class GoalCheckWorker:
             if reply.get('ready'):
                 self._ready = True
                 continue
-            key = self._keys.pop(reply.get('id'), None)
-            self._requests.pop(reply.get('id'), None)
+            key = self._requests.pop(reply.get('id'), (None, None))[0]
             if reply.get('id') == self._running:
                 self._running = None
             self._deaths_in_a_row = 0
@@ -396,7 +393,6 @@ class GoalCheckWorker:
         code = self._proc.poll()  # no wait on the control thread: its output has closed
         if self._running is not None and self._next is None:  # re-check it after the restart
             self._next = self._requests.get(self._running)
-        self._keys.clear()
         self._requests.clear()
         self._running = None
         backoff_s = RESTART_BACKOFF_S[min(self._deaths_in_a_row, len(RESTART_BACKOFF_S) - 1)]

@@ -24,7 +24,7 @@ from quat_jt_controller.regulator import Goal, Regulator
 DIAGNOSTICS_WAIT_NS = 20_000_000
 
 
-@dataclass
+@dataclass(frozen=True)
 class GoalTaken:
     """What :meth:`Supervisor.on_goal` did with a goal."""
 
