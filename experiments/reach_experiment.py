@@ -18,7 +18,16 @@ their likely cause (``stall.StallDetector.diagnose`` at the final state).
 
     python -m experiments.reach_experiment [--robot wrist xarm6]
         [--potential tanh quadratic] [--cases N] [--seed S] [--dds K]
-        [--without configuration|friction|limits]
+        [--without configuration|friction|limits] [--fraction F] [--duration T]
+        [--sim-coulomb-scale S | --sim-coulomb-effort-fraction X] [--estimate-of-sim K]
+
+The plant is never the model: ``--sim-coulomb-scale`` multiplies the simulator's Coulomb
+friction of ``config/*_sim.yaml`` (the controller's estimate unchanged),
+``--sim-coulomb-effort-fraction`` sets it to a fraction of each URDF effort limit, and
+``--estimate-of-sim`` sets the controller's estimate to that multiple of the simulated
+friction. The sign changes of each joint's control torque without gravity, ``tau - g(q)``, are
+counted over the case's last second: more than one on a joint and the case ends in a limit
+cycle.
 
 ``--dds K`` also runs the first K wrist cases over DDS with the real nodes (``local_ros``).
 """
@@ -46,8 +55,11 @@ from quat_jt_controller.reference_sim import ClosedLoop, run_sampled
 from quat_jt_controller.regulator import Regulator
 from quat_jt_controller.resources import config_parameters, default_urdf_xml
 from quat_jt_controller.stall import StallDetector
+import yaml
 
 TOUCH_RAD = 1e-3  # closer than this to a URDF limit: the stop was touched
+LIMIT_CYCLE_FLIPS_PER_S = 1.0  # more sign changes of tau - g(q) in the last second: a cycle
+FLIP_FLOOR = 1e-3  # of the effort limit: smaller torques have no sign (numerical dither)
 FINAL_WINDOW_S = 0.1
 Q_STAR_AFTER_S = 0.1  # the goal-check worker's answer arrives after the goal (10-50 ms)
 
@@ -82,9 +94,10 @@ def robot_urdf(robot: Robot) -> str:
     return (Path(pybullet_data.getDataPath()) / 'xarm' / 'xarm6_robot.urdf').read_text()
 
 
-def load_controller(robot: Robot, potential: Optional[str] = None):
-    """Return ``(model, gains, shaping)`` of the robot's controller config."""
-    p = config_parameters(robot.controller_config)
+def load_controller(robot: Robot, potential: Optional[str] = None,
+                    overrides: Optional[dict] = None):
+    """Return ``(model, gains, shaping)`` of the robot's controller config (+ ``overrides``)."""
+    p = dict(config_parameters(robot.controller_config), **(overrides or {}))
     model = RobotModel(robot_urdf(robot), p['base_link'], p['tip_link'], p['joints'])
     gains = cl.Gains.create(potential or p['potential'], p['kp'], p['kv'], p['lambda'],
                             cl.Task(p['task']), model.n, p.get('gravity_compensation', True))
@@ -139,6 +152,7 @@ class Outcome:
     settled_s: float
     max_speed_rad_s: float
     saturated_ticks: int
+    flips_per_s: float  # the most sign changes of tau_j - g_j(q) in the last second
     q_start: np.ndarray
     q_goal: np.ndarray
     q_final: np.ndarray
@@ -174,12 +188,36 @@ def run_case(robot: Robot, model: RobotModel, gains: cl.Gains, shaping: sh.Shapi
                and position < robot.position_tol_m)
     speed = float(np.abs(np.diff(run.q_rad, axis=0)).max() / (run.t_s[1] - run.t_s[0]))
     settle_tol = (robot.position_tol_m if math.isfinite(robot.position_tol_m) else math.inf)
-    outcome = Outcome(index, reached, gap < TOUCH_RAD, position, orientation,
-                      run.settled_at_s(settle_tol, robot.orientation_tol), speed,
-                      run.saturated_ticks, q0, qg, run.q_rad[-1].copy())
+    settled_s = run.settled_at_s(settle_tol, robot.orientation_tol)
+    outcome = Outcome(index, reached, gap < TOUCH_RAD, position, orientation, settled_s, speed,
+                      run.saturated_ticks, torque_flips_per_s(model, run),
+                      q0, qg, run.q_rad[-1].copy())
     if not reached:
         outcome.cause = classify(model, loop, shaping, q_star, run)
+    if outcome.flips_per_s > LIMIT_CYCLE_FLIPS_PER_S:
+        outcome.cause = '; '.join(c for c in (outcome.cause, (
+            f'LIMIT CYCLE: {outcome.flips_per_s:.0f} torque sign changes in the last second'))
+            if c)
     return outcome
+
+
+def torque_flips_per_s(model: RobotModel, run) -> float:
+    """
+    Return the most sign changes of a joint's ``tau - g(q)`` in the case's last second.
+
+    More than ``LIMIT_CYCLE_FLIPS_PER_S`` there: the case ends in a limit cycle. Torques below
+    ``FLIP_FLOOR`` of the effort limit carry no sign (numerical dither at rest).
+    """
+    k0 = int(np.searchsorted(run.t_s, float(run.t_s[-1]) - 1.0))
+    q, tau = run.q_rad[k0:], run.tau_nm[k0:]
+    g = np.array([model.gravity(qi.tolist()) for qi in q])
+    floor = FLIP_FLOOR * np.array([v if math.isfinite(v) else 1.0 for v in model.effort_limits])
+    most = 0
+    for j in range(model.n):
+        signs = np.sign(tau[:, j] - g[:, j])
+        signs = signs[np.abs(tau[:, j] - g[:, j]) > floor[j]]
+        most = max(most, int(np.count_nonzero(np.diff(signs))))
+    return float(most)
 
 
 def classify(model: RobotModel, loop: ClosedLoop, shaping: sh.Shaping, q_star,
@@ -219,12 +257,17 @@ def report(robot: Robot, potential: str, outcomes: list, elapsed_s: float) -> st
                      f'90% {np.percentile(settled, 90):.2f} s, max {settled.max():.2f} s; '
                      f'fastest joint speed up to '
                      f'{max(o.max_speed_rad_s for o in outcomes):.2f} rad/s')
+    flips = np.array([o.flips_per_s for o in outcomes])
+    cycles = int(np.count_nonzero(flips > LIMIT_CYCLE_FLIPS_PER_S))
+    lines.append(f'  torque sign changes in the last second (tau - g, worst joint): median '
+                 f'{np.median(flips):.2f}, max {flips.max():.2f}; limit cycles (> '
+                 f'{LIMIT_CYCLE_FLIPS_PER_S:g}) in {cycles} cases')
     lines.append(f'  final ||e||: median {np.median(ori):.2e}, max {ori.max():.2e}'
                  + (f'; final ||p_d - p||: median {np.median(pos) * 1e3:.3f} mm, max '
                     f'{pos.max() * 1e3:.3f} mm' if robot.task is cl.Task.POSE else '')
                  + f' ({elapsed_s:.0f} s)')
     for o in outcomes:
-        if not o.reached or o.touched:
+        if not o.reached or o.touched or o.flips_per_s > LIMIT_CYCLE_FLIPS_PER_S:
             lines.append(
                 f'  case {o.index}: start {np.round(o.q_start, 2).tolist()} goal '
                 f'{np.round(o.q_goal, 2).tolist()} end {np.round(o.q_final, 2).tolist()}: '
@@ -243,13 +286,51 @@ ABLATIONS = {  # --without: turn one extension off to see what it does
 }
 
 
+@dataclass(frozen=True)
+class Plant:
+    """How the simulated plant and the controller's friction estimate differ from the configs."""
+
+    coulomb_scale: float = 1.0  # x the simulator config's Coulomb friction
+    coulomb_effort_fraction: Optional[float] = None  # or this fraction of each effort limit
+    estimate_of_sim: Optional[float] = None  # the estimate = this x the simulated friction
+
+    def describe(self) -> str:
+        """Return the plant's difference from the configs, for the report ('' if none)."""
+        parts = []
+        if self.coulomb_effort_fraction is not None:
+            parts.append(f'simulated Coulomb friction {self.coulomb_effort_fraction:g} x the '
+                         'effort limits')
+        elif self.coulomb_scale != 1.0:
+            parts.append(f'simulated Coulomb friction {self.coulomb_scale:g} x the configured one')
+        if self.estimate_of_sim is not None:
+            parts.append(f'estimate {self.estimate_of_sim:g} x the simulated friction')
+        return ', '.join(parts)
+
+    def apply(self, model: RobotModel, sim_params: dict, shaping: sh.Shaping):
+        """Return ``(sim_params, shaping)`` for this plant."""
+        coulomb = [self.coulomb_scale * f for f in sim_params['coulomb_friction']]
+        if self.coulomb_effort_fraction is not None:
+            coulomb = [self.coulomb_effort_fraction * e for e in model.effort_limits]
+        sim_params = dict(sim_params, coulomb_friction=coulomb)
+        if self.estimate_of_sim is not None:  # the learnable part keeps its ratio to it
+            estimate = [self.estimate_of_sim * f for f in coulomb]
+            old = shaping.friction_compensation_nm or (0.0,) * model.n
+            ratio = [a / f if f > 0.0 else 0.0 for a, f in
+                     zip(shaping.friction_learning_limit_nm or (0.0,) * model.n, old)]
+            shaping = dataclasses.replace(
+                shaping, friction_compensation_nm=tuple(estimate),
+                friction_learning_limit_nm=tuple(r * e for r, e in zip(ratio, estimate)))
+        return sim_params, shaping
+
+
 def run_robot(robot: Robot, potential: str, count: int, seed: int, delay_ticks: int = 1,
-              progress=print, without: Optional[str] = None) -> list:
+              progress=print, without: Optional[str] = None,
+              plant: Plant = Plant(), overrides: Optional[dict] = None) -> list:
     """Run ``count`` cases of ``robot`` with ``potential``; return their outcomes."""
-    model, gains, shaping = load_controller(robot, potential)
+    model, gains, shaping = load_controller(robot, potential, overrides)
     if without:
         shaping = dataclasses.replace(shaping, **ABLATIONS[without])
-    sim_params = config_parameters(robot.sim_config)
+    sim_params, shaping = plant.apply(model, config_parameters(robot.sim_config), shaping)
     outcomes = []
     for i, (q0, qg) in enumerate(cases(model, robot, count, seed)):
         outcomes.append(run_case(robot, model, gains, shaping, sim_params, i, q0, qg,
@@ -339,16 +420,50 @@ def main(argv: Optional[list] = None) -> int:
                         help='also run this many wrist cases over DDS (real nodes)')
     parser.add_argument('--without', choices=list(ABLATIONS),
                         help='turn this extension off (to see what it does)')
+    parser.add_argument('--fraction', type=float,
+                        help='draw starts and goals within this fraction of the half ranges '
+                        '(default: 0.9 wrist, 0.8 xArm6)')
+    parser.add_argument('--duration', type=float,
+                        help='seconds per case (default: 4 wrist, 5 xArm6)')
+    friction = parser.add_mutually_exclusive_group()
+    friction.add_argument('--sim-coulomb-scale', type=float, default=1.0,
+                          help="multiply the simulator config's Coulomb friction by this (the "
+                          "controller's estimate unchanged)")
+    friction.add_argument('--sim-coulomb-effort-fraction', type=float,
+                          help='simulate a Coulomb friction of this fraction of each URDF '
+                          'effort limit')
+    parser.add_argument('--estimate-of-sim', type=float,
+                        help="set the controller's friction estimate to this multiple of the "
+                        'simulated Coulomb friction')
+    parser.add_argument('--param', action='append', default=[], metavar='NAME:=VALUE',
+                        help='override a controller parameter of the config, ros2-style '
+                        "(VALUE in YAML, e.g. 'configuration_gain:=[0, 0, 0]')")
     args = parser.parse_args(argv)
+    overrides = {}
+    for item in args.param:
+        name, sep, value = item.partition(':=')
+        if not sep:
+            parser.error(f'--param takes NAME:=VALUE, got {item!r}')
+        overrides[name.strip()] = yaml.safe_load(value)
+    plant = Plant(args.sim_coulomb_scale, args.sim_coulomb_effort_fraction,
+                  args.estimate_of_sim)
     default_cases = {'wrist': 200, 'xarm6': 100}
     text = []
     for name in args.robot:
         robot = ROBOTS[name]
+        if args.fraction is not None:
+            robot = dataclasses.replace(robot, fraction=args.fraction)
+        if args.duration is not None:
+            robot = dataclasses.replace(robot, duration_s=args.duration)
         for potential in args.potential:
             t0 = time.monotonic()
             outcomes = run_robot(robot, potential, args.cases or default_cases[name],
-                                 args.seed, args.delay, without=args.without)
-            label = potential + (f' without {args.without}' if args.without else '')
+                                 args.seed, args.delay, without=args.without, plant=plant,
+                                 overrides=overrides)
+            label = ', '.join(x for x in (
+                potential, f'without {args.without}' if args.without else '',
+                f'within {robot.fraction:g} of the ranges', plant.describe(),
+                ', '.join(f'{k} {v}' for k, v in overrides.items())) if x)
             text.append(report(robot, label, outcomes, time.monotonic() - t0))
             print(text[-1], flush=True)
     if args.dds:

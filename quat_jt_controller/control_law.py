@@ -195,27 +195,6 @@ def task_force(y_tilde: Sequence[float], eta_e: float, gains: Gains,
     return w_o if len(w) == 3 else (w[0], w[1], w[2]) + w_o
 
 
-def control_torque(jacobian: Sequence[Sequence[float]], y_tilde: Sequence[float],
-                   eta_e: float, qdot: Sequence[float], gravity: Optional[Sequence[float]],
-                   gains: Gains) -> list[float]:
-    """
-    Joint torque of Eq. (22): Eq. (24)/(32) for the pose, Eq. (37)/(38) for orientation.
-
-    ``jacobian`` has one row per task coordinate, matching ``y_tilde``: ``J_o`` (3 x n) for the
-    orientation task or ``J_G = [J_p; J_o]`` (6 x n) for the pose task, base-frame axes.
-    ``gravity`` is g(q); it is added only when ``gains.gravity_compensation`` is set.
-    Returns tau in N m, one entry per joint. Effort limits are applied by :func:`saturate`.
-    """
-    tau = potential_torque(jacobian, y_tilde, eta_e, gains)
-    n = len(qdot)
-    for j in range(n):
-        tau[j] -= gains.kv[j] * qdot[j]
-    if gravity is not None and gains.gravity_compensation:
-        for j in range(n):
-            tau[j] += gravity[j]
-    return tau
-
-
 def potential_torque(jacobian: Sequence[Sequence[float]], y_tilde: Sequence[float],
                      eta_e: float, gains: Gains, k_l: float = 0.0) -> list[float]:
     """J^T Q(eta_e, e)^T grad U_a(y_tilde) = -grad_q U_a(y_tilde(q)) (Eqs. 21-22), in N m."""

@@ -161,7 +161,7 @@ class QuatJtController(Node):
         if held is not None:
             self.get_logger().info(
                 f'first joint state: holding the measured pose, {held.describe()}')
-        out = self.regulator.update(q, qdot)
+        out = self.regulator.update(q, qdot, self.supervisor.tick_interval_s(stamp_ns))
         self._cmd_msg.data = out.tau_nm
         t1 = time.perf_counter_ns()
         self._cmd_pub.publish(self._cmd_msg)
@@ -309,6 +309,14 @@ class QuatJtController(Node):
         if self.supervisor.on_diagnostics_timer(time.monotonic_ns()):
             self._publish_diagnostics()
 
+    def _configuration_state(self) -> diagnostics.ConfigurationState:
+        reg = self.regulator
+        names = reg.model.joint_names
+        return diagnostics.ConfigurationState(
+            reg.shaping.configuration_on, reg.goal_configuration,
+            [names[j] for j in reg.goal_in_band()],
+            reg.learned_friction_nm if reg.shaping.learning_on else ())
+
     def _publish_diagnostics(self) -> None:
         """Publish the loop's figures and the goal's state, from the ROS-free builders."""
         now = time.monotonic_ns()
@@ -322,7 +330,8 @@ class QuatJtController(Node):
             ('goal', diagnostics.goal_status(
                 self.supervisor.goal_source, self.regulator.goal, self._goal_warning, self._last,
                 self._last_qdot, self.config.task is Task.POSE, self.counters,
-                self._goal_checker.unavailable_reason, self._goal_checker.ready)),
+                self._goal_checker.unavailable_reason, self._goal_checker.ready,
+                self._configuration_state())),
             ('stall', self.stall.status()),
         )
         arr = DiagnosticArray(status=[

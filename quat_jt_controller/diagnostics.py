@@ -6,7 +6,7 @@ values of diagnostic_msgs/DiagnosticStatus); the node only wraps them into messa
 """
 from dataclasses import dataclass
 from math import nan
-from typing import Optional, Sequence
+from typing import NamedTuple, Optional, Sequence
 
 from quat_jt_controller.regulator import Goal, TickOutput
 
@@ -81,12 +81,14 @@ def loop_status(figures: dict, waiting: bool, stopped: bool, counters: Counters,
 
 def goal_status(source: str, goal: Optional[Goal], warning: str, last: Optional[TickOutput],
                 qdot: Optional[Sequence[float]], pose_task: bool, counters: Counters,
-                goal_check_unavailable: str = '', goal_check_ready: bool = True) -> Status:
+                goal_check_unavailable: str = '', goal_check_ready: bool = True,
+                configuration: Optional['ConfigurationState'] = None) -> Status:
     """
     Report the goal: its source, the A1/A2 advice, the errors, a near-180-degree warning.
 
     ``goal_check_unavailable`` says why goal checks are not being made ('' when they are);
     ``goal_check_ready`` is False while the worker is still building its model ('starting').
+    ``configuration`` gives the goal configuration q* and the friction learned at rest.
     """
     level = OK
     messages = [{'none': 'no goal (no joint state yet)',
@@ -118,6 +120,43 @@ def goal_status(source: str, goal: Optional[Goal], warning: str, last: Optional[
             ('goal_position_m',
              str([round(c, 6) for c in goal.p_desired_base]) if goal else ''),
         ]
+    if configuration is not None:
+        values += configuration.values()
+        note = configuration.note(source)
+        if note:
+            messages.append(note)
     values += [('accepted_goals_total', str(counters.accepted_goals)),
                ('rejected_goals_total', str(counters.rejected_goals))]
     return level, '; '.join(messages), values
+
+
+class ConfigurationState(NamedTuple):
+    """The goal configuration in force and the friction learned, for the goal status."""
+
+    term_on: bool  # the goal-configuration term has a gain
+    q_star_rad: Optional[Sequence[float]]
+    in_band: Sequence[str]  # joints whose q* lies in the limit band (the band ends at q*)
+    learned_friction_nm: Sequence[float] = ()
+
+    def values(self) -> list[tuple[str, str]]:
+        """Return the key-value pairs."""
+        q_star = ('' if self.q_star_rad is None else
+                  str([round(x, 6) for x in self.q_star_rad]))
+        out = [('goal_configuration_rad', q_star),
+               ('goal_configuration_in_band', ', '.join(self.in_band))]
+        if self.learned_friction_nm:
+            out.append(('learned_friction_nm',
+                        str([round(x, 4) for x in self.learned_friction_nm])))
+        return out
+
+    def note(self, source: str) -> str:
+        """Return what the goal's message says of q* ('' if nothing to say)."""
+        if not self.term_on or source != 'target_pose':
+            return ''
+        if self.q_star_rad is None:
+            return ('no goal configuration (none found within the limits yet): the '
+                    'goal-configuration term is off for this goal')
+        if self.in_band:
+            return (f'the goal configuration lies in the joint-limit band of '
+                    f'{", ".join(self.in_band)}: the band ends there')
+        return ''

@@ -10,17 +10,19 @@ serves both potentials, so ``potential`` can be switched live) and the extension
 (``shaping.Shaping``): joint-limit band, goal-configuration term, cubic damping, friction
 compensation. In short:
 
-1. budget per joint: a share of the effort limit left after gravity and friction compensation;
+1. budget per joint: a share of the effort limit left after gravity and friction compensation
+   (the estimate and the part the regulator may learn at rest, ``friction_learning_limit``);
 2. K_p from the tanh law's a-priori bound |tau_j| <= ||J_p[:, j]|| ||k_p|| + 1/2 ||k_o||
    (|Q| <= 1/2 on the orientation rows; a revolute column of J_o is a unit vector), kept
    within the part of the budget left to the task potential;
 3. Lambda from where the tanh force should saturate; K_v for critical damping of the
    linearised loop at the geometric mean of the two potentials' stiffnesses, from M(q) at
    representative configurations;
-4. the sampled loop with one tick of delay (and any other delays asked for) linearised at
-   those configurations must have spectral radius < 1, for both potentials; the stiffness of
-   the limit band, of the goal-configuration ramp and the slope of the cubic damping are
-   checked the same way, per joint.
+4. the sampled loop linearised at those configurations must have spectral radius < 1, for
+   both potentials, with every delay asked for plus one more tick (``DELAY_MARGIN``), and at
+   ``GAIN_MARGIN`` x the gains; the stiffness of the limit band, of the goal-configuration
+   ramp, the slope of the cubic damping and that of the friction compensation's braking are
+   checked the same way, per joint, on the inertia the joint sees, ``1 / (M^-1)_jj``.
 
 ROS-free. ``python -m quat_jt_controller.gain_design --help`` (``ros2 run quat_jt_controller
 design_gains`` under colcon) writes a parameter file in the format of config/*_controller.yaml.
@@ -47,6 +49,8 @@ LIMIT_OVER_TASK = 1.5  # the limit band at the stop holds 1.5 x the task term's 
 LAMBDA_ORIENTATION = 4.0  # tanh(4 ||e||) = 0.96 at ||e|| = 0.5 (60 degrees)
 POSITION_SATURATION_M = 0.1  # tanh(lambda_p 0.1 m) = 0.96
 DAMPING_RATIO = sqrt(0.5)  # of the tanh law's linearised loop (the quadratic's: x sqrt(lambda))
+# Where the sampled loop caps K_v, the stiffness is lowered until the tanh law keeps this much
+DAMPING_RATIO_MIN = 0.5
 CRUISE_FRACTION = 0.6  # of the URDF velocity limit: the speed the cubic damping aims at
 DEFAULT_VELOCITY = 2.0 * pi  # rad/s, for a joint whose URDF gives no velocity limit
 DAMPER_SAFETY = 0.5  # of the largest damping the sampled loop tolerates on a joint
@@ -57,10 +61,16 @@ GUIDE_RAMP_RAD = 0.25
 FRICTION_VELOCITY_RAD_S = 0.05
 FRICTION_ERROR_BAND = 0.004  # ||e||; a little below the 0.005 the wrist is asked to reach
 FRICTION_POSITION_BAND_M = 0.0005
+# At rest the regulator may learn this much more than the estimate (x the estimate), in
+# FRICTION_LEARNING_TIME_S: a friction up to (1 + this) x the estimate is still broken
+FRICTION_LEARNING = 2.0
+FRICTION_LEARNING_TIME_S = 1.0
 SAMPLES = 24  # representative regular configurations for M(q), J(q)
 SURVEY = 400  # random configurations for the largest g(q) and lever ||J_p[:, j]||
 REGULAR_SIGMA_MIN = 0.1
 SHRINK = 0.8  # gains are scaled by this until the sampled loop is stable
+DELAY_MARGIN = 1  # the loop must also be stable with this many ticks more than asked for
+GAIN_MARGIN = 1.5  # ... and with the gains (stiffness and damping) this many times larger
 # The damping acts on qdot - g_v qdot*_d of a streamed goal: all of it (an exogenous input to
 # the loop, which changes none of its gains; docs/lyapunov.md, section 7)
 GOAL_VELOCITY_GAIN = 1.0
@@ -177,6 +187,8 @@ class Design:
             'friction_velocity': s.friction_velocity_rad_s,
             'friction_error_band': s.friction_error_band,
             'friction_position_band': s.friction_position_band_m,
+            'friction_learning_limit': list(s.friction_learning_limit_nm),
+            'friction_learning_time': s.friction_learning_time_s,
             'configuration_gain': list(s.configuration_gain),
             'configuration_radius': s.configuration_radius_rad,
             'configuration_ramp': s.configuration_ramp_rad,
@@ -203,7 +215,9 @@ def survey(model: RobotModel, task: cl.Task, seed: int = 0) -> dict:
     ``gravity_max`` and ``lever_max`` (the largest ||J_p[:, j]||, m) over SURVEY
     configurations within the limits; ``configurations``: SAMPLES regular ones (sigma_min of
     the task Jacobian >= REGULAR_SIGMA_MIN) within 90% of the ranges, with their task
-    Jacobians and M(q); ``inertia_min`` the smallest M_jj over all of them.
+    Jacobians and M(q); ``inertia_min`` the smallest inertia a joint sees over all of them,
+    ``1 / (M^-1)_jj`` (the others free to move; up to several times below M_jj on a coupled
+    arm).
     """
     rng = np.random.default_rng(seed)
     n = model.n
@@ -213,7 +227,7 @@ def survey(model: RobotModel, task: cl.Task, seed: int = 0) -> dict:
         _, _, J = model.kinematics(q.tolist())
         g_max = np.maximum(g_max, np.abs(model.gravity(q.tolist())))
         lever = np.maximum(lever, np.linalg.norm(np.array(J)[:3], axis=0))
-        inertia_min = np.minimum(inertia_min, np.diag(model.mass_matrix(q.tolist())))
+        inertia_min = np.minimum(inertia_min, seen_inertia(model.mass_matrix(q.tolist())))
     configs = []
     while len(configs) < SAMPLES:
         q = _sample(model, rng, 0.9)
@@ -222,10 +236,15 @@ def survey(model: RobotModel, task: cl.Task, seed: int = 0) -> dict:
         if _sigma_min(rows) < REGULAR_SIGMA_MIN:
             continue
         M = model.mass_matrix(q.tolist())
-        inertia_min = np.minimum(inertia_min, np.diag(M))
+        inertia_min = np.minimum(inertia_min, seen_inertia(M))
         configs.append((q, rows, M))
     return {'gravity_max': g_max, 'lever_max': lever, 'inertia_min': inertia_min,
             'configurations': configs}
+
+
+def seen_inertia(M: np.ndarray) -> np.ndarray:
+    """Return ``1 / (M^-1)_jj``: the inertia joint j sees when the other joints move freely."""
+    return 1.0 / np.diag(np.linalg.inv(M))
 
 
 def task_torque_bound(lever_max: np.ndarray, kp: Sequence[float], task: cl.Task,
@@ -259,14 +278,30 @@ def _damping(configs, kp: np.ndarray, lam: np.ndarray, extra: np.ndarray) -> np.
     return np.median(values, axis=0)
 
 
-def _worst_rho(configs, kp, kv, lam, extra, delays, dt_s) -> dict:
+def _median_damping_ratio(configs, slope: np.ndarray, kv: np.ndarray,
+                          extra: np.ndarray) -> np.ndarray:
+    """Median over the configurations of k_v / (2 sqrt(M_jj k_jj)), per joint."""
+    zeta = [kv / (2.0 * np.sqrt(np.diag(M) * (np.diag(joint_stiffness(rows, slope)) + extra)))
+            for _, rows, M in configs]
+    return np.median(zeta, axis=0)
+
+
+def _worst_rho(configs, kp, kv, lam, extra, delays, dt_s, margins: bool = True) -> dict:
+    """
+    Worst spectral radius per potential over the configurations.
+
+    With ``margins``: with DELAY_MARGIN more ticks of delay, and at GAIN_MARGIN x the gains.
+    """
+    cases = [(1.0, d) for d in (_checked_delays(delays) if margins else delays)]
+    if margins:
+        cases += [(GAIN_MARGIN, d) for d in delays]
     worst = {}
     for potential, slope in (('quadratic', kp), ('tanh', kp * lam)):
         rho = 0.0
         for _, rows, M in configs:
             K = joint_stiffness(rows, slope) + np.diag(extra)
-            for d in delays:
-                rho = max(rho, spectral_radius(M, K, np.diag(kv), d, dt_s))
+            for scale, d in cases:
+                rho = max(rho, spectral_radius(M, scale * K, scale * np.diag(kv), d, dt_s))
         worst[potential] = rho
     return worst
 
@@ -279,8 +314,18 @@ def configuration_stiffness(shaping: Shaping) -> np.ndarray:
 
 
 def _joint_stable(inertia: float, stiffness: float, damping: float, delays, dt_s) -> float:
-    return max(spectral_radius(np.array([[inertia]]), np.array([[stiffness]]),
-                               np.array([[damping]]), d, dt_s) for d in delays)
+    """Worst spectral radius of one joint's mass-spring-damper, with the margins."""
+    checked = _checked_delays(delays)
+    return max([spectral_radius(np.array([[inertia]]), np.array([[stiffness]]),
+                                np.array([[damping]]), d, dt_s) for d in checked]
+               + [spectral_radius(np.array([[inertia]]), np.array([[GAIN_MARGIN * stiffness]]),
+                                  np.array([[GAIN_MARGIN * damping]]), d, dt_s)
+                  for d in delays])
+
+
+def _checked_delays(delays) -> tuple[int, ...]:
+    """Return the delays asked for, plus DELAY_MARGIN ticks more than the largest."""
+    return tuple(sorted(set(delays) | {max(delays) + DELAY_MARGIN}))
 
 
 def _largest_stable_damping(inertia: float, delays, dt_s) -> float:
@@ -308,13 +353,16 @@ def _damper_stable(inertia: float, damping: float, delays, dt_s) -> float:
 def design(model: RobotModel, task: cl.Task, rate_hz: float = 1000.0,
            effort_limits_nm: Optional[Sequence[float]] = None,
            friction_nm: Optional[Sequence[float]] = None, delays: Sequence[int] = (1,),
-           seed: int = 0) -> Design:
+           seed: int = 0, friction_learning: float = FRICTION_LEARNING) -> Design:
     """
     Compute gains and extensions for ``model`` and ``task`` (docs/gain_design.md).
 
     ``effort_limits_nm`` default the URDF's; ``friction_nm`` are the Coulomb estimates per
     joint (default zeros: no friction compensation); ``delays`` the ticks of delay the
-    sampled loop must be stable with. Raises ValueError if a joint has no torque left.
+    sampled loop must be stable with; ``friction_learning`` how much more than the estimate
+    (x the estimate) the regulator may learn at rest. Raises ValueError if a joint has no
+    torque left, or if the goal-configuration term of a joint cannot stay above the task
+    term's bound (it would no longer lead that joint round its stop).
     """
     task = cl.Task(task)
     n = model.n
@@ -327,7 +375,10 @@ def design(model: RobotModel, task: cl.Task, rate_hz: float = 1000.0,
     data = survey(model, task, seed)
     configs = data['configurations']
     lever = data['lever_max'] if task is cl.Task.POSE else np.zeros(n)
-    budget = TORQUE_SHARE * (effort - data['gravity_max'] - friction)
+    if not np.isfinite(friction_learning) or friction_learning < 0.0:
+        raise ValueError(f'friction_learning must be finite and >= 0, got {friction_learning}')
+    learning = friction_learning * friction
+    budget = TORQUE_SHARE * (effort - data['gravity_max'] - friction - learning)
     if np.any(budget <= 0.0):
         raise ValueError(f'no torque left for the potential on joints '
                          f'{[model.joint_names[j] for j in np.flatnonzero(budget <= 0.0)]}: '
@@ -338,7 +389,8 @@ def design(model: RobotModel, task: cl.Task, rate_hz: float = 1000.0,
     inertia = data['inertia_min']
     velocity = np.array(model.velocity_limits, dtype=float)
     velocity = np.where(np.isfinite(velocity) & (velocity > 0), velocity, DEFAULT_VELOCITY)
-    b_max = np.array([DAMPER_SAFETY * _largest_stable_damping(inertia[j], delays, dt_s)
+    b_max = np.array([DAMPER_SAFETY * _largest_stable_damping(inertia[j],
+                                                              _checked_delays(delays), dt_s)
                       for j in range(n)])
     push_max = np.minimum(budget, b_max * velocity)
     cap = push_max / (1.0 + GUIDE_OVER_TASK)  # what the task potential may ask of a joint
@@ -365,9 +417,10 @@ def design(model: RobotModel, task: cl.Task, rate_hz: float = 1000.0,
 
     # The goal-configuration term (GUIDE_OVER_TASK x the task bound, over a ramp) adds joint
     # stiffness at q*; K_v damps the sum. The sampled-loop check: shrink Lambda (down to 1),
-    # then K_p, until every representative configuration is stable with every delay, for
-    # both potentials; a joint whose own mass-spring-damper (smallest inertia) is unstable
-    # gets a smaller goal-configuration gain.
+    # then K_p, until every representative configuration is stable with every delay (and the
+    # margins), for both potentials, and no joint whose damping the loop caps is left with a
+    # damping ratio below DAMPING_RATIO_MIN; a joint whose own mass-spring-damper (smallest
+    # inertia) is unstable gets a smaller goal-configuration gain.
     for _ in range(80):
         bound = task_torque_bound(lever, kp, task)
         guide = GUIDE_OVER_TASK * bound
@@ -379,7 +432,8 @@ def design(model: RobotModel, task: cl.Task, rate_hz: float = 1000.0,
         extra = guide / GUIDE_RAMP_RAD
         kv = np.minimum(_damping(configs, kp, lam, extra), b_max)
         rho = _worst_rho(configs, kp, kv, lam, extra, delays, dt_s)
-        if max(rho.values()) < 1.0:
+        zeta = _median_damping_ratio(configs, kp * lam, kv, extra)
+        if max(rho.values()) < 1.0 and zeta.min() >= DAMPING_RATIO_MIN:
             break
         if lam.min() > 1.0:
             lam = np.maximum(lam * SHRINK, 1.0)
@@ -387,6 +441,13 @@ def design(model: RobotModel, task: cl.Task, rate_hz: float = 1000.0,
             kp = kp * SHRINK
     else:
         raise ValueError(f'no stable gains found (spectral radius {rho})')
+    weak = [model.joint_names[j] for j in range(n) if guide[j] <= bound[j]]
+    if weak:
+        raise ValueError(
+            f'the goal-configuration term of {weak} fell to {np.round(guide, 4).tolist()} N m, '
+            f'at or below the task bound {np.round(bound, 4).tolist()} N m, to keep the sampled '
+            'loop stable: it could not lead those joints round their stops. Give the loop more '
+            'room (a higher --rate, fewer --delays) or a robot with more inertia on them')
 
     # Joint-limit band and goal-configuration term, checked per joint on its smallest inertia.
     lower, upper = np.array(model.position_lower), np.array(model.position_upper)
@@ -423,6 +484,8 @@ def design(model: RobotModel, task: cl.Task, rate_hz: float = 1000.0,
     shaping = Shaping.create(
         n, joint_limit_margin=margin, joint_limit_gain=limit_gain.round(3).tolist(),
         friction_compensation=friction.tolist(), friction_velocity=FRICTION_VELOCITY_RAD_S,
+        friction_learning_limit=learning.tolist(),
+        friction_learning_time=FRICTION_LEARNING_TIME_S,
         friction_error_band=FRICTION_ERROR_BAND,
         friction_position_band=FRICTION_POSITION_BAND_M,
         configuration_gain=guide.round(3).tolist(), configuration_radius=GUIDE_RADIUS_RAD,
@@ -434,12 +497,9 @@ def design(model: RobotModel, task: cl.Task, rate_hz: float = 1000.0,
     extra = configuration_stiffness(shaping)
     final = _worst_rho(configs, np.array(kp_r), np.array(kv_r), np.array(lam_r), extra,
                        delays, dt_s)
-    ratios = {}
-    for potential, slope in (('quadratic', np.array(kp_r)), ('tanh', np.array(kp_r) *
-                                                             np.array(lam_r))):
-        zeta = [np.array(kv_r) / (2.0 * np.sqrt(np.diag(M) * (np.diag(joint_stiffness(
-            rows, slope)) + extra))) for _, rows, M in configs]
-        ratios[potential] = np.median(zeta, axis=0)
+    ratios = {'quadratic': _median_damping_ratio(configs, np.array(kp_r), np.array(kv_r), extra),
+              'tanh': _median_damping_ratio(configs, np.array(kp_r) * np.array(lam_r),
+                                            np.array(kv_r), extra)}
     figures = {
         'effort_limits_nm': effort, 'gravity_max_nm': data['gravity_max'],
         'friction_nm': friction, 'budget_nm': budget, 'task_bound_nm': bound,
@@ -447,10 +507,50 @@ def design(model: RobotModel, task: cl.Task, rate_hz: float = 1000.0,
         'lever_max_m': data['lever_max'], 'inertia_min': inertia,
         'spectral_radius': final, 'delays': tuple(delays),
         'damping_ratio': ratios, 'terminal_speed_rad_s': np.array(terminal),
-        'velocity_limits_rad_s': velocity,
+        'velocity_limits_rad_s': velocity, 'friction_learning': friction_learning,
+        'warnings': friction_warnings(model, friction, learning),
     }
     return Design(task, model.joint_names, model.base_link, model.tip_link, rate_hz, kp_r,
                   kv_r, lam_r, shaping, figures)
+
+
+def friction_warnings(model: RobotModel, friction: np.ndarray,
+                      learning: np.ndarray) -> list[str]:
+    """
+    Return warnings on friction estimates the robot's data do not support (none if they do).
+
+    The data are the URDF's ``<dynamics friction>`` values. The compensation at rest reaches
+    the estimate plus what it may learn; above the true friction it would push a joint that
+    friction no longer holds (docs/lyapunov.md, section 4). A URDF with no friction value
+    gives nothing to check against; that is said once.
+    """
+    data = np.array(model.friction_nm, dtype=float)
+    if not np.any(data > 0.0):
+        if np.any(friction > 0.0):
+            return ['the URDF gives no <dynamics friction>: the friction estimates cannot be '
+                    "checked against the robot's data (measure the breakaway torque per joint)"]
+        return []
+    out = []
+    for j, name in enumerate(model.joint_names):
+        if friction[j] > data[j]:
+            out.append(f'{name}: the friction estimate {friction[j]:g} N m is above the '
+                       f"URDF's {data[j]:g} N m: an over-estimate drives a joint that friction "
+                       'no longer holds; lower it')
+        elif data[j] > 0.0 and friction[j] + learning[j] > 2.0 * data[j]:
+            out.append(f'{name}: the estimate {friction[j]:g} N m + {learning[j]:g} N m '
+                       f"learnable at rest exceeds twice the URDF's {data[j]:g} N m")
+    return out
+
+
+def _saturation(lam: Sequence[float], pose: bool) -> str:
+    """Say from which error the tanh force is 96% of K_p (tanh(x) = 0.96 at x = 1.946)."""
+    x96 = float(np.arctanh(0.96))
+    e = x96 / lam[-1]  # ||e|| = sin(theta / 2)
+    text = ('tanh at 96% of K_p from ' + (f'{np.degrees(2.0 * np.arcsin(e)):.0f} deg'
+                                          if e < 1.0 else 'no angle (orientation)'))
+    if pose:
+        text += f' / {x96 / lam[0]:.2g} m'
+    return text
 
 
 def _float(value: float) -> str:
@@ -492,18 +592,24 @@ def to_yaml(d: Design, potential: str = 'tanh', command: str = '',
         f'  effort limits {_fmt(f["effort_limits_nm"])}, largest |g(q)| '
         f'{_fmt(np.round(f["gravity_max_nm"], 4))}, friction estimates '
         f'{_fmt(f["friction_nm"])};',
-        f'  budget {TORQUE_SHARE:g} x (effort - gravity - friction) = '
+        f'  at rest the regulator may learn {f["friction_learning"]:g} x the estimates more, '
+        f'in {FRICTION_LEARNING_TIME_S:g} s;',
+        f'  budget {TORQUE_SHARE:g} x (effort - gravity - friction - learnable friction) = '
         f'{_fmt(f["budget_nm"])}, of which the task potential may ask at most (a-priori '
         f'bound of the tanh law) {_fmt(f["task_bound_nm"])} and the goal-configuration term '
         f'{_fmt(f["guide_nm"])};',
         f'  joint-limit band torque at a stop {_fmt(f["limit_at_stop_nm"])};',
         f'  sampled loop at {d.rate_hz:g} Hz with {"/".join(str(x) for x in f["delays"])} '
-        f'tick(s) of delay, linearised at {SAMPLES} regular configurations: worst spectral '
+        f'tick(s) of delay and {max(f["delays"]) + DELAY_MARGIN}, and at {GAIN_MARGIN:g} x the '
+        f'gains, per joint on the inertia it sees (1 / (M^-1)_jj, smallest '
+        f'{_fmt(f["inertia_min"])} kg m^2), linearised at {SAMPLES} regular configurations: '
+        'worst spectral '
         f'radius {rho["tanh"]:.6f} (tanh), {rho["quadratic"]:.6f} (quadratic) < 1; median '
         f'damping ratios tanh {_fmt(zeta["tanh"])}, quadratic {_fmt(zeta["quadratic"])};',
         f'  cruising speeds far from the goal {_fmt(f["terminal_speed_rad_s"])} rad/s '
         f'(velocity limits {_fmt(f["velocity_limits_rad_s"])}).',
     ]
+    header += [f'WARNING: {w}' for w in f.get('warnings', ())]
     lines = []
     for entry in header:
         indent = '#   ' if entry.startswith('  ') else '# '
@@ -519,8 +625,7 @@ def to_yaml(d: Design, potential: str = 'tanh', command: str = '',
         f'    kp: {_fmt(d.kp)}  # K_p, {axes}: a-priori torque bound within the budget',
         f'    kv: {_fmt(d.kv)}  # K_v, N m s/rad: damping ratio {DAMPING_RATIO:.2f} (tanh), '
         'from M(q)',
-        f'    lambda: {_fmt(d.lam)}  # Lambda: tanh saturates at 60 deg'
-        + (f' / {POSITION_SATURATION_M:g} m' if pose else ''),
+        f'    lambda: {_fmt(d.lam)}  # Lambda: {_saturation(d.lam, pose)}',
         '    gravity_compensation: true   # + g(q) from the URDF',
         f'    joint_limit_margin: {_float(s.joint_limit_margin_rad)}   # rad, band inside each '
         'limit (joints with less than a full turn)',
@@ -530,9 +635,13 @@ def to_yaml(d: Design, potential: str = 'tanh', command: str = '',
         'term carries large errors',
         f'    friction_compensation: {_fmt(s.friction_compensation_nm)}  # N m, the Coulomb '
         'estimates (0 = off)',
+        f'    friction_learning_limit: {_fmt(s.friction_learning_limit_nm)}  # N m, the most '
+        'learned at rest on top (0 = none)',
+        f'    friction_learning_time: {_float(s.friction_learning_time_s)}   # s, to learn it '
+        'while stuck; it leaks as fast near the goal',
         f'    friction_velocity: {_float(s.friction_velocity_rad_s)}   # rad/s, v_eps of '
         'f tanh(qdot / v_eps)',
-        f'    friction_error_band: {_float(s.friction_error_band)}   # ||e|| where the at-rest '
+        f'    friction_error_band: {_float(s.friction_error_band)}   # ||e|| where the '
         'compensation fades out',
         f'    friction_position_band: {_float(s.friction_position_band_m)}   # m, the same for '
         '||p_d - p||',
@@ -582,6 +691,9 @@ def main(argv: Optional[list] = None) -> int:
     parser.add_argument('--rate', type=float, default=1000.0, help='control rate, Hz')
     parser.add_argument('--friction', type=float, nargs='+',
                         help='Coulomb friction estimates, N m per joint (default: none)')
+    parser.add_argument('--friction-learning', type=float, default=FRICTION_LEARNING,
+                        help='how much more than the estimates the regulator may learn at '
+                        f'rest, x the estimates (default {FRICTION_LEARNING:g}; 0 = none)')
     parser.add_argument('--delays', type=int, nargs='+', default=[1],
                         help='ticks of delay the sampled loop must be stable with')
     parser.add_argument('--potential', choices=[p.value for p in cl.Potential],
@@ -593,7 +705,9 @@ def main(argv: Optional[list] = None) -> int:
     urdf = args.urdf.read_text() if args.urdf else default_urdf_xml()
     model = RobotModel(urdf, args.base_link, args.tip_link, args.joints)
     result = design(model, cl.Task(args.task), args.rate, args.effort_limits, args.friction,
-                    tuple(args.delays))
+                    tuple(args.delays), friction_learning=args.friction_learning)
+    for warning in result.figures['warnings']:
+        print(f'design_gains: WARNING: {warning}', file=sys.stderr)
     command = shlex.join(['python', '-m', 'quat_jt_controller.gain_design']
                          + _public_argv(sys.argv[1:] if argv is None else argv))
     text = to_yaml(result, args.potential, command, args.robot_note)

@@ -87,6 +87,8 @@ class RobotModel:
         self.position_upper = self._per_joint(model.upperPositionLimit)
         self.velocity_limits = self._per_joint(model.velocityLimit)
         self.effort_limits = self._per_joint(model.effortLimit)
+        # the URDF's <dynamics friction>, N m (0: not given); the simulator does not use it
+        self.friction_nm = self._per_joint(model.friction)
 
     def _per_joint(self, vec: np.ndarray) -> tuple[float, ...]:
         return tuple(float(vec[i]) for i in self._idx)

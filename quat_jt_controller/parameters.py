@@ -358,7 +358,8 @@ def build_gains(values: Mapping[str, Any], config: StructuralConfig,
 # turn them on with the values of quat_jt_controller.gain_design.
 SHAPING_PARAMETERS = ('joint_limit_margin', 'joint_limit_gain', 'large_error_gain',
                       'friction_compensation', 'friction_velocity', 'friction_error_band',
-                      'friction_position_band', 'configuration_gain', 'configuration_radius',
+                      'friction_position_band', 'friction_learning_limit',
+                      'friction_learning_time', 'configuration_gain', 'configuration_radius',
                       'configuration_ramp', 'damping_speed', 'goal_velocity_gain')
 
 
@@ -370,6 +371,8 @@ def default_shaping(n_joints: int) -> dict[str, Any]:
             'friction_velocity': s.friction_velocity_rad_s,
             'friction_error_band': s.friction_error_band,
             'friction_position_band': s.friction_position_band_m,
+            'friction_learning_limit': [0.0] * n_joints,
+            'friction_learning_time': s.friction_learning_time_s,
             'configuration_gain': [0.0] * n_joints,
             'configuration_radius': s.configuration_radius_rad,
             'configuration_ramp': s.configuration_ramp_rad,
@@ -408,18 +411,28 @@ def declare_shaping(node: Node, config: StructuralConfig,
         'friction_compensation': _descriptor(
             f'Coulomb friction estimates (N m), one per joint ({n}), compensated without '
             'exceeding them: by velocity while moving, in the direction of the potential '
-            'torque at rest (fading out near the goal). Zeros = off. Over-estimates break '
-            'the stability argument (docs/lyapunov.md). Live.', joint_vector,
+            'torque at rest, all of it fading out near the goal. Zeros = off. Over-estimates '
+            'break the stability argument away from the goal (docs/lyapunov.md). Live.',
+            joint_vector,
             constraints=f'{n} finite values >= 0'),
         'friction_velocity': _descriptor(
             'v_eps (rad/s) of the velocity part, f tanh(qdot / v_eps). Live.', number,
             float_range=(1e-4, 10.0)),
         'friction_error_band': _descriptor(
-            '||e|| below which the at-rest part of the friction compensation fades out '
-            '(it is off below half of it). Live.', number, float_range=(1e-5, 1.0)),
+            '||e|| below which the friction compensation fades out (it is off below half of '
+            'it). Live.', number, float_range=(1e-5, 1.0)),
         'friction_position_band': _descriptor(
-            '||p_d - p|| (m) below which the at-rest part fades out (pose task). Live.',
-            number, float_range=(1e-6, 1.0)),
+            '||p_d - p|| (m) below which the friction compensation fades out (pose task). '
+            'Live.', number, float_range=(1e-6, 1.0)),
+        'friction_learning_limit': _descriptor(
+            f'The most (N m) the friction compensation may learn on top of the estimate, one '
+            f'per joint ({n}): it grows while a joint is stuck away from the goal, stops once '
+            'the joint moves, and leaks away near the goal. Zeros = off. Live.', joint_vector,
+            constraints=f'{n} finite values >= 0'),
+        'friction_learning_time': _descriptor(
+            'Time (s) to learn friction_learning_limit while stuck; the learned part leaks '
+            'with this time constant near the goal. Live.', number,
+            float_range=(0.01, 1000.0)),
         'configuration_gain': _descriptor(
             f'Most torque (N m) the goal-configuration term asks of each joint ({n}); it '
             'pulls towards a goal configuration within the limits found by the goal check. '

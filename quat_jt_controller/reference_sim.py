@@ -167,7 +167,7 @@ def run_sampled(loop: ClosedLoop, sim, duration_s: float, delay_ticks: int = 1,
         if k == q_star_step:
             loop.set_goal_configuration(q_star)
         q, qdot = history[-1 - delay_ticks]
-        out = loop.clamped.update(q, qdot)
+        out = loop.clamped.update(q, qdot, sim.dt_s)
         saturated += out.saturated
         if not out.finite:
             finite = False

@@ -27,6 +27,7 @@ from quat_jt_controller import shaping as sh
 from quat_jt_controller.model import RobotModel
 
 Vector3 = tuple[float, float, float]
+MAX_LEARNING_STEP_S = 0.01  # a longer gap between ticks advances the friction learning by this
 
 
 @dataclass(frozen=True)
@@ -177,6 +178,11 @@ class Regulator:
         # qdot*_d of a streamed goal (rad/s), or None: independent of the goal, which a stream
         # replaces at every sample while its velocity stays
         self._goal_joint_velocity: Optional[tuple[float, ...]] = None
+        # a, the part of the friction estimate learned at rest (N m per joint): the one state
+        # the tick keeps, advanced only by ticks given a time step (shaping.learn_friction)
+        self._learned_friction_nm = [0.0] * self.n
+        # the limit band ending at q* (LimitBand.ending_at), cached for (band, q*): derived
+        self._band_at_goal: tuple = (None, None, None)
 
     # -- snapshots ------------------------------------------------------------------------
     @property
@@ -216,9 +222,21 @@ class Regulator:
         return shaping
 
     def set_shaping(self, shaping: sh.Shaping) -> None:
-        """Swap in new extensions (and their limit band), whole; raise ShapingError if unfit."""
+        """
+        Swap in new extensions (and their limit band), whole; raise ShapingError if unfit.
+
+        The friction learned so far is kept within the new limits (zero where none).
+        """
         band = self._band(shaping)
+        limits = shaping.friction_learning_limit_nm or (0.0,) * self.n
+        self._learned_friction_nm = [min(a, a_max) for a, a_max in
+                                     zip(self._learned_friction_nm, limits)]
         self._law = self._law._replace(shaping=shaping, band=band)
+
+    @property
+    def learned_friction_nm(self) -> tuple[float, ...]:
+        """Return ``a``, the part of the friction estimate learned at rest so far (N m)."""
+        return tuple(self._learned_friction_nm)
 
     @property
     def goal(self) -> Optional[Goal]:
@@ -278,6 +296,28 @@ class Regulator:
         self._target = Target(goal, tuple(float(x) for x in q))
         return goal
 
+    def _band_at(self, band: Optional[sh.LimitBand],
+                 q_star: Optional[tuple[float, ...]]) -> Optional[sh.LimitBand]:
+        """Return the band in force for the target: ``band``, ending at q* if q* is in it."""
+        if band is None or q_star is None:
+            return band
+        cached = self._band_at_goal
+        if cached[0] is band and cached[1] is q_star:
+            return cached[2]
+        ended = band.ending_at(q_star)
+        self._band_at_goal = (band, q_star, ended)
+        return ended
+
+    def goal_in_band(self) -> tuple[int, ...]:
+        """Return the joints whose goal configuration q* lies in the joint-limit band."""
+        gains, shaping, band = self._law
+        q_star = self._target.q_star
+        ended = self._band_at(band, q_star)
+        if ended is None or ended is band:
+            return ()
+        return tuple(j for j in ended.joints if ended.lower_rad[j] != band.lower_rad[j]
+                     or ended.upper_rad[j] != band.upper_rad[j])
+
     # -- the law ----------------------------------------------------------------------------
     def error(self, q: Sequence[float], goal: Optional[Goal] = None):
         """
@@ -290,7 +330,7 @@ class Regulator:
         y, eta_e = cl.output_error(p, R, goal.p_desired_base, goal.q_desired_base, self.task)
         return y, eta_e, (J[3:] if self._orientation_only else J), p, R
 
-    def update(self, q: Sequence[float], qdot: Sequence[float]) -> TickOutput:
+    def update(self, q: Sequence[float], qdot: Sequence[float], dt_s: float = 0.0) -> TickOutput:
         """
         One control tick at the measured ``(q, qdot)``: Eq. (22) + g(q), checked and clamped.
 
@@ -298,9 +338,13 @@ class Regulator:
         goal-configuration terms of the potential, + friction compensation (``shaping.py``).
         Reads the law and the target once each. A goal must have been set (or :meth:`hold`).
         If the law gives a non-finite torque the command is zero and ``finite`` is False.
+        ``dt_s``, the time since the last tick (s; at most ``MAX_LEARNING_STEP_S`` counts),
+        advances the friction learned at rest; 0 (a re-evaluation, the ideal loop's stages)
+        leaves it as it is.
         """
         gains, shaping, band = self._law
         goal, q_star = self._target
+        band = self._band_at(band, q_star)
         qdot_goal = self._goal_joint_velocity
         y, eta_e, rows, p, R = self.error(q, goal)
         n = self.n
@@ -322,9 +366,14 @@ class Regulator:
             for j in range(n):
                 tau[j] += g[j]
         if shaping.friction_on:
-            fc = sh.friction_compensation(tau_p, qdot, sh.fade(y, shaping), shaping)
+            phi = sh.fade(y, shaping)
+            learned = self._learned_friction_nm if shaping.learning_on else None
+            fc = sh.friction_compensation(tau_p, qdot, phi, shaping, learned)
             for j in range(n):
                 tau[j] += fc[j]
+            if learned is not None and dt_s > 0.0:
+                sh.learn_friction(learned, tau_p, qdot, phi, shaping,
+                                  dt_s if dt_s < MAX_LEARNING_STEP_S else MAX_LEARNING_STEP_S)
         total = 0.0
         for t in tau:
             total += t
@@ -342,6 +391,7 @@ class Regulator:
         """
         gains, shaping, band = self._law
         goal, q_star = self._target
+        band = self._band_at(band, q_star)
         u = cl.potential_energy(self.error(q, goal)[0], gains, shaping.large_error_gain)
         if band is not None:
             u += band.energy(q)

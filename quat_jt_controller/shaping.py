@@ -24,10 +24,17 @@ The law of Eq. (22) becomes
   configuration (from the goal-check worker: the stream's task velocity mapped through
   J(q*), never an inverse in the tick), ``g_v`` in [0, 1]. Zero for a fixed goal.
 * ``tau_fc``, Coulomb friction compensation (section 4): per joint
-  ``f_j [t_v + (1 - |t_v|) phi(y_tilde) t_p]``, ``t_v = tanh(qdot_j / v_eps)`` while moving,
-  ``t_p = tanh(tau_p,j / (0.001 f_j))`` in the direction of the potential torque ``tau_p`` at
-  rest, faded by ``phi`` to zero inside a small error band. Its size never exceeds ``f_j``,
-  which is what keeps dV/dt <= -qdot^T K_v qdot against a Coulomb friction of at least ``f_j``.
+  ``phi(y_tilde) (f_j + a_j) t_p [max(0, t_v t_p) + 1 - |t_v|]``, ``t_p = tanh(tau_p,j /
+  (0.001 (f_j + a_max,j)))`` the direction of the potential torque ``tau_p``, ``t_v =
+  tanh(qdot_j / v_eps)``: at rest and while the joint moves the way the potential pushes it,
+  ``f_j + a_j`` that way; a joint moving against it (an overshoot) is left to its friction.
+  All of it fades to zero inside a small error band (``phi``), so an estimate above the true
+  friction cannot feed a limit cycle at the goal. Its size never
+  exceeds ``f_j + a_j``, which is what keeps dV/dt <= -qdot^T K_v qdot against a Coulomb
+  friction of at least that. ``a_j`` in ``[0, a_max,j]`` is the learned part of the estimate
+  (:func:`learn_friction`): it grows while the joint is stuck outside the error band, which
+  happens only while ``f_j + a_j`` is below the friction that holds it, and leaks away inside
+  the band.
 
 All are off by default (:class:`Shaping` ()), which gives the paper's law exactly. Plain
 floats: the functions here run in the 1 kHz tick.
@@ -116,6 +123,10 @@ class Shaping:
     damping_speed_rad_s: tuple[float, ...] = ()
     # g_v: the joint damping acts on qdot - g_v qdot*_d of a streamed goal; 0 = off
     goal_velocity_gain: float = 0.0
+    # a_max per joint, N m: the most the friction estimate may learn at rest (0 = no learning)
+    friction_learning_limit_nm: tuple[float, ...] = ()
+    # s: a_max is learned in this time while stuck, and leaks with it inside the band
+    friction_learning_time_s: float = 1.0
 
     @classmethod
     def create(cls, n_joints: int, joint_limit_margin: float = 0.0,
@@ -127,7 +138,9 @@ class Shaping:
                configuration_gain: Optional[Sequence[float]] = None,
                configuration_radius: float = 0.05, configuration_ramp: float = 0.25,
                damping_speed: Optional[Sequence[float]] = None,
-               goal_velocity_gain: float = 0.0) -> 'Shaping':
+               goal_velocity_gain: float = 0.0,
+               friction_learning_limit: Optional[Sequence[float]] = None,
+               friction_learning_time: float = 1.0) -> 'Shaping':
         """Validate and build; raise ShapingError naming the bad value."""
         if _nonnegative('goal_velocity_gain', goal_velocity_gain) > 1.0:
             raise ShapingError(f'goal_velocity_gain must be in [0, 1], got {goal_velocity_gain}')
@@ -145,14 +158,19 @@ class Shaping:
             configuration_radius_rad=_nonnegative('configuration_radius', configuration_radius),
             configuration_ramp_rad=_positive('configuration_ramp', configuration_ramp),
             damping_speed_rad_s=_per_joint('damping_speed', damping_speed, n_joints),
-            goal_velocity_gain=float(goal_velocity_gain))
+            goal_velocity_gain=float(goal_velocity_gain),
+            friction_learning_limit_nm=_per_joint('friction_learning_limit',
+                                                  friction_learning_limit, n_joints),
+            friction_learning_time_s=_positive('friction_learning_time',
+                                               friction_learning_time))
 
     def check_size(self, n_joints: int) -> 'Shaping':
         """Return self if the per-joint vectors fit ``n_joints`` (or are empty); else raise."""
         for name, values in (('joint_limit_gain', self.joint_limit_gain),
                              ('friction_compensation', self.friction_compensation_nm),
                              ('configuration_gain', self.configuration_gain),
-                             ('damping_speed', self.damping_speed_rad_s)):
+                             ('damping_speed', self.damping_speed_rad_s),
+                             ('friction_learning_limit', self.friction_learning_limit_nm)):
             if values and len(values) != n_joints:
                 raise ShapingError(f'{name} must have {n_joints} values (one per joint), got '
                                    f'{len(values)}')
@@ -160,8 +178,21 @@ class Shaping:
 
     @cached_property  # read every tick: computed once per snapshot
     def friction_on(self) -> bool:
-        """Return True if any joint has a friction estimate."""
-        return any(f > 0.0 for f in self.friction_compensation_nm)
+        """Return True if any joint has a friction estimate or may learn one."""
+        return any(f > 0.0 for f in self.friction_compensation_nm) or self.learning_on
+
+    @cached_property  # read every tick: computed once per snapshot
+    def learning_on(self) -> bool:
+        """Return True if some joint may learn a part of its friction estimate at rest."""
+        return any(a > 0.0 for a in self.friction_learning_limit_nm)
+
+    @cached_property  # read every tick: computed once per snapshot
+    def friction_table(self) -> tuple[tuple[float, float, float], ...]:
+        """Return per joint ``(f, a_max, 0.001 (f + a_max))``: estimate, learnable, scale."""
+        n = max(len(self.friction_compensation_nm), len(self.friction_learning_limit_nm))
+        f = self.friction_compensation_nm or (0.0,) * n
+        a = self.friction_learning_limit_nm or (0.0,) * n
+        return tuple((fj, aj, TORQUE_BAND_FRACTION * (fj + aj)) for fj, aj in zip(f, a))
 
     @cached_property  # read every tick: computed once per snapshot
     def speed_damping_on(self) -> bool:
@@ -225,6 +256,22 @@ class LimitBand:
             return None
         return cls(tuple(lo), tuple(hi), tuple(gain), tuple(joints), m)
 
+    def ending_at(self, q_star: Sequence[float]) -> 'LimitBand':
+        """
+        Return this band with each inner edge moved out to ``q_star`` where it lies in the band.
+
+        A goal configuration inside a band would otherwise sit where the band pushes the joint
+        away: the band and the goal terms would balance off the goal. Ending the band at q* keeps
+        its stiffness and its side, so the joint is still pushed back from the stop beyond q*, and
+        makes q* a minimum of the whole potential again (docs/lyapunov.md, section 2). Returns
+        self if q* lies outside every band.
+        """
+        lower = tuple(min(lo, q_star[j]) for j, lo in enumerate(self.lower_rad))
+        upper = tuple(max(up, q_star[j]) for j, up in enumerate(self.upper_rad))
+        if lower == self.lower_rad and upper == self.upper_rad:
+            return self
+        return LimitBand(lower, upper, self.gain, self.joints, self.margin_rad)
+
     def add_torque(self, q: Sequence[float], tau: list[float]) -> None:
         """Add -grad U_lim(q) to ``tau`` in place: k x out of the band, 0 outside it."""
         for j in self.joints:
@@ -272,24 +319,55 @@ def fade(y_tilde: Sequence[float], shaping: Shaping) -> float:
 
 
 def friction_compensation(tau_potential: Sequence[float], qdot: Sequence[float], phi: float,
-                          shaping: Shaping) -> list[float]:
+                          shaping: Shaping,
+                          learned_nm: Optional[Sequence[float]] = None) -> list[float]:
     """
-    tau_fc per joint: f [t_v + (1 - |t_v|) phi t_p], never larger than f in size.
+    tau_fc per joint: phi (f + a) t_p [max(0, t_v t_p) + 1 - |t_v|], never above f + a in size.
 
-    ``t_v = tanh(qdot / v_eps)`` compensates the friction of a moving joint; at rest
-    ``t_p = tanh(tau_p / (0.001 f))`` adds f in the direction of the potential torque
-    ``tau_potential`` (breakaway), faded out by ``phi`` near the goal (:func:`fade`).
+    ``t_p = tanh(tau_p / (0.001 (f + a_max)))`` is the direction of the potential torque
+    ``tau_potential``, ``t_v = tanh(qdot / v_eps)``. At rest it pushes with ``f + a`` in the
+    direction of the potential (breakaway); a joint moving that way keeps the push (the
+    friction of a moving joint compensated); a joint moving against it (past the goal) gets
+    no push along its motion, only ``(1 - |t_v|)`` towards the potential, so the friction
+    brakes the overshoot. So the compensation does positive work only while the potential
+    does. ``phi`` (:func:`fade`) turns all of it off near the goal. ``learned_nm`` is ``a``,
+    the part of the estimate learned at rest (:func:`learn_friction`; None = zeros).
+    """
+    out = [0.0] * len(qdot)
+    if phi <= 0.0:
+        return out
+    v_eps = shaping.friction_velocity_rad_s
+    for j, (f, _, scale) in enumerate(shaping.friction_table):
+        size = f if learned_nm is None else f + learned_nm[j]
+        if size <= 0.0:
+            continue
+        tv = tanh(qdot[j] / v_eps)
+        tp = tanh(tau_potential[j] / scale)
+        along = tv * tp
+        out[j] = phi * size * tp * ((along if along > 0.0 else 0.0) + 1.0 - abs(tv))
+    return out
+
+
+def learn_friction(learned_nm: list[float], tau_potential: Sequence[float],
+                   qdot: Sequence[float], phi: float, shaping: Shaping, dt_s: float) -> None:
+    """
+    Advance ``a``, the learned part of the friction estimate, by one tick of ``dt_s``, in place.
+
+    ``da/dt = (a_max / T) phi (1 - |t_v|) |t_p| - (1 - phi) a / T`` (``T`` the learning time),
+    clipped to ``[0, a_max]``: it grows only while the joint is at rest (``t_v`` ~ 0) and pushed
+    (``t_p``) outside the error band (``phi`` > 0), that is while the compensation is still
+    below the friction that holds the joint; it stops growing once the joint breaks away, and
+    leaks away within the band (docs/lyapunov.md, section 4).
     """
     v_eps = shaping.friction_velocity_rad_s
-    out = []
-    for f, tp_nm, v in zip(shaping.friction_compensation_nm, tau_potential, qdot):
-        if f <= 0.0:
-            out.append(0.0)
+    rate = dt_s / shaping.friction_learning_time_s
+    for j, (_, a_max, scale) in enumerate(shaping.friction_table):
+        if a_max <= 0.0:
             continue
-        tv = tanh(v / v_eps)
-        tp = tanh(tp_nm / (TORQUE_BAND_FRACTION * f)) if phi > 0.0 else 0.0
-        out.append(f * (tv + (1.0 - abs(tv)) * phi * tp))
-    return out
+        a = learned_nm[j]
+        stuck = (1.0 - abs(tanh(qdot[j] / v_eps))) * abs(tanh(tau_potential[j] / scale))
+        a += rate * (a_max * phi * stuck - (1.0 - phi) * a)
+        learned_nm[j] = a_max if a > a_max else (a if a > 0.0 else 0.0)
 
 
 def add_configuration_torque(q: Sequence[float], q_star: Sequence[float], shaping: Shaping,
@@ -362,7 +440,10 @@ def from_parameters(values: dict, n_joints: int) -> Shaping:
         configuration_radius=values.get('configuration_radius', d.configuration_radius_rad),
         configuration_ramp=values.get('configuration_ramp', d.configuration_ramp_rad),
         damping_speed=values.get('damping_speed'),
-        goal_velocity_gain=values.get('goal_velocity_gain', 0.0))
+        goal_velocity_gain=values.get('goal_velocity_gain', 0.0),
+        friction_learning_limit=values.get('friction_learning_limit'),
+        friction_learning_time=values.get('friction_learning_time',
+                                          d.friction_learning_time_s))
 
 
 def describe(shaping: Shaping) -> str:
@@ -382,4 +463,7 @@ def describe(shaping: Shaping) -> str:
                      f'{shaping.goal_velocity_gain:g}')
     if shaping.friction_on:
         parts.append(f'friction compensation {list(shaping.friction_compensation_nm)} N m')
+    if shaping.learning_on:
+        parts.append(f'learning up to {list(shaping.friction_learning_limit_nm)} N m more at '
+                     f'rest in {shaping.friction_learning_time_s:g} s')
     return '; '.join(parts) if parts else "off (the paper's law)"

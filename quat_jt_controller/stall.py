@@ -92,9 +92,10 @@ class StallDetector:
         friction = shaping.friction_compensation_nm
         tau_p = out.tau_potential_nm
         if friction and tau_p:
-            weak = [f'{name} |tau| {abs(t):.3g} N m <= {f:g} N m'
-                    for name, t, f in zip(model.joint_names, tau_p, friction)
-                    if f > 0.0 and abs(t) <= f]
+            learned = reg.learned_friction_nm  # the estimate so far: f + what was learned
+            weak = [f'{name} |tau| {abs(t):.3g} N m <= {f + a:.3g} N m'
+                    for name, t, f, a in zip(model.joint_names, tau_p, friction, learned)
+                    if f > 0.0 and abs(t) <= f + a]
             if weak:
                 causes.append('potential torque below the friction estimate ('
                               + ', '.join(weak) + ')')

@@ -48,6 +48,20 @@ class Supervisor:
         self._decimation = 0
         self._published_q: quat.Quaternion = (1.0, 0.0, 0.0, 0.0)
         self.diagnostics_due = False
+        self._last_stamp_ns = 0
+
+    def tick_interval_s(self, stamp_ns: int) -> float:
+        """
+        Return the time since the last state's stamp (s), the tick's time step; 0 if unknown.
+
+        0 for the first state, an unstamped one, or one not newer than the last: a tick of
+        zero length re-evaluates the law without advancing its slow state (the friction
+        learned at rest). The regulator caps long gaps.
+        """
+        last, self._last_stamp_ns = self._last_stamp_ns, stamp_ns
+        if last <= 0 or stamp_ns <= last:
+            return 0.0
+        return (stamp_ns - last) * 1e-9
 
     # -- states ---------------------------------------------------------------------------
     def before_tick(self, q: Sequence[float], now_ns: int) -> Optional[Goal]:

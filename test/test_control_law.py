@@ -9,6 +9,7 @@ import pytest
 from quat_jt_controller import control_law as cl
 from quat_jt_controller import paper
 from quat_jt_controller import quaternion as quat
+from quat_jt_controller.regulator import Goal, Regulator
 from robots import PAPER_KP, PAPER_KV, PAPER_LAMBDA, Q_DESIRED, random_q, wrist_model, \
     xarm6_model
 
@@ -60,17 +61,15 @@ def test_eq21_error_jacobian_is_minus_q_times_geometric_jacobian(make_model, tas
 @pytest.mark.parametrize('potential', ['quadratic', 'tanh'])
 @pytest.mark.parametrize('make_model, task', CASES)
 def test_torque_is_minus_gradient_of_potential(make_model, task, potential):
-    """With K_v = 0 and g = 0, Eq. (24)/(32) is -grad_q U_a(y_tilde(q)) of Eq. (23)/(31)."""
+    """At rest and without g, the tick's Eq. (24)/(32) is -grad_q U_a(y_tilde(q)) (23)/(31)."""
     model = make_model()
     rng = np.random.default_rng(23)
-    g = gains(potential, task, model.n)
+    g = gains(potential, task, model.n, gravity=False)
     for _ in range(10):
         p_d, q_d = random_goal(model, rng)
         q = random_q(model, rng)
-        p, R, J = model.kinematics(q)
-        y, eta_e = cl.output_error(p, R, p_d, q_d, task)
-        rows = J if task is POSE else J[3:]
-        tau = cl.control_torque(rows, y, eta_e, [0.0] * model.n, None, g)
+        regulator = Regulator(model, task, g, [math.inf] * model.n, Goal(q_d, tuple(p_d)))
+        tau = regulator.update(q, [0.0] * model.n).tau_nm
 
         def energy(qq):
             return cl.potential_energy(y_of_q(model, qq, p_d, q_d, task), g)
@@ -80,14 +79,18 @@ def test_torque_is_minus_gradient_of_potential(make_model, task, potential):
 
 
 def test_damping_and_gravity_terms():
+    """The tick adds -K_v qdot (Eq. 22) and, if asked, g(q); nothing else depends on them."""
+    model = wrist_model()
     g = gains('quadratic', ORI, 3, kv=(2.0, 3.0, 4.0))
-    zero_j = [[0.0] * 3] * 3
-    tau = cl.control_torque(zero_j, (0.1, 0.2, 0.3), 0.9, [1.0, -1.0, 0.5], [0.1, 0.2, 0.3], g)
-    assert tau == pytest.approx([-2.0 + 0.1, 3.0 + 0.2, -2.0 + 0.3])
-    g_off = dataclasses.replace(g, gravity_compensation=False)
-    tau = cl.control_torque(zero_j, (0.1, 0.2, 0.3), 0.9, [1.0, -1.0, 0.5], [0.1, 0.2, 0.3],
-                            g_off)
-    assert tau == pytest.approx([-2.0, 3.0, -2.0])
+    q, qdot = [0.2, 0.7, -0.3], [1.0, -1.0, 0.5]
+    on = Regulator(model, ORI, g, [math.inf] * 3, Goal(Q_DESIRED))
+    off = Regulator(model, ORI, dataclasses.replace(g, gravity_compensation=False),
+                    [math.inf] * 3, Goal(Q_DESIRED))
+    at_rest = np.array(off.update(q, [0.0] * 3).tau_nm)
+    np.testing.assert_allclose(off.update(q, qdot).tau_nm - at_rest, [-2.0, 3.0, -2.0],
+                               atol=1e-12)
+    np.testing.assert_allclose(np.array(on.update(q, qdot).tau_nm) - off.update(q, qdot).tau_nm,
+                               model.gravity(q), atol=1e-12)
 
 
 def test_task_force_matches_numpy_form():
@@ -111,11 +114,10 @@ def test_torque_unchanged_when_measured_or_desired_quaternion_flips_sign(q, q_d,
     """docs/errata.md note 6: e and Q flip together and grad U_a is odd, so tau is unchanged."""
     g = gains(potential, ORI, 3)
     J = [[0.3, -0.2, 0.5], [0.1, 0.9, -0.4], [1.0, 0.0, 0.2]]
-    qdot = [0.1, -0.2, 0.3]
 
     def torque(qm, qd):
         eta_e, e = quat.orientation_error(qm, qd)
-        return cl.control_torque(J, e, eta_e, qdot, None, g)
+        return cl.potential_torque(J, e, eta_e, g)
 
     ref = torque(q, q_d)
     neg = tuple(-c for c in q)

@@ -550,3 +550,32 @@ def test_a_stamped_stream_gets_its_joint_velocity_and_a_pause_makes_the_goal_fix
     probe.state_pub.publish(state(q_now))
     probe.spin_until(lambda: node.regulator.goal_joint_velocity is None,
                      'the next tick to make the goal fixed again')
+
+
+def test_friction_is_learned_at_rest_off_the_goal_and_reported(make_probe):
+    """Stuck away from the goal, the node learns friction from its states' stamps (section 4)."""
+    probe = make_probe({'friction_compensation': [0.5, 0.5, 0.5],
+                        'friction_learning_limit': [1.0, 1.0, 1.0]})
+    node = probe.node
+    stuck = (0.1, 0.5, 0.2)
+    probe.command_for(state(stuck))
+    probe.send_goal(goal(GOAL_XYZW))
+
+    def learned() -> bool:
+        probe.command_for(state(stuck))  # at rest, freshly stamped: time passes between ticks
+        return all(a > 0.0 for a in node.regulator.learned_friction_nm)
+    probe.spin_until(learned, 'friction learned at rest', timeout=15.0)
+
+    def reported():
+        probe.command_for(state(stuck))
+        for arr in reversed(probe.diagnostics):
+            for s in arr.status:
+                if s.name.endswith(': goal'):
+                    return {kv.key: kv.value for kv in s.values}
+        return None
+
+    def learned_reported() -> bool:
+        text = (reported() or {}).get('learned_friction_nm', '')
+        return bool(text) and all(float(x) > 0.0 for x in text.strip('[]').split(','))
+    probe.spin_until(learned_reported, 'learned friction on /diagnostics', timeout=15.0)
+    assert 'goal_configuration_rad' in reported()

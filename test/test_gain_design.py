@@ -26,21 +26,21 @@ pytestmark = pytest.mark.unit
 REPO = Path(__file__).resolve().parent.parent
 # The command lines that wrote config/wrist_controller.yaml and config/xarm6_controller.yaml.
 WRIST_ARGS = ['--task', 'orientation', '--friction', '1.8', '0.72', '0.45', '--delays', '1',
-              '2', '3']
+              '2']
 XARM6_ARGS = ['--urdf', str(Path(pybullet_data.getDataPath()) / 'xarm' / 'xarm6_robot.urdf'),
               '--base-link', 'link_base', '--tip-link', 'link6', '--task', 'pose',
               '--friction', '0.009', '0.009', '0.0045', '0.0018', '0.0018', '0.00045',
-              '--delays', '1', '2', '3']
+              '--delays', '1', '2']
 
 
 @pytest.fixture(scope='module')
 def designs():
     return {
         'wrist': (wrist_model(), gd.design(wrist_model(), cl.Task.ORIENTATION,
-                                           friction_nm=(1.8, 0.72, 0.45), delays=(1, 2, 3))),
+                                           friction_nm=(1.8, 0.72, 0.45), delays=(1, 2))),
         'xarm6': (xarm6_model(), gd.design(xarm6_model(), cl.Task.POSE,
                                            friction_nm=(0.009, 0.009, 0.0045, 0.0018, 0.0018,
-                                                        0.00045), delays=(1, 2, 3))),
+                                                        0.00045), delays=(1, 2))),
     }
 
 
@@ -144,3 +144,31 @@ def test_the_command_prints_a_loadable_file_and_the_design_parameters_match():
                    'potential', 'base_link', 'tip_link', 'robot_description'):
             continue
         assert all(isinstance(v, float) for v in values), (key, value)
+
+
+def test_the_design_warns_of_estimates_the_urdf_does_not_support():
+    model = xarm6_model()  # <dynamics friction="1.0"/> on every joint
+    assert model.friction_nm == (1.0,) * 6
+    ok = gd.friction_warnings(model, np.full(6, 0.5), np.full(6, 0.5))
+    assert ok == []
+    high = gd.friction_warnings(model, np.array([1.5, 0.5, 0.5, 0.5, 0.5, 0.5]),
+                                np.full(6, 0.5))
+    assert len(high) == 1 and high[0].startswith('joint1: the friction estimate 1.5 N m is '
+                                                 "above the URDF's 1 N m")
+    unknown = gd.friction_warnings(wrist_model(), np.array([1.8, 0.72, 0.45]), np.zeros(3))
+    assert len(unknown) == 1 and 'cannot be checked' in unknown[0]
+    assert gd.friction_warnings(wrist_model(), np.zeros(3), np.zeros(3)) == []
+
+
+def test_the_learnable_friction_comes_out_of_the_budget():
+    model = wrist_model()
+    friction = [1.8, 0.72, 0.45]
+    plain = gd.design(model, cl.Task.ORIENTATION, friction_nm=friction, friction_learning=0.0)
+    learning = gd.design(model, cl.Task.ORIENTATION, friction_nm=friction)
+    assert learning.shaping.friction_learning_limit_nm == pytest.approx(
+        [gd.FRICTION_LEARNING * f for f in friction])
+    assert plain.shaping.friction_learning_limit_nm == (0.0, 0.0, 0.0)
+    np.testing.assert_allclose(plain.figures['budget_nm'] - learning.figures['budget_nm'],
+                               gd.TORQUE_SHARE * gd.FRICTION_LEARNING * np.array(friction))
+    with pytest.raises(ValueError, match='friction_learning'):
+        gd.design(model, cl.Task.ORIENTATION, friction_nm=friction, friction_learning=-1.0)

@@ -67,3 +67,20 @@ def test_a_stream_of_goals_keeps_one_ik_branch_from_the_warm_start():
             assert max(abs(a - b) for a, b in zip(q_star, q_last)) < WARM_STEP_RAD
         q_last = q_star.tolist()
     assert max(abs(a - b) for a, b in zip(q_last, q_path[-1])) < 1e-3  # still the path's branch
+
+
+def test_the_goal_configuration_is_polished_to_the_models_precision():
+    """q* reaches the goal to 1e-10, not to the search's 1e-5: U_a and U_c share a minimum."""
+    import numpy as np
+    from quat_jt_controller.goal_check import goal_configuration, POLISHED_TOLERANCE
+    for model, task, q_goal in ((xarm6_model(), POSE, [0.4, -0.3, -1.2, 0.3, 1.1, 0.2]),
+                                (wrist_model(), ORI, [0.3, 2.5, -3.0])):
+        p_d, R_d = model.forward_kinematics(q_goal)
+        q_d = quat.from_rotation_matrix(R_d)
+        q_star = goal_configuration(model, [0.0] * model.n, q_d, p_d, task, 0.25)
+        assert q_star is not None
+        p, R = model.forward_kinematics(list(q_star))
+        _, e = quat.orientation_error(quat.from_rotation_matrix(R), q_d)
+        assert np.linalg.norm(e) < POLISHED_TOLERANCE  # ||e|| = sin(angle / 2)
+        if task is POSE:
+            assert np.linalg.norm(np.subtract(p, p_d)) < POLISHED_TOLERANCE

@@ -167,10 +167,83 @@ def test_friction_compensation_at_rest_pushes_with_the_potential_and_fades_at_th
     assert fc[0] == pytest.approx(2.0) and fc[1] == pytest.approx(-0.8) and fc[2] == 0.0
     assert sh.fade((0.0019, 0.0, 0.0), shaping) == 0.0  # below half the band: off
     assert 0.0 < sh.fade((0.003, 0.0, 0.0), shaping) < 1.0
-    moving = sh.friction_compensation([0.0, 0.0, 0.0], [1.0, -1.0, 0.0], 0.0, shaping)
+    # moving the way the potential pushes: the friction of the moving joint is compensated
+    moving = sh.friction_compensation([0.3, -0.2, 0.0], [1.0, -1.0, 0.0], far, shaping)
     assert moving[0] == pytest.approx(2.0) and moving[1] == pytest.approx(-0.8)
+    # moving against it (past the goal): nothing along the motion, the friction brakes it
+    overshoot = sh.friction_compensation([-0.3, 0.2, 0.0], [1.0, -1.0, 0.0], far, shaping)
+    assert -2.0 * (1.0 - math.tanh(20.0)) <= overshoot[0] <= 0.0
+    assert 0.0 <= overshoot[1] <= 0.8 * (1.0 - math.tanh(20.0))
+    slow = sh.friction_compensation([-0.3, 0.0, 0.0], [0.01, 0.0, 0.0], far, shaping)
+    assert slow[0] == pytest.approx(-2.0 * (1.0 - math.tanh(0.2)))  # towards the potential
+    # near the goal all of it is off: an over-estimate cannot cycle there
+    assert sh.friction_compensation([0.3, -0.2, 0.0], [1.0, -1.0, 0.0], 0.0, shaping) == [0.0] * 3
     pose = sh.fade((0.002, 0.0, 0.0, 0.0, 0.0, 0.0), shaping)  # 2 mm, band 0.5 mm
     assert pose == 1.0
+
+
+def test_friction_learning_grows_only_while_stuck_off_the_goal_and_leaks_at_it():
+    shaping = sh.Shaping.create(2, friction_compensation=(1.0, 1.0),
+                                friction_learning_limit=(0.5, 0.0), friction_learning_time=1.0)
+    assert shaping.learning_on and shaping.friction_on
+    learned = [0.0, 0.0]
+    for _ in range(250):  # stuck, pushed, far from the goal: 0.5 N m/s
+        sh.learn_friction(learned, [0.3, 0.3], [0.0, 0.0], 1.0, shaping, 1e-3)
+    assert learned[0] == pytest.approx(0.125, rel=1e-3) and learned[1] == 0.0
+    fc = sh.friction_compensation([0.3, 0.3], [0.0, 0.0], 1.0, shaping, learned)
+    assert fc[0] == pytest.approx(1.125, rel=1e-3) and fc[1] == pytest.approx(1.0)
+    for _ in range(2000):  # capped at the limit
+        sh.learn_friction(learned, [0.3, 0.3], [0.0, 0.0], 1.0, shaping, 1e-3)
+    assert learned[0] == 0.5
+    before = list(learned)
+    sh.learn_friction(learned, [0.3, 0.3], [1.0, 0.0], 1.0, shaping, 1e-3)  # moving: holds
+    assert learned == before
+    for _ in range(1000):  # within the band (phi = 0): leaks with the learning time
+        sh.learn_friction(learned, [0.3, 0.3], [0.0, 0.0], 0.0, shaping, 1e-3)
+    assert learned[0] == pytest.approx(0.5 * math.exp(-1.0), rel=2e-3)
+
+
+def test_regulator_learns_friction_only_from_ticks_with_a_time_step():
+    model = wrist_model()
+    gains = cl.Gains.create('tanh', (8.0,) * 3, (1.5, 1.2, 0.8), (4.0,) * 3, ORI, 3)
+    shaping = sh.Shaping.create(3, friction_compensation=(1.0, 0.5, 0.3),
+                                friction_learning_limit=(1.0, 0.5, 0.3))
+    reg = Regulator(model, ORI, gains, None, None, shaping)
+    reg.hold([0.0, 0.5, 0.0])
+    reg.set_goal(reg.pose([0.2, 0.6, 0.1]))  # off the goal, at rest
+    for _ in range(100):
+        reg.update([0.0, 0.5, 0.0], [0.0] * 3)  # re-evaluations: no time passes
+    assert reg.learned_friction_nm == (0.0, 0.0, 0.0)
+    for _ in range(100):
+        reg.update([0.0, 0.5, 0.0], [0.0] * 3, 1e-3)
+    assert all(a > 0.0 for a in reg.learned_friction_nm)
+    reg.set_shaping(dataclasses.replace(shaping, friction_learning_limit_nm=()))
+    assert reg.learned_friction_nm == (0.0, 0.0, 0.0)  # learning off: forgotten
+
+
+def test_the_band_ends_at_a_goal_configuration_inside_it():
+    """A q* in the band is a minimum of the whole potential: no push away from the goal."""
+    model = wrist_model()
+    gains = cl.Gains.create('tanh', (8.0,) * 3, (1.5, 1.2, 0.8), (4.0,) * 3, ORI, 3)
+    shaping = sh.Shaping.create(3, joint_limit_margin=0.25, joint_limit_gain=(40.0,) * 3,
+                                configuration_gain=(6.0,) * 3, configuration_radius=0.0)
+    reg = Regulator(model, ORI, gains, [math.inf] * 3, None, shaping)
+    q_star = [0.3, model.position_upper[1] - 0.1, -0.2]  # joint 2 0.15 rad deep in its band
+    reg.set_goal(reg.pose(q_star))
+    band_push = reg.update(q_star, [0.0] * 3).tau_potential_nm  # q* not known yet
+    assert band_push[1] < -1.0  # the band pushes joint 2 away from its goal
+    assert reg.set_goal_configuration(reg.goal, q_star)
+    assert reg.goal_in_band() == (1,)
+    out = reg.update(q_star, [0.0] * 3)
+    np.testing.assert_allclose(out.tau_potential_nm, 0.0, atol=1e-9)
+    beyond = list(q_star)
+    beyond[1] += 0.05  # towards the stop, beyond q*: pushed back, by the band too
+    tau = reg.update(beyond, [0.0] * 3).tau_potential_nm
+    assert tau[1] < -40.0 * 0.05 * 0.99
+    assert reg.potential_energy(q_star) == pytest.approx(0.0, abs=1e-12)
+    assert reg.potential_energy(beyond) > 0.0
+    reg.set_goal_configuration(reg.goal, [0.3, 0.5, -0.2])  # outside the bands
+    assert reg.goal_in_band() == ()
 
 
 def test_goal_configuration_term_is_a_huber_spring_with_a_dead_zone():

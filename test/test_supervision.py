@@ -82,3 +82,13 @@ def test_the_published_quaternion_keeps_its_hemisphere():
     flipped = tuple(-c for c in paper.Q_DESIRED)  # the same rotation, the other sign
     again = sup.published_quaternion(quat.to_rotation_matrix(flipped))
     assert sum(a * b for a, b in zip(first, again)) > 0.0
+
+
+def test_the_tick_interval_comes_from_the_state_stamps():
+    sup = supervisor()
+    assert sup.tick_interval_s(0) == 0.0  # unstamped
+    assert sup.tick_interval_s(5_000_000_000) == 0.0  # the first stamped state
+    assert sup.tick_interval_s(5_001_000_000) == pytest.approx(1e-3)
+    assert sup.tick_interval_s(5_001_000_000) == 0.0  # a repeat: no time passed
+    assert sup.tick_interval_s(5_000_500_000) == 0.0  # older: no time passes backwards
+    assert sup.tick_interval_s(5_002_500_000) == pytest.approx(2e-3)

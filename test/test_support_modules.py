@@ -240,3 +240,22 @@ def test_every_unusable_value_error_has_one_base_class():
     with pytest.raises(QuatJtError, match='goal_velocity_gain'):
         from quat_jt_controller.shaping import Shaping
         Shaping.create(3, goal_velocity_gain=2.0)
+
+
+def test_the_goal_status_says_when_the_goal_configuration_term_is_off_or_in_a_band():
+    from quat_jt_controller import diagnostics
+    Counters = diagnostics.Counters
+    none = diagnostics.ConfigurationState(True, None, ())
+    _, message, values = diagnostics.goal_status('target_pose', None, '', None, None, False,
+                                                 Counters(), configuration=none)
+    assert 'goal-configuration term is off for this goal' in message
+    assert ('goal_configuration_rad', '') in values
+    banded = diagnostics.ConfigurationState(True, (0.1, 2.5, 0.0), ('joint2',), (0.5, 0.0, 0.1))
+    _, message, values = diagnostics.goal_status('target_pose', None, '', None, None, False,
+                                                 Counters(), configuration=banded)
+    assert 'joint-limit band of joint2: the band ends there' in message
+    assert ('goal_configuration_in_band', 'joint2') in values
+    assert ('learned_friction_nm', '[0.5, 0.0, 0.1]') in values
+    _, message, _ = diagnostics.goal_status('hold', None, '', None, None, False, Counters(),
+                                            configuration=none)
+    assert 'goal-configuration' not in message  # holding: q* is the held pose
