@@ -371,14 +371,14 @@ class Regulator:
             fc = sh.friction_compensation(tau_p, qdot, phi, shaping, learned)
             for j in range(n):
                 tau[j] += fc[j]
-            if learned is not None and dt_s > 0.0:
-                sh.learn_friction(learned, tau_p, qdot, phi, shaping,
-                                  dt_s if dt_s < MAX_LEARNING_STEP_S else MAX_LEARNING_STEP_S)
         total = 0.0
         for t in tau:
             total += t
         if total - total != 0.0:  # NaN or Inf somewhere (inf - inf is NaN)
             return TickOutput(list(self._zero), y, eta_e, p, R, False, False, tuple(self._zero))
+        if shaping.learning_on and dt_s > 0.0:  # only from a finite tick: never poisoned
+            sh.learn_friction(self._learned_friction_nm, tau_p, qdot, phi, shaping,
+                              dt_s if dt_s < MAX_LEARNING_STEP_S else MAX_LEARNING_STEP_S)
         saturated = cl.saturate(tau, self.effort_limits_nm)
         return TickOutput(tau, y, eta_e, p, R, saturated, True, tuple(tau_p))
 

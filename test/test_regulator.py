@@ -6,6 +6,7 @@ import pytest
 from quat_jt_controller import control_law as cl
 from quat_jt_controller import paper
 from quat_jt_controller import quaternion as quat
+from quat_jt_controller import shaping as sh
 from quat_jt_controller.regulator import Goal, Regulator
 from robots import random_q, wrist_model, xarm6_model
 
@@ -61,6 +62,15 @@ def test_non_finite_law_gives_zero_torque_and_says_so():
     assert not out.finite and out.tau_nm == [0.0, 0.0, 0.0]
 
 
+def test_a_non_finite_tick_does_not_poison_the_learned_friction():
+    shaping = sh.Shaping.create(3, friction_compensation=(1.0, 1.0, 1.0),
+                                friction_learning_limit=(1.0, 1.0, 1.0))
+    reg = Regulator(wrist_model(), ORI, paper_gains(kp=(1.7e308,) * 3),
+                    goal=Goal(paper.Q_DESIRED), shaping=shaping)
+    assert not reg.update([1.0, 1.0, 1.0], [0.0, 0.0, 0.0], 1e-3).finite
+    assert reg.learned_friction_nm == (0.0, 0.0, 0.0)
+
+
 def test_hold_makes_the_measured_pose_the_goal_and_gives_gravity_alone():
     model = wrist_model()
     reg = Regulator(model, ORI, paper_gains())
@@ -109,7 +119,6 @@ def test_goal_validation_names_the_problem_in_ros_order():
 @pytest.mark.parametrize('seed', range(3))
 def test_the_goal_velocity_term_adds_k_v_g_v_qdot_star_and_nothing_else(seed):
     """docs/lyapunov.md, section 7: without qdot*_d, or with g_v = 0, the law to the bit."""
-    from quat_jt_controller import shaping as sh
     model = wrist_model()
     rng = np.random.default_rng(seed)
     q, qdot = random_q(model, rng).tolist(), rng.normal(size=3).tolist()
