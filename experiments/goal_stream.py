@@ -254,8 +254,8 @@ def main(argv: Optional[list] = None) -> int:
     parser.add_argument('--config', default=PRODUCT_CONFIG,
                         help='controller config, relative to the package share')
     parser.add_argument('--set', action='append', default=[], metavar='NAME=VALUE',
-                        help='override a controller parameter, VALUE as YAML/JSON, e.g. '
-                             "--set 'goal_velocity_damping=[0, 0, 0]'")
+                        help='override a controller parameter, VALUE as JSON, e.g. '
+                             "--set 'goal_velocity_gain=0.0'")
     parser.add_argument('--out', type=Path, default=Path('results/goal_stream'),
                         help='folder for the node logs and stream.json')
     args = parser.parse_args(argv)

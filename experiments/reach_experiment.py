@@ -32,7 +32,6 @@ cycle.
 ``--dds K`` also runs the first K wrist cases over DDS with the real nodes (``local_ros``).
 """
 import argparse
-import contextlib
 import dataclasses
 from dataclasses import dataclass
 import math
@@ -123,21 +122,10 @@ def cases(model: RobotModel, robot: Robot, count: int, seed: int) -> list:
     return out
 
 
-@contextlib.contextmanager
 def quiet():
     """Silence PyBullet's C-level prints (connection banner, inertia warnings)."""
-    sys.stdout.flush()
-    saved = os.dup(1), os.dup(2)
-    with open(os.devnull, 'w') as null:
-        os.dup2(null.fileno(), 1)
-        os.dup2(null.fileno(), 2)
-        try:
-            yield
-        finally:
-            os.dup2(saved[0], 1)
-            os.dup2(saved[1], 2)
-            os.close(saved[0])
-            os.close(saved[1])
+    from wrist_sim.quiet import c_output_silenced
+    return c_output_silenced((1, 2))
 
 
 @dataclass

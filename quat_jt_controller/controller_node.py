@@ -75,7 +75,7 @@ class QuatJtController(Node):
         self.get_logger().info(f'extensions: {describe_shaping(self.shaping.current)}')
 
         self.supervisor = Supervisor(self.regulator, cfg.state_timeout_s,
-                                     cfg.publish_rate_divider, cfg.task is Task.POSE)
+                                     cfg.publish_rate_divider)
         self._goal_warning = ''
         self._reject_log = Throttle(THROTTLE_S)  # per cause (the reason without numbers)
         self._goal_log = Throttle(GOAL_LOG_PERIOD_S)

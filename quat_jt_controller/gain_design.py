@@ -286,15 +286,13 @@ def _median_damping_ratio(configs, slope: np.ndarray, kv: np.ndarray,
     return np.median(zeta, axis=0)
 
 
-def _worst_rho(configs, kp, kv, lam, extra, delays, dt_s, margins: bool = True) -> dict:
+def _worst_rho(configs, kp, kv, lam, extra, delays, dt_s) -> dict:
     """
-    Worst spectral radius per potential over the configurations.
+    Worst spectral radius per potential over the configurations, with the margins.
 
-    With ``margins``: with DELAY_MARGIN more ticks of delay, and at GAIN_MARGIN x the gains.
+    DELAY_MARGIN more ticks of delay than asked for, and GAIN_MARGIN x the gains.
     """
-    cases = [(1.0, d) for d in (_checked_delays(delays) if margins else delays)]
-    if margins:
-        cases += [(GAIN_MARGIN, d) for d in delays]
+    cases = _margin_cases(delays)
     worst = {}
     for potential, slope in (('quadratic', kp), ('tanh', kp * lam)):
         rho = 0.0
@@ -315,17 +313,20 @@ def configuration_stiffness(shaping: Shaping) -> np.ndarray:
 
 def _joint_stable(inertia: float, stiffness: float, damping: float, delays, dt_s) -> float:
     """Worst spectral radius of one joint's mass-spring-damper, with the margins."""
-    checked = _checked_delays(delays)
-    return max([spectral_radius(np.array([[inertia]]), np.array([[stiffness]]),
-                                np.array([[damping]]), d, dt_s) for d in checked]
-               + [spectral_radius(np.array([[inertia]]), np.array([[GAIN_MARGIN * stiffness]]),
-                                  np.array([[GAIN_MARGIN * damping]]), d, dt_s)
-                  for d in delays])
+    return max(spectral_radius(np.array([[inertia]]), np.array([[scale * stiffness]]),
+                               np.array([[scale * damping]]), d, dt_s)
+               for scale, d in _margin_cases(delays))
 
 
 def _checked_delays(delays) -> tuple[int, ...]:
     """Return the delays asked for, plus DELAY_MARGIN ticks more than the largest."""
     return tuple(sorted(set(delays) | {max(delays) + DELAY_MARGIN}))
+
+
+def _margin_cases(delays) -> list[tuple[float, int]]:
+    """Return the (gain scale, delay) pairs checked: 1x up to one tick more, 1.5x as asked."""
+    return ([(1.0, d) for d in _checked_delays(delays)]
+            + [(GAIN_MARGIN, d) for d in delays])
 
 
 def _largest_stable_damping(inertia: float, delays, dt_s) -> float:

@@ -181,6 +181,7 @@ class Regulator:
         # a, the part of the friction estimate learned at rest (N m per joint): the one state
         # the tick keeps, advanced only by ticks given a time step (shaping.learn_friction)
         self._learned_friction_nm = [0.0] * self.n
+        self._stuck = [0.0] * self.n  # this tick's (1 - |t_v|) |t_p|, for the learning
         # the limit band ending at q* (LimitBand.ending_at), cached for (band, q*): derived
         self._band_at_goal: tuple = (None, None, None)
 
@@ -310,13 +311,11 @@ class Regulator:
 
     def goal_in_band(self) -> tuple[int, ...]:
         """Return the joints whose goal configuration q* lies in the joint-limit band."""
-        gains, shaping, band = self._law
-        q_star = self._target.q_star
-        ended = self._band_at(band, q_star)
-        if ended is None or ended is band:
+        band, q_star = self._law.band, self._target.q_star
+        if band is None or q_star is None:
             return ()
-        return tuple(j for j in ended.joints if ended.lower_rad[j] != band.lower_rad[j]
-                     or ended.upper_rad[j] != band.upper_rad[j])
+        return tuple(j for j in band.joints
+                     if not band.lower_rad[j] <= q_star[j] <= band.upper_rad[j])
 
     # -- the law ----------------------------------------------------------------------------
     def error(self, q: Sequence[float], goal: Optional[Goal] = None):
@@ -367,17 +366,18 @@ class Regulator:
                 tau[j] += g[j]
         if shaping.friction_on:
             phi = sh.fade(y, shaping)
-            learned = self._learned_friction_nm if shaping.learning_on else None
-            fc = sh.friction_compensation(tau_p, qdot, phi, shaping, learned)
-            for j in range(n):
-                tau[j] += fc[j]
+            if phi > 0.0:  # else the compensation is zero (near the goal)
+                learned = self._learned_friction_nm if shaping.learning_on else None
+                fc = sh.friction_compensation(tau_p, qdot, phi, shaping, learned, self._stuck)
+                for j in range(n):
+                    tau[j] += fc[j]
         total = 0.0
         for t in tau:
             total += t
         if total - total != 0.0:  # NaN or Inf somewhere (inf - inf is NaN)
             return TickOutput(list(self._zero), y, eta_e, p, R, False, False, tuple(self._zero))
         if shaping.learning_on and dt_s > 0.0:  # only from a finite tick: never poisoned
-            sh.learn_friction(self._learned_friction_nm, tau_p, qdot, phi, shaping,
+            sh.learn_friction(self._learned_friction_nm, self._stuck, phi, shaping,
                               dt_s if dt_s < MAX_LEARNING_STEP_S else MAX_LEARNING_STEP_S)
         saturated = cl.saturate(tau, self.effort_limits_nm)
         return TickOutput(tau, y, eta_e, p, R, saturated, True, tuple(tau_p))

@@ -319,8 +319,8 @@ def fade(y_tilde: Sequence[float], shaping: Shaping) -> float:
 
 
 def friction_compensation(tau_potential: Sequence[float], qdot: Sequence[float], phi: float,
-                          shaping: Shaping,
-                          learned_nm: Optional[Sequence[float]] = None) -> list[float]:
+                          shaping: Shaping, learned_nm: Optional[Sequence[float]] = None,
+                          stuck_out: Optional[list[float]] = None) -> list[float]:
     """
     tau_fc per joint: phi (f + a) t_p [max(0, t_v t_p) + 1 - |t_v|], never above f + a in size.
 
@@ -332,41 +332,47 @@ def friction_compensation(tau_potential: Sequence[float], qdot: Sequence[float],
     brakes the overshoot. So the compensation does positive work only while the potential
     does. ``phi`` (:func:`fade`) turns all of it off near the goal. ``learned_nm`` is ``a``,
     the part of the estimate learned at rest (:func:`learn_friction`; None = zeros).
+    ``stuck_out``, if given, receives ``(1 - |t_v|) |t_p|`` per joint (how stuck and pushed
+    each joint is, for :func:`learn_friction`); it is left alone when ``phi`` is 0.
     """
     out = [0.0] * len(qdot)
     if phi <= 0.0:
         return out
     v_eps = shaping.friction_velocity_rad_s
     for j, (f, _, scale) in enumerate(shaping.friction_table):
-        size = f if learned_nm is None else f + learned_nm[j]
-        if size <= 0.0:
+        if scale <= 0.0:  # no estimate and nothing to learn
             continue
         tv = tanh(qdot[j] / v_eps)
         tp = tanh(tau_potential[j] / scale)
+        rest = 1.0 - abs(tv)
+        if stuck_out is not None:
+            stuck_out[j] = rest * abs(tp)
+        size = f if learned_nm is None else f + learned_nm[j]
         along = tv * tp
-        out[j] = phi * size * tp * ((along if along > 0.0 else 0.0) + 1.0 - abs(tv))
+        out[j] = phi * size * tp * ((along if along > 0.0 else 0.0) + rest)
     return out
 
 
-def learn_friction(learned_nm: list[float], tau_potential: Sequence[float],
-                   qdot: Sequence[float], phi: float, shaping: Shaping, dt_s: float) -> None:
+def learn_friction(learned_nm: list[float], stuck: Sequence[float], phi: float,
+                   shaping: Shaping, dt_s: float) -> None:
     """
     Advance ``a``, the learned part of the friction estimate, by one tick of ``dt_s``, in place.
 
     ``da/dt = (a_max / T) phi (1 - |t_v|) |t_p| - (1 - phi) a / T`` (``T`` the learning time),
-    clipped to ``[0, a_max]``: it grows only while the joint is at rest (``t_v`` ~ 0) and pushed
-    (``t_p``) outside the error band (``phi`` > 0), that is while the compensation is still
-    below the friction that holds the joint; it stops growing once the joint breaks away, and
-    leaks away within the band (docs/lyapunov.md, section 4).
+    clipped to ``[0, a_max]``; ``stuck`` is ``(1 - |t_v|) |t_p|`` per joint, as
+    :func:`friction_compensation` gave it this tick (unread when ``phi`` is 0). It grows only
+    while the joint is at rest (``t_v`` ~ 0) and pushed (``t_p``) outside the error band
+    (``phi`` > 0), that is while the compensation is still below the friction that holds the
+    joint; it stops growing once the joint breaks away, and leaks away within the band
+    (docs/lyapunov.md, section 4).
     """
-    v_eps = shaping.friction_velocity_rad_s
     rate = dt_s / shaping.friction_learning_time_s
-    for j, (_, a_max, scale) in enumerate(shaping.friction_table):
+    for j, (_, a_max, _) in enumerate(shaping.friction_table):
         if a_max <= 0.0:
             continue
         a = learned_nm[j]
-        stuck = (1.0 - abs(tanh(qdot[j] / v_eps))) * abs(tanh(tau_potential[j] / scale))
-        a += rate * (a_max * phi * stuck - (1.0 - phi) * a)
+        grow = a_max * phi * stuck[j] if phi > 0.0 else 0.0
+        a += rate * (grow - (1.0 - phi) * a)
         learned_nm[j] = a_max if a > a_max else (a if a > 0.0 else 0.0)
 
 

@@ -17,6 +17,7 @@ from dataclasses import dataclass
 from typing import Optional, Sequence
 
 from quat_jt_controller import quaternion as quat
+from quat_jt_controller.control_law import Task
 from quat_jt_controller.goal_motion import GoalVelocityEstimator
 from quat_jt_controller.regulator import Goal, Regulator
 
@@ -36,14 +37,14 @@ class Supervisor:
     """The controller's decisions around :class:`Regulator`; one per node."""
 
     def __init__(self, regulator: Regulator, state_timeout_s: float,
-                 publish_rate_divider: int, with_position: bool) -> None:
+                 publish_rate_divider: int) -> None:
         self.regulator = regulator
         self.state_timeout_ns = int(state_timeout_s * 1e9)
         self.publish_rate_divider = publish_rate_divider
         self.goal_source = 'none'  # 'none' | 'hold' (initial pose) | 'target_pose'
         self.stopped = False  # commanding zeros after a state timeout
         self.last_state_ns = 0  # the last valid state; 0: none yet
-        self._motion = GoalVelocityEstimator(with_position)
+        self._motion = GoalVelocityEstimator(regulator.task is Task.POSE)
         self._goal_velocity_until_ns = 0  # 0: not a stream (a fixed goal)
         self._decimation = 0
         self._published_q: quat.Quaternion = (1.0, 0.0, 0.0, 0.0)

@@ -78,6 +78,8 @@ def test_compensation_never_does_more_than_the_friction_it_cancels():
         fc = np.array(sh.friction_compensation(tau_p, qdot, phi, shaping, list(learned)))
         assert np.all(np.abs(fc) <= np.array(estimate) + learned + 1e-12)
         assert np.all(qdot * (fc - f_true * np.sign(qdot)) <= 1e-12)
+        overshoot = qdot * tau_p < 0.0  # moving against the potential: no push along it
+        assert np.all(fc[overshoot] * qdot[overshoot] <= 1e-12)
         if phi == 0.0:
             assert np.all(fc == 0.0)  # off near the goal: nothing to feed a cycle there
 

@@ -187,19 +187,24 @@ def test_friction_learning_grows_only_while_stuck_off_the_goal_and_leaks_at_it()
                                 friction_learning_limit=(0.5, 0.0), friction_learning_time=1.0)
     assert shaping.learning_on and shaping.friction_on
     learned = [0.0, 0.0]
+
+    def learn(tau_p, qdot, phi):  # one tick, as the regulator runs it
+        stuck = [0.0, 0.0]
+        sh.friction_compensation(tau_p, qdot, phi, shaping, learned, stuck)
+        sh.learn_friction(learned, stuck, phi, shaping, 1e-3)
     for _ in range(250):  # stuck, pushed, far from the goal: 0.5 N m/s
-        sh.learn_friction(learned, [0.3, 0.3], [0.0, 0.0], 1.0, shaping, 1e-3)
+        learn([0.3, 0.3], [0.0, 0.0], 1.0)
     assert learned[0] == pytest.approx(0.125, rel=1e-3) and learned[1] == 0.0
     fc = sh.friction_compensation([0.3, 0.3], [0.0, 0.0], 1.0, shaping, learned)
     assert fc[0] == pytest.approx(1.125, rel=1e-3) and fc[1] == pytest.approx(1.0)
     for _ in range(2000):  # capped at the limit
-        sh.learn_friction(learned, [0.3, 0.3], [0.0, 0.0], 1.0, shaping, 1e-3)
+        learn([0.3, 0.3], [0.0, 0.0], 1.0)
     assert learned[0] == 0.5
     before = list(learned)
-    sh.learn_friction(learned, [0.3, 0.3], [1.0, 0.0], 1.0, shaping, 1e-3)  # moving: holds
+    learn([0.3, 0.3], [1.0, 0.0], 1.0)  # moving: holds
     assert learned == before
     for _ in range(1000):  # within the band (phi = 0): leaks with the learning time
-        sh.learn_friction(learned, [0.3, 0.3], [0.0, 0.0], 0.0, shaping, 1e-3)
+        learn([0.3, 0.3], [0.0, 0.0], 0.0)
     assert learned[0] == pytest.approx(0.5 * math.exp(-1.0), rel=2e-3)
 
 

@@ -16,7 +16,7 @@ MS = 1_000_000  # ns
 
 def supervisor(divider: int = 3) -> Supervisor:
     gains = cl.Gains.create('tanh', paper.KP, paper.KV, paper.LAMBDA, cl.Task.ORIENTATION, 3)
-    return Supervisor(Regulator(wrist_model(), cl.Task.ORIENTATION, gains), 0.5, divider, False)
+    return Supervisor(Regulator(wrist_model(), cl.Task.ORIENTATION, gains), 0.5, divider)
 
 
 def turned(angle: float) -> Goal:
