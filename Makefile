@@ -5,7 +5,7 @@ VENV ?= .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: venv test test-unit demo bench soak flood lint clean
+.PHONY: venv test test-unit demo panda bench soak flood lint clean
 
 venv: $(STAMP)
 
@@ -25,9 +25,16 @@ test-unit: $(STAMP)
 
 # The main job: the paper's experiment, both potentials, real nodes over DDS.
 # DEMO_ARGS go to the experiment, e.g. make demo DEMO_ARGS='--lockstep --duration 12 --composed'
+# (--xarm6 and --panda add the ROS-free xArm6 and Panda demos)
 DEMO_ARGS ?=
 demo: $(STAMP)
 	$(PY) -m experiments.paper_experiment $(DEMO_ARGS)
+
+# The 7-DOF Panda through a sequence of goals (ROS-free, about 20 s): MCAP, GIF and a figure of
+# the errors and the null-space speed in results/panda. PANDA_ARGS go to experiments/panda_demo.py.
+PANDA_ARGS ?=
+panda: $(STAMP)
+	$(PY) -m experiments.panda_demo $(PANDA_ARGS)
 
 # The 1 kHz loop benchmark (about 5 min): two processes pinned and not pinned, each beside a
 # minimal pair, composed for 60 s, the lockstep experiment in both modes, the core tick.

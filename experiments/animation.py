@@ -19,14 +19,15 @@ import os
 from pathlib import Path
 import tempfile
 import time
-from typing import Callable, Optional, Sequence
+from typing import Callable, Optional, Sequence, Union
 
 import numpy as np
 from PIL import Image, ImageDraw
 import pybullet
 import pybullet_data
 from pybullet_utils.bullet_client import BulletClient
-from wrist_sim.simulator import disconnect, resolve_package_uris
+from wrist_sim.quiet import c_output_silenced
+from wrist_sim.simulator import disconnect, resolve_meshes
 
 AXIS_RGB = ((220, 20, 20), (20, 170, 20), (20, 60, 230))  # x, y, z
 TEXT_RGB = (20, 20, 20)
@@ -91,12 +92,13 @@ class RobotRenderer:
                  floor: bool = True) -> None:
         self.width_px, self.height_px = int(width_px), int(height_px)
         dirs = [str(d) for d in search_dirs] + [pybullet_data.getDataPath()]
-        self._client = BulletClient(connection_mode=pybullet.DIRECT)
+        with c_output_silenced():  # PyBullet prints 'argv[0]=' on each connection
+            self._client = BulletClient(connection_mode=pybullet.DIRECT)
         c = self._client
         fd, path = tempfile.mkstemp(prefix='animation_', suffix='.urdf')
         try:
             with os.fdopen(fd, 'w') as f:
-                f.write(resolve_package_uris(urdf_xml, dirs))
+                f.write(resolve_meshes(urdf_xml, dirs)[0])
             self._body = c.loadURDF(path, useFixedBase=True)
         finally:
             os.unlink(path)
@@ -250,7 +252,8 @@ def frame_indices(t_s: Sequence[float], fps: float) -> np.ndarray:
 
 def animate(urdf_xml: str, joint_names: Sequence[str], t_s: Sequence[float],
             q_rad: np.ndarray, path: Path, *, tip_link: str, base_link: Optional[str] = None,
-            goal: Optional[tuple[Sequence[float], np.ndarray]] = None,
+            goal: Union[None, tuple[Sequence[float], np.ndarray],
+                        Callable[[int], Optional[tuple]]] = None,
             text: Optional[Callable[[int], Sequence[str]]] = None, fps: float = 25.0,
             width_px: int = 320, height_px: int = 240, axis_length_m: float = 0.1,
             hold_end_s: float = 1.0, still_at_s: Optional[float] = None,
@@ -263,7 +266,8 @@ def animate(urdf_xml: str, joint_names: Sequence[str], t_s: Sequence[float],
         order; subsampled at ``fps`` of these time stamps.
     :param tip_link: the link whose frame is drawn as the current end-effector frame.
     :param base_link: the frame in which ``goal`` is given (default: the URDF root).
-    :param goal: (p_base_m, R_base) of the goal frame, drawn thicker and labelled 'goal'.
+    :param goal: (p_base_m, R_base) of the goal frame, drawn thicker and labelled 'goal'; or a
+        function of the sample index returning it (a sequence of goals), or None then.
     :param text: the lines written in the corner for sample index k (e.g. time and ||e||).
     :param hold_end_s: how long the last frame stays before the GIF loops.
     :param still_at_s, still_path: also save the frame nearest to this time as a PNG.
@@ -275,11 +279,13 @@ def animate(urdf_xml: str, joint_names: Sequence[str], t_s: Sequence[float],
     path = Path(path)
     with RobotRenderer(urdf_xml, joint_names, width_px=width_px, height_px=height_px,
                        search_dirs=search_dirs) as renderer:
-        goal_world = None
-        if goal is not None:
-            p_base, R_base = renderer.link_pose(base_link or renderer.root_link)
-            goal_world = (p_base + R_base @ np.asarray(goal[0], dtype=float),
-                          R_base @ np.asarray(goal[1], dtype=float))
+        p_base, R_base = renderer.link_pose(base_link or renderer.root_link)
+
+        def in_world(g):
+            return (p_base + R_base @ np.asarray(g[0], dtype=float),
+                    R_base @ np.asarray(g[1], dtype=float))
+        goal_at = goal if callable(goal) else (lambda i: goal)
+        goal_world = None if goal is None or callable(goal) else in_world(goal)
         if camera is None:
             extra = [] if goal_world is None else [goal_world[0]]
             camera = renderer.fit_camera(q[indices[::max(1, len(indices) // 12)]], extra,
@@ -291,6 +297,8 @@ def animate(urdf_xml: str, joint_names: Sequence[str], t_s: Sequence[float],
         for k, i in enumerate(indices):
             renderer.set_joint_positions(q[i])
             frames = []
+            if callable(goal):
+                goal_world = None if goal_at(i) is None else in_world(goal_at(i))
             if goal_world is not None:
                 frames.append(AxesFrame(tuple(goal_world[0]), goal_world[1],
                                         1.3 * axis_length_m, 4, 'goal'))

@@ -27,8 +27,12 @@ for the same duration: the floor this machine sets at that moment. What the real
 beyond it is theirs.
 
 Core: ticks per second of the node's own tick, ``Regulator.update`` (kinematics, Jacobian, g(q),
-error, law, finite check, clamp), for the wrist (3-DOF, orientation task) and the xArm6 (6-DOF,
-pose task), in one process.
+error, law, finite check, clamp), for the wrist (3-DOF, orientation task), the xArm6 (6-DOF,
+pose task) and the Panda (7-DOF, pose task, ``config/panda_controller.yaml``), in one process.
+
+Panda: the same two-process figures, pinned, for the 7-DOF Panda with its product configs
+(``config/panda_*.yaml``, every extension on), regulating to the goal of
+``launch/panda_demo.launch.py`` and holding it, in the same run (``--no-panda`` skips it).
 
     python -m experiments.benchmark [--duration 30] [--composed-duration 60]
         [--prewarm-lead S] [--out results/bench]
@@ -80,6 +84,19 @@ def core_ticks(regulator: Regulator, q, qdot, n: int = 20000) -> dict:
 
 
 def core_benchmark() -> dict:
+    import pybullet_data
+    from quat_jt_controller import shaping as sh
+    from quat_jt_controller.resources import config_parameters
+
+    p = config_parameters('panda_controller.yaml')
+    panda = RobotModel((Path(pybullet_data.getDataPath()) / 'franka_panda' / 'panda.urdf')
+                       .read_text(), p['base_link'], p['tip_link'], p['joints'])
+    g7 = cl.Gains.create('tanh', p['kp'], p['kv'], p['lambda'], cl.Task.POSE, 7)
+    q7 = [0.3, -0.5, 0.2, -2.0, 0.1, 1.8, 0.9]
+    panda_tick = Regulator(panda, cl.Task.POSE, g7, shaping=sh.from_parameters(p, 7))
+    goal7 = panda_tick.pose([0.0, -0.785, 0.0, -2.356, 0.0, 1.571, 0.785])
+    panda_tick.set_goal(goal7)
+    panda_tick.set_goal_configuration(goal7, [0.0, -0.785, 0.0, -2.356, 0.0, 1.571, 0.785])
     wrist = RobotModel(default_urdf_xml(), 'base_link', 'tool0')
     g3 = cl.Gains.create('tanh', paper.KP, paper.KV, paper.LAMBDA, cl.Task.ORIENTATION, 3)
     xarm = RobotModel(xarm6_urdf_xml(), 'link_base', 'link6')
@@ -92,6 +109,8 @@ def core_benchmark() -> dict:
             [0.3, 0.5, -0.2], [0.1, 0.1, 0.1]),
         'xArm6 6-DOF pose': core_ticks(Regulator(xarm, cl.Task.POSE, g6, goal=goal6),
                                        [0.1, -0.3, -0.8, 0.2, 0.9, -0.1], [0.1] * 6),
+        'Panda 7-DOF pose, its config (every extension on)': core_ticks(
+            panda_tick, q7, [0.1] * 7),
     }
 
 
@@ -137,36 +156,55 @@ def baseline_benchmark(duration_s: float, warmup_s: float, out: Path,
             'host_steal_percent': 100.0 * host[7] / max(sum(host), 1)}
 
 
+# The 7-DOF run: the package's Panda configs and the goal of launch/panda_demo.launch.py (the
+# flange's pose at q = (0.3, -0.5, 0.2, -2.0, 0.1, 1.8, 0.9), 0.25 m from the start).
+PANDA_GOAL = ('panda_link0', (0.3514, 0.2278, 0.6777), (-0.9678, 0.2055, -0.1104, 0.0942))
+
+
 def loop_benchmark(duration_s: float, warmup_s: float, out: Path, composed: bool = False,
                    cpus: tuple[tuple[int, ...], tuple[int, ...]] = ((), ()),
-                   controller_params: Optional[dict] = None) -> dict:
+                   controller_params: Optional[dict] = None, robot: str = 'wrist') -> dict:
     """
     Measure the real-time loop of the two nodes: two processes, or composed in one.
 
     ``cpus``: the simulator's and the controller's ``cpu_affinity`` (composed: the process is
     pinned to both); empty = not pinned. ``controller_params`` override the paper's config.
+    ``robot='panda'``: the Panda with ``config/panda_*.yaml`` (two processes), to PANDA_GOAL.
     """
     from diagnostic_msgs.msg import DiagnosticArray
     from experiments.probe import ProbeNode
     from geometry_msgs.msg import PoseStamped
 
-    out = out / ('composed' if composed else
-                 'two_processes_pinned' if any(cpus) else 'two_processes')
+    out = out / ((f'{robot}_' if robot != 'wrist' else '') + (
+        'composed' if composed else 'two_processes_pinned' if any(cpus) else 'two_processes'))
     out.mkdir(parents=True, exist_ok=True)
     domain_id = random.randint(1, 100)
     env = local_ros.isolated_env(out, domain_id)
     stats_file = out / 'sim_stats.json'
     stats_file.unlink(missing_ok=True)
     # The simulator's statistics cover the measured interval: it is stopped right after it.
-    sim_params = {'stats_file': str(stats_file), 'coulomb_friction': [0.0] * 3,
+    sim_params = {'stats_file': str(stats_file),
                   'stats_window_steps': max(int(duration_s * 1000), 100)}
     controller_params = {'potential': 'tanh', **(controller_params or {})}
+    configs = {}
+    if robot == 'panda':
+        import pybullet_data
+        urdf = {'robot_description': (Path(pybullet_data.getDataPath()) / 'franka_panda'
+                                      / 'panda.urdf').read_text()}
+        sim_params.update(urdf)
+        controller_params.update(urdf)
+        configs = {'sim_config': 'config/panda_sim.yaml',
+                   'controller_config': 'config/panda_controller.yaml'}
+        frame, position, xyzw = PANDA_GOAL
+    else:
+        sim_params['coulomb_friction'] = [0.0] * 3
+        frame, position, xyzw = 'base_link', (0.0, 0.0, 0.0), quat.to_xyzw(paper.Q_DESIRED)
     for params, cpu_affinity in zip((sim_params, controller_params), cpus):
         if cpu_affinity:
             params['cpu_affinity'] = list(cpu_affinity)
     sim, ctrl = local_ros.spawn_wrist_pair(env, out, sim_params=sim_params,
                                            controller_params=controller_params,
-                                           composed=composed)
+                                           composed=composed, **configs)
     procs = {sim.pid: sim, ctrl.pid: ctrl}  # one entry when composed
     probe = ProbeNode('benchmark_probe', domain_id)
     node, executor = probe.node, probe.executor
@@ -192,12 +230,13 @@ def loop_benchmark(duration_s: float, warmup_s: float, out: Path, composed: bool
     try:
         mode = ('composed' if composed else
                 'two processes, pinned' if any(cpus) else 'two processes')
-        print(f'loop ({mode}): starting the nodes '
+        print(f'loop ({robot}, {mode}): starting the nodes '
               f'(domain {domain_id}), warm-up {warmup_s} s')
         goal = PoseStamped()
-        goal.header.frame_id = 'base_link'
-        o = goal.pose.orientation
-        o.x, o.y, o.z, o.w = quat.to_xyzw(paper.Q_DESIRED)
+        goal.header.frame_id = frame
+        o, p = goal.pose.orientation, goal.pose.position
+        o.x, o.y, o.z, o.w = xyzw
+        p.x, p.y, p.z = position
         spin_for(2.0)
         goal_pub.publish(goal)
         spin_for(warmup_s)
@@ -269,6 +308,7 @@ def _window_range(loop: dict) -> str:
 PINNED = 'two processes, pinned'
 UNPINNED = 'two processes, not pinned'
 COMPOSED = 'composed'
+PANDA = 'Panda 7-DOF pose, two processes'
 
 
 def pinned_layout() -> tuple[tuple[int, ...], tuple[int, ...]]:
@@ -291,6 +331,9 @@ def report(loops: dict, baselines: dict, core: dict, lockstep: dict,
     for m in modes:
         header += [m, f'minimal pair, {"pinned" if m == PINNED else "not pinned"}']
     header.append(f'composed ({loops[COMPOSED]["duration_s"]:.0f} s)')
+    if PANDA in loops:
+        columns.append((loops[PANDA], None))
+        header.append(PANDA + (', pinned' if any(layout) else ''))
 
     def cells(ours, floor=None, node=None) -> list[str]:
         """One row: ``ours(loop)`` per mode, ``floor(baseline)`` beside it ('' if None)."""
@@ -420,6 +463,8 @@ def main(argv: Optional[list] = None) -> int:
                              'default: its own default (0 = off)')
     parser.add_argument('--warmup', type=float, default=3.0)
     parser.add_argument('--out', type=Path, default=Path('results/bench'))
+    parser.add_argument('--no-panda', action='store_true',
+                        help='skip the Panda run (7-DOF, pose task, its product configs)')
     parser.add_argument('--prewarm-pairs', type=int, default=0,
                         help='instead of the benchmark: this many pairs of two-process runs, '
                              'prewarm off then on (--duration s each), not pinned then pinned')
@@ -453,6 +498,9 @@ def main(argv: Optional[list] = None) -> int:
                                      controller_params=prewarm)
     loops[COMPOSED] = loop_benchmark(args.composed_duration, args.warmup, args.out,
                                      composed=True)
+    if not args.no_panda:
+        loops[PANDA] = loop_benchmark(args.duration, args.warmup, args.out, cpus=layout,
+                                      controller_params=dict(prewarm), robot='panda')
     lockstep = lockstep_benchmark(args.out, args.lockstep_duration)
     text = report(loops, baselines, core, lockstep, layout,
                   'its default' if args.prewarm_lead is None else f'{args.prewarm_lead:g} s')

@@ -112,23 +112,26 @@ def spawn_wrist_pair(env: Mapping[str, str], work_dir: Path,
                      sim_params: Optional[Mapping[str, Any]] = None,
                      controller_params: Optional[Mapping[str, Any]] = None,
                      controller_config: str = PAPER_CONTROLLER_CONFIG,
-                     composed: bool = False) -> tuple[subprocess.Popen, subprocess.Popen]:
+                     composed: bool = False,
+                     sim_config: str = 'config/wrist_sim.yaml'
+                     ) -> tuple[subprocess.Popen, subprocess.Popen]:
     """
-    Start ``wrist_sim_node`` and ``controller_node`` as the wrist demo does.
+    Start ``wrist_sim_node`` and ``controller_node`` as the demos do.
 
-    Each reads the package's ``config/wrist_sim.yaml`` / ``controller_config`` (by default
-    ``config/paper_wrist_controller.yaml``, the paper's experiment), then the given overrides.
+    Each reads the package's ``sim_config`` (by default ``config/wrist_sim.yaml``) /
+    ``controller_config`` (by default ``config/paper_wrist_controller.yaml``, the paper's
+    experiment), then the given overrides (``robot_description`` for another robot).
     Returns ``(sim, controller)``; with ``composed`` both run in one ``composed`` process,
     returned twice.
     """
     if composed:
         both = spawn_node('composed', env, work_dir,
                           params={**(sim_params or {}), **(controller_params or {})},
-                          params_files=(share_path('config/wrist_sim.yaml'),
+                          params_files=(share_path(sim_config),
                                         share_path(controller_config)))
         return both, both
     sim = spawn_node('wrist_sim_node', env, work_dir, params=sim_params,
-                     params_files=(share_path('config/wrist_sim.yaml'),))
+                     params_files=(share_path(sim_config),))
     controller = spawn_node('controller_node', env, work_dir, params=controller_params,
                             params_files=(share_path(controller_config),))
     return sim, controller

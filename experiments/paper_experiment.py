@@ -10,11 +10,13 @@ commands and the controller's error to MCAP, with what a 3D viewer needs to repl
 Then write a CSV, a figure like the paper's Fig. 2 (||e|| against time, linear and log) with
 the joint torques and angles against their URDF limits, an animated GIF of each run rendered
 offscreen from the recorded joint states (``experiments/animation.py``) and print the comparison
-table. ``--xarm6`` also runs the xArm6 demo goal (``experiments/xarm6_demo.py``, ROS-free).
+table. ``--xarm6`` also runs the xArm6 demo goal (``experiments/xarm6_demo.py``, ROS-free),
+``--panda`` the Panda's sequence of goals (``experiments/panda_demo.py``, ROS-free).
 
     python -m experiments.paper_experiment [--out results/paper] [--duration 6]
                                                         [--lockstep] [--composed]
                                                         [--no-animation] [--xarm6]
+                                                        [--panda]
 
 By default the simulator paces itself in real time, as the wrist would run. With ``--lockstep``
 it publishes ``/clock`` and steps as soon as the command for its last state has arrived
@@ -432,6 +434,9 @@ def main(argv: Optional[list] = None) -> int:
     parser.add_argument('--xarm6', action='store_true',
                         help='also run the xArm6 demo goal (experiments/xarm6_demo.py, ROS-free) '
                              'into <out>/xarm6')
+    parser.add_argument('--panda', action='store_true',
+                        help='also run the Panda through its sequence of goals '
+                             '(experiments/panda_demo.py, ROS-free) into <out>/panda')
     args = parser.parse_args(argv)
     args.out.mkdir(parents=True, exist_ok=True)
     model = RobotModel(default_urdf_xml(), 'base_link', 'tool0')
@@ -479,6 +484,10 @@ def main(argv: Optional[list] = None) -> int:
     if args.xarm6:
         from experiments import xarm6_demo
         xarm6_demo.main(['--out', str(args.out / 'xarm6')]
+                        + (['--no-animation'] if args.no_animation else []))
+    if args.panda:
+        from experiments import panda_demo
+        panda_demo.main(['--out', str(args.out / 'panda')]
                         + (['--no-animation'] if args.no_animation else []))
     print(f'Done in {time.monotonic() - t_start:.0f} s.')
     return 0

@@ -1,22 +1,27 @@
 """
 Reach any reachable goal from any start: the figures, from the package's configs.
 
-For random (start, goal) pairs, seeded, the regulator of ``config/wrist_controller.yaml`` or
-``config/xarm6_controller.yaml`` runs as the nodes run it: on the PyBullet simulator core, with
-the friction of ``config/*_sim.yaml``, sampled at 1 kHz, one tick of delay, clamped to the
-effort limits (``reference_sim.run_sampled``). The goal configuration q* reaches the regulator
-``--q-star-after`` seconds after the goal, as from the node's goal-check worker.
+For random (start, goal) pairs, seeded, the regulator of ``config/wrist_controller.yaml``,
+``config/xarm6_controller.yaml`` or ``config/panda_controller.yaml`` runs as the nodes run it:
+on the PyBullet simulator core, with the friction of ``config/*_sim.yaml``, sampled at 1 kHz,
+one tick of delay, clamped to the effort limits (``reference_sim.run_sampled``). The goal
+configuration q* reaches the regulator 0.1 s after the goal, as from the node's goal-check
+worker.
 
 * wrist (orientation): start and goal joint angles within 90% of the URDF ranges, |q2| >= 0.3
   at the goal; reached if ||e|| < 0.005 over the last 0.1 s of 4 s;
 * xArm6 (pose): start and goal within 80% of the ranges (about their middle), the goal away
   from singularities (sigma_min(J_G) >= 0.1); reached if ||p_d - p|| < 1 mm and ||e|| < 0.01
   over the last 0.1 s of 5 s.
+* Panda (pose, 7 joints: a redundant arm; the fingers held): as the xArm6, with the goal's
+  sigma_min(J_G) >= 0.05 (the issue's bound), then held 2 s more:
+  over that last second the fastest joint speed (the self-motion drift) and, at the end,
+  max_j |q_j - q*_j| (the elbow where the goal check put it).
 
 A stop is touched if a joint comes within 1e-3 rad of a URDF limit. Failures are listed with
 their likely cause (``stall.StallDetector.diagnose`` at the final state).
 
-    python -m experiments.reach_experiment [--robot wrist xarm6]
+    python -m experiments.reach_experiment [--robot wrist xarm6 panda]
         [--potential tanh quadratic] [--cases N] [--seed S] [--dds K]
         [--without configuration|friction|limits] [--fraction F] [--duration T]
         [--sim-coulomb-scale S | --sim-coulomb-effort-fraction X] [--estimate-of-sim K]
@@ -29,7 +34,10 @@ friction. The sign changes of each joint's control torque without gravity, ``tau
 counted over the case's last second: more than one on a joint and the case ends in a limit
 cycle.
 
-``--dds K`` also runs the first K wrist cases over DDS with the real nodes (``local_ros``).
+``--dds K`` also runs the first K cases of each robot over DDS with the real nodes
+(``local_ros``, lockstep paced at real time, so that the goal-check worker answers in the same
+time as on a robot; the goal 2 s after the start): the verdict from the last joint state after
+the case's duration.
 """
 import argparse
 import dataclasses
@@ -61,6 +69,7 @@ LIMIT_CYCLE_FLIPS_PER_S = 1.0  # more sign changes of tau - g(q) in the last sec
 FLIP_FLOOR = 1e-3  # of the effort limit: smaller torques have no sign (numerical dither)
 FINAL_WINDOW_S = 0.1
 Q_STAR_AFTER_S = 0.1  # the goal-check worker's answer arrives after the goal (10-50 ms)
+DDS_GOAL_AFTER_S = 2.0  # over DDS, the goal is sent this long after the start (simulated time)
 
 
 @dataclass(frozen=True)
@@ -75,6 +84,10 @@ class Robot:
     duration_s: float
     orientation_tol: float
     position_tol_m: float
+    # held on after duration_s (reached is judged at duration_s): the drift, the distance to q*
+    # and the limit cycles are measured over the last second of the hold
+    hold_s: float = 0.0
+    goal_sigma_min: float = 0.1  # pose task: the goal's sigma_min(J_G) at least this
 
 
 ROBOTS = {
@@ -82,6 +95,8 @@ ROBOTS = {
                    cl.Task.ORIENTATION, 0.9, 4.0, 0.005, math.inf),
     'xarm6': Robot('xarm6', 'xarm6_controller.yaml', 'xarm6_sim.yaml',
                    cl.Task.POSE, 0.8, 5.0, 0.01, 1e-3),
+    'panda': Robot('panda', 'panda_controller.yaml', 'panda_sim.yaml',
+                   cl.Task.POSE, 0.8, 5.0, 0.01, 1e-3, hold_s=2.0, goal_sigma_min=0.05),
 }
 
 
@@ -90,6 +105,8 @@ def robot_urdf(robot: Robot) -> str:
     if robot.name == 'wrist':
         return default_urdf_xml()
     import pybullet_data
+    if robot.name == 'panda':
+        return (Path(pybullet_data.getDataPath()) / 'franka_panda' / 'panda.urdf').read_text()
     return (Path(pybullet_data.getDataPath()) / 'xarm' / 'xarm6_robot.urdf').read_text()
 
 
@@ -116,7 +133,7 @@ def cases(model: RobotModel, robot: Robot, count: int, seed: int) -> list:
             continue
         if robot.task is cl.Task.POSE:
             _, _, J = model.kinematics(qg.tolist())
-            if np.linalg.svd(np.array(J), compute_uv=False)[-1] < 0.1:
+            if np.linalg.svd(np.array(J), compute_uv=False)[-1] < robot.goal_sigma_min:
                 continue
         out.append((q0, qg))
     return out
@@ -144,6 +161,8 @@ class Outcome:
     q_start: np.ndarray
     q_goal: np.ndarray
     q_final: np.ndarray
+    final_speed_rad_s: float = math.nan  # the fastest joint over the run's last second
+    from_q_star_rad: float = math.nan  # max_j |q_j - q*_j| at the end (nan: no q*)
     cause: str = ''
 
 
@@ -156,7 +175,9 @@ def run_case(robot: Robot, model: RobotModel, gains: cl.Gains, shaping: sh.Shapi
     p_d, R_d = model.forward_kinematics(qg.tolist())
     q_d = quat.from_rotation_matrix(R_d)
     q_star = (goal_configuration(model, q0, q_d, p_d, robot.task,
-                                 shaping.joint_limit_margin_rad)
+                                 shaping.joint_limit_margin_rad,
+                                 q_preferred=shaping.preferred_configuration_rad or None,
+                                 posture_weight=shaping.posture_weight)
               if shaping.configuration_on else None)
     loop = ClosedLoop(model, gains, robot.task, q_d, p_d, shaping=shaping)
     with quiet():
@@ -166,20 +187,27 @@ def run_case(robot: Robot, model: RobotModel, gains: cl.Gains, shaping: sh.Shapi
                              enforce_velocity_limits=sim_params.get('enforce_velocity_limits',
                                                                     True))
     try:
-        run = run_sampled(loop, sim, robot.duration_s, delay_ticks, q_star, q_star_after_s)
+        held = run_sampled(loop, sim, robot.duration_s + robot.hold_s, delay_ticks, q_star,
+                           q_star_after_s)
     finally:
         sim.close()
+    run = held.until(robot.duration_s)
     lower, upper = np.array(model.position_lower), np.array(model.position_upper)
-    gap = float(np.minimum(run.q_rad - lower, upper - run.q_rad).min())
+    gap = float(np.minimum(held.q_rad - lower, upper - held.q_rad).min())
     position, orientation = run.final(FINAL_WINDOW_S)
     reached = (run.all_finite and orientation < robot.orientation_tol
                and position < robot.position_tol_m)
-    speed = float(np.abs(np.diff(run.q_rad, axis=0)).max() / (run.t_s[1] - run.t_s[0]))
+    dt_s = run.t_s[1] - run.t_s[0]
+    speed = float(np.abs(np.diff(held.q_rad, axis=0)).max() / dt_s)
     settle_tol = (robot.position_tol_m if math.isfinite(robot.position_tol_m) else math.inf)
     settled_s = run.settled_at_s(settle_tol, robot.orientation_tol)
+    last = held.q_rad[int(np.searchsorted(held.t_s, held.t_s[-1] - 1.0)):]
     outcome = Outcome(index, reached, gap < TOUCH_RAD, position, orientation, settled_s, speed,
-                      run.saturated_ticks, torque_flips_per_s(model, run),
-                      q0, qg, run.q_rad[-1].copy())
+                      held.saturated_ticks, torque_flips_per_s(model, held),
+                      q0, qg, held.q_rad[-1].copy(),
+                      final_speed_rad_s=float(np.abs(np.diff(last, axis=0)).max() / dt_s),
+                      from_q_star_rad=(math.nan if q_star is None else
+                                       float(np.abs(held.q_rad[-1] - q_star).max())))
     if not reached:
         outcome.cause = classify(model, loop, shaping, q_star, run)
     if outcome.flips_per_s > LIMIT_CYCLE_FLIPS_PER_S:
@@ -250,6 +278,14 @@ def report(robot: Robot, potential: str, outcomes: list, elapsed_s: float) -> st
     lines.append(f'  torque sign changes in the last second (tau - g, worst joint): median '
                  f'{np.median(flips):.2f}, max {flips.max():.2f}; limit cycles (> '
                  f'{LIMIT_CYCLE_FLIPS_PER_S:g}) in {cycles} cases')
+    if robot.hold_s > 0.0 and ok:  # after settling: the cases reached
+        drift = np.array([o.final_speed_rad_s for o in outcomes if o.reached])
+        away = np.array([o.from_q_star_rad for o in outcomes if o.reached])
+        lines.append(f'  the {ok} reached, held {robot.hold_s:g} s more: fastest joint over the '
+                     f'last second median {np.median(drift):.1e}, max {drift.max():.1e} rad/s; '
+                     f'at the end, max_j |q_j - q*_j| median {np.nanmedian(away):.1e}, max '
+                     f'{np.nanmax(away):.1e} rad (no q* in '
+                     f'{int(np.count_nonzero(np.isnan(away)))})')
     lines.append(f'  final ||e||: median {np.median(ori):.2e}, max {ori.max():.2e}'
                  + (f'; final ||p_d - p||: median {np.median(pos) * 1e3:.3f} mm, max '
                     f'{pos.max() * 1e3:.3f} mm' if robot.task is cl.Task.POSE else '')
@@ -330,27 +366,29 @@ def run_robot(robot: Robot, potential: str, count: int, seed: int, delay_ticks: 
     return outcomes
 
 
-def run_dds(count: int, seed: int, progress=print) -> str:
-    """Run the first ``count`` wrist cases over DDS (real nodes, lockstep); return a report."""
+def run_dds(robot: Robot, count: int, seed: int, progress=print) -> str:
+    """Run the first ``count`` cases of ``robot`` over DDS (real nodes, lockstep); a report."""
     from geometry_msgs.msg import PoseStamped
     from sensor_msgs.msg import JointState
 
     from experiments import local_ros
     from experiments.probe import ProbeNode
 
-    robot = ROBOTS['wrist']
-    model, _, _ = load_controller(robot)
+    model, _, shaping = load_controller(robot)
+    urdf = {} if robot.name == 'wrist' else {'robot_description': robot_urdf(robot)}
     lines = []
     for i, (q0, qg) in enumerate(cases(model, robot, count, seed)):
-        _, R_d = model.forward_kinematics(qg.tolist())
+        p_d, R_d = model.forward_kinematics(qg.tolist())
         q_d = quat.from_rotation_matrix(R_d)
         work = Path(tempfile.mkdtemp(prefix='reach_dds_'))
         domain = 50 + (os.getpid() + i) % 40
         env = local_ros.isolated_env(work, domain)
         sim, ctrl = local_ros.spawn_wrist_pair(
-            env, work, sim_params={'initial_positions': q0.tolist(), 'publish_clock': True},
-            controller_params={'use_sim_time': True},
-            controller_config=local_ros.PRODUCT_CONTROLLER_CONFIG)
+            env, work, sim_params={'initial_positions': q0.tolist(), 'publish_clock': True,
+                                   'max_real_time_factor': 1.0, **urdf},
+            controller_params={'use_sim_time': True, **urdf},
+            controller_config=f'config/{robot.controller_config}',
+            sim_config=f'config/{robot.sim_config}')
         probe = ProbeNode('reach_probe', domain)
         states: list = []
         probe.node.create_subscription(JointState, '/joint_states', states.append, 100)
@@ -364,29 +402,37 @@ def run_dds(count: int, seed: int, progress=print) -> str:
                     return False
                 probe.executor.spin_once(timeout_sec=0.05)
             return True
-        try:
-            ok = spin_until(lambda: len(states) > 50, 60.0)
-            msg = PoseStamped()
-            msg.header.frame_id = 'base_link'
-            o = msg.pose.orientation
-            o.x, o.y, o.z, o.w = quat.to_xyzw(q_d)
-            t0 = states[-1].header.stamp.sec + 1e-9 * states[-1].header.stamp.nanosec
-            pub.publish(msg)
 
-            def sim_time() -> float:
-                s = states[-1].header.stamp
-                return s.sec + 1e-9 * s.nanosec - t0
-            ok = ok and spin_until(lambda: sim_time() >= robot.duration_s, 120.0)
+        def stamp_s() -> float:
+            s = states[-1].header.stamp
+            return s.sec + 1e-9 * s.nanosec
+        try:
+            # as a user would: the goal some time after the start, the goal-check worker up
+            ok = spin_until(lambda: len(states) > 50 and stamp_s() >= DDS_GOAL_AFTER_S, 60.0)
+            msg = PoseStamped()
+            msg.header.frame_id = model.base_link
+            o, p = msg.pose.orientation, msg.pose.position
+            o.x, o.y, o.z, o.w = quat.to_xyzw(q_d)
+            if robot.task is cl.Task.POSE:
+                p.x, p.y, p.z = (float(v) for v in p_d)
+            t0 = stamp_s()
+            pub.publish(msg)
+            ok = ok and spin_until(lambda: stamp_s() - t0 >= robot.duration_s, 240.0)
             q_end = [states[-1].position[states[-1].name.index(n)] for n in model.joint_names]
-            p, R = model.forward_kinematics(q_end)
-            _, e = quat.orientation_error(quat.from_rotation_matrix(R), q_d)
+            p_end, R_end = model.forward_kinematics(q_end)
+            _, e = quat.orientation_error(quat.from_rotation_matrix(R_end), q_d)
             err = math.sqrt(sum(c * c for c in e))
-            verdict = 'reached' if ok and err < robot.orientation_tol else 'NOT reached'
+            position = math.dist(p_end, p_d) if robot.task is cl.Task.POSE else 0.0
+            verdict = ('reached' if ok and err < robot.orientation_tol
+                       and position < robot.position_tol_m else 'NOT reached')
             if verdict == 'reached':
                 shutil.rmtree(work, ignore_errors=True)  # else keep the nodes' logs
-            lines.append(f'  DDS case {i}: ||e|| after {robot.duration_s:g} s (simulated) = '
-                         f'{err:.3g} -> {verdict}' + ('' if verdict == 'reached'
-                                                      else f' (logs in {work})'))
+            lines.append(f'  DDS case {i}: after {robot.duration_s:g} s (simulated) ||e|| = '
+                         f'{err:.3g}'
+                         + (f', ||p_d - p|| = {position * 1e3:.3f} mm'
+                            if robot.task is cl.Task.POSE else '')
+                         + f' -> {verdict}' + ('' if verdict == 'reached'
+                                               else f' (logs in {work})'))
             progress(lines[-1], flush=True)
         finally:
             for proc in (sim, ctrl):
@@ -405,7 +451,8 @@ def main(argv: Optional[list] = None) -> int:
     parser.add_argument('--seed', type=int, default=10)
     parser.add_argument('--delay', type=int, default=1, help='ticks of delay')
     parser.add_argument('--dds', type=int, default=0,
-                        help='also run this many wrist cases over DDS (real nodes)')
+                        help='also run the first this many cases of each robot over DDS (real '
+                        'nodes, lockstep)')
     parser.add_argument('--without', choices=list(ABLATIONS),
                         help='turn this extension off (to see what it does)')
     parser.add_argument('--fraction', type=float,
@@ -435,7 +482,7 @@ def main(argv: Optional[list] = None) -> int:
         overrides[name.strip()] = yaml.safe_load(value)
     plant = Plant(args.sim_coulomb_scale, args.sim_coulomb_effort_fraction,
                   args.estimate_of_sim)
-    default_cases = {'wrist': 200, 'xarm6': 100}
+    default_cases = {'wrist': 200, 'xarm6': 100, 'panda': 100}
     text = []
     for name in args.robot:
         robot = ROBOTS[name]
@@ -454,9 +501,10 @@ def main(argv: Optional[list] = None) -> int:
                 ', '.join(f'{k} {v}' for k, v in overrides.items())) if x)
             text.append(report(robot, label, outcomes, time.monotonic() - t0))
             print(text[-1], flush=True)
-    if args.dds:
-        text.append('wrist over DDS (nodes in lockstep, tanh, config/wrist_controller.yaml):\n'
-                    + run_dds(args.dds, args.seed))
+    for name in args.robot if args.dds else ():
+        robot = ROBOTS[name]
+        text.append(f'{name} over DDS (nodes in lockstep, tanh, config/'
+                    f'{robot.controller_config}):\n' + run_dds(robot, args.dds, args.seed))
     print('\n' + '\n'.join(text))
     return 0
 

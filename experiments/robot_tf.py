@@ -99,7 +99,9 @@ def decimate(stamps_ns: Sequence[int], rate_hz: float) -> np.ndarray:
 def write_robot_replay(log: McapLog, urdf_xml: str, joint_names: Sequence[str],
                        log_ns: Sequence[int], stamps_ns: Sequence[int], q_rad: np.ndarray,
                        goal: Optional[tuple[str, Sequence[float], Sequence[float]]] = None,
-                       tf_rate_hz: float = TF_RATE_HZ) -> dict[str, int]:
+                       tf_rate_hz: float = TF_RATE_HZ,
+                       moving_goals: Sequence[tuple[int, str, Sequence[float],
+                                                    Sequence[float]]] = ()) -> dict[str, int]:
     """
     Add the topics a 3D viewer needs to replay the robot to ``log``; return message counts.
 
@@ -107,6 +109,8 @@ def write_robot_replay(log: McapLog, urdf_xml: str, joint_names: Sequence[str],
         time), header stamp and positions (N, n) in ``joint_names`` order.
     :param goal: (base frame, p_base_m, quaternion x, y, z, w) of a frame named 'goal' child of
         the base frame, published on /tf_static.
+    :param moving_goals: (stamp_ns, base frame, p_base_m, x, y, z, w) of a sequence of goals:
+        the 'goal' frame on /tf from each stamp on (instead of ``goal``).
     """
     tree = UrdfTfTree(urdf_xml, joint_names)
     start_ns = int(log_ns[0])
@@ -120,8 +124,13 @@ def write_robot_replay(log: McapLog, urdf_xml: str, joint_names: Sequence[str],
               cdr_tf_message(static), start_ns)
     tf = log.channel('/tf', 'tf2_msgs/msg/TFMessage')
     keep = decimate(stamps_ns, tf_rate_hz)
+    goals = sorted(moving_goals, key=lambda g: g[0])
     for k in keep:
         stamp = int(stamps_ns[k])
-        log.write(tf, cdr_tf_message([(stamp,) + t for t in tree.moving_transforms(q_rad[k])]),
-                  int(log_ns[k]))
+        transforms = [(stamp,) + t for t in tree.moving_transforms(q_rad[k])]
+        current = [g for g in goals if g[0] <= stamp]
+        if current:
+            _, base, p_base_m, xyzw = current[-1]
+            transforms.append((stamp, base, GOAL_FRAME, tuple(p_base_m), tuple(xyzw)))
+        log.write(tf, cdr_tf_message(transforms), int(log_ns[k]))
     return {'/robot_description': 1, '/tf_static': 1, '/tf': int(keep.size)}

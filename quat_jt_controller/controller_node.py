@@ -20,7 +20,7 @@ from quat_jt_controller import lifecycle
 from quat_jt_controller import quaternion as quat
 from quat_jt_controller import realtime
 from quat_jt_controller.control_law import Gains, GainsError, Task
-from quat_jt_controller.goal_check import GoalCheckWorker, ModelSpec
+from quat_jt_controller.goal_check import GoalCheckWorker, ModelSpec, Posture
 from quat_jt_controller.joints import stamp_problem, StateLayout
 from quat_jt_controller.loop_stats import TickStats
 from quat_jt_controller.model import ModelError, RobotModel
@@ -65,7 +65,8 @@ class QuatJtController(Node):
             cfg.robot_description, cfg.base_link, cfg.tip_link, cfg.joints, cfg.task))
         # The extensions (live, whole) and stall detection for /diagnostics.
         self.shaping = declare_shaping(self, cfg, check=self.regulator.check_shaping,
-                                       on_apply=self._apply_shaping)
+                                       on_apply=self._apply_shaping,
+                                       preferred_configuration=model.middle_of_ranges())
         self.regulator.set_shaping(self.shaping.current)
         self.stall = StallDetector(self.regulator)
         self._change_log = ChangeLog(self, (
@@ -256,7 +257,9 @@ class QuatJtController(Node):
         self._goal_checker.submit(goal, self._last_q, goal.q_desired_base, goal.p_desired_base,
                                   shaping.joint_limit_margin_rad
                                   if shaping.configuration_on or tracking else None,
-                                  nu_desired if tracking else None)
+                                  nu_desired if tracking else None,
+                                  Posture(shaping.preferred_configuration_rad or None,
+                                          shaping.posture_weight))
         self._log_goal(goal)
 
     def _log_goal(self, goal: Goal) -> None:

@@ -51,7 +51,8 @@ POSITION_SATURATION_M = 0.1  # tanh(lambda_p 0.1 m) = 0.96
 DAMPING_RATIO = sqrt(0.5)  # of the tanh law's linearised loop (the quadratic's: x sqrt(lambda))
 # Where the sampled loop caps K_v, the stiffness is lowered until the tanh law keeps this much
 DAMPING_RATIO_MIN = 0.5
-CRUISE_FRACTION = 0.6  # of the URDF velocity limit: the speed the cubic damping aims at
+CRUISE_FRACTION = 0.6  # of the URDF velocity limit: the speed far from the goal (default)
+CRUISE_STEP = 1.1  # the goal-configuration gain of a joint slower than that grows by this
 DEFAULT_VELOCITY = 2.0 * pi  # rad/s, for a joint whose URDF gives no velocity limit
 DAMPER_SAFETY = 0.5  # of the largest damping the sampled loop tolerates on a joint
 LIMIT_MARGIN_MAX_RAD = 0.25
@@ -74,6 +75,9 @@ GAIN_MARGIN = 1.5  # ... and with the gains (stiffness and damping) this many ti
 # The damping acts on qdot - g_v qdot*_d of a streamed goal: all of it (an exogenous input to
 # the loop, which changes none of its gains; docs/lyapunov.md, section 7)
 GOAL_VELOCITY_GAIN = 1.0
+# Of the preferred posture against the distance to the measured joints, in the choice of a
+# redundant arm's q* (goal_check.posture): nearest first, the posture breaks near-ties
+POSTURE_WEIGHT = 0.1
 QO = 0.5  # |Q| on the orientation rows (Eq. 15)
 
 
@@ -194,6 +198,8 @@ class Design:
             'configuration_ramp': s.configuration_ramp_rad,
             'damping_speed': s.damping_speed_rad_s,
             'goal_velocity_gain': s.goal_velocity_gain,
+            'preferred_configuration': list(s.preferred_configuration_rad),
+            'posture_weight': s.posture_weight,
         }
 
 
@@ -304,6 +310,28 @@ def _worst_rho(configs, kp, kv, lam, extra, delays, dt_s) -> dict:
     return worst
 
 
+def _cruising_guide(configs, kp: np.ndarray, lam: np.ndarray, bound: np.ndarray,
+                    push_max: np.ndarray, cruise: np.ndarray, b_max: np.ndarray) -> np.ndarray:
+    """
+    Return the goal-configuration gains T_j: GUIDE_OVER_TASK x the task bound, or more.
+
+    A joint whose push far from the goal, ``bound + T``, would drive it slower than ``cruise``
+    against its damping K_v (which grows with the ramp's stiffness T / w) gets a larger T, up
+    to what its budget leaves, ``push_max - bound``. So a strong joint is not held to the pace
+    that the task bound, set by the weakest joint, gives it (the Panda's 87 N m shoulder
+    beside its 12 N m wrist).
+    """
+    guide = GUIDE_OVER_TASK * bound
+    ceiling = np.maximum(push_max - bound, guide)
+    for _ in range(60):
+        kv = np.minimum(_damping(configs, kp, lam, guide / GUIDE_RAMP_RAD), b_max)
+        slow = ((bound + guide) / kv < cruise) & (guide < ceiling)
+        if not slow.any():
+            break
+        guide = np.where(slow, np.minimum(guide * CRUISE_STEP, ceiling), guide)
+    return guide
+
+
 def configuration_stiffness(shaping: Shaping) -> np.ndarray:
     """Joint stiffness (N m/rad) of the goal-configuration term at q* (0 with a dead zone)."""
     if shaping.configuration_radius_rad > 0.0 or not shaping.configuration_gain:
@@ -354,14 +382,20 @@ def _damper_stable(inertia: float, damping: float, delays, dt_s) -> float:
 def design(model: RobotModel, task: cl.Task, rate_hz: float = 1000.0,
            effort_limits_nm: Optional[Sequence[float]] = None,
            friction_nm: Optional[Sequence[float]] = None, delays: Sequence[int] = (1,),
-           seed: int = 0, friction_learning: float = FRICTION_LEARNING) -> Design:
+           seed: int = 0, friction_learning: float = FRICTION_LEARNING,
+           cruise_fraction: float = CRUISE_FRACTION,
+           preferred_configuration_rad: Optional[Sequence[float]] = None) -> Design:
     """
     Compute gains and extensions for ``model`` and ``task`` (docs/gain_design.md).
 
     ``effort_limits_nm`` default the URDF's; ``friction_nm`` are the Coulomb estimates per
     joint (default zeros: no friction compensation); ``delays`` the ticks of delay the
     sampled loop must be stable with; ``friction_learning`` how much more than the estimate
-    (x the estimate) the regulator may learn at rest. Raises ValueError if a joint has no
+    (x the estimate) the regulator may learn at rest; ``cruise_fraction`` of the velocity
+    limits the speed far from the goal that the goal-configuration gain is raised towards and
+    the cubic damping holds (``_cruising_guide``); ``preferred_configuration_rad`` the
+    posture a redundant arm's q* leans to (default: the middle of the ranges). Raises
+    ValueError if a joint has no
     torque left, or if the goal-configuration term of a joint cannot stay above the task
     term's bound (it would no longer lead that joint round its stop).
     """
@@ -376,6 +410,8 @@ def design(model: RobotModel, task: cl.Task, rate_hz: float = 1000.0,
     data = survey(model, task, seed)
     configs = data['configurations']
     lever = data['lever_max'] if task is cl.Task.POSE else np.zeros(n)
+    if not 0.0 < cruise_fraction <= 1.0:
+        raise ValueError(f'cruise_fraction must be in (0, 1], got {cruise_fraction}')
     if not np.isfinite(friction_learning) or friction_learning < 0.0:
         raise ValueError(f'friction_learning must be finite and >= 0, got {friction_learning}')
     learning = friction_learning * friction
@@ -422,9 +458,10 @@ def design(model: RobotModel, task: cl.Task, rate_hz: float = 1000.0,
     # margins), for both potentials, and no joint whose damping the loop caps is left with a
     # damping ratio below DAMPING_RATIO_MIN; a joint whose own mass-spring-damper (smallest
     # inertia) is unstable gets a smaller goal-configuration gain.
+    cruise = cruise_fraction * velocity
     for _ in range(80):
         bound = task_torque_bound(lever, kp, task)
-        guide = GUIDE_OVER_TASK * bound
+        guide = _cruising_guide(configs, kp, lam, bound, push_max, cruise, b_max)
         kv = np.minimum(_damping(configs, kp, lam, guide / GUIDE_RAMP_RAD), b_max)
         for j in range(n):
             while _joint_stable(inertia[j], guide[j] / GUIDE_RAMP_RAD, kv[j], delays,
@@ -466,7 +503,6 @@ def design(model: RobotModel, task: cl.Task, rate_hz: float = 1000.0,
 
     # Cubic damping: linear near rest, it holds the cruising speed far from the goal; its
     # slope k_v (1 + 3 v^2 / v_c^2) must not exceed b_max up to the velocity limit.
-    cruise = CRUISE_FRACTION * velocity
     push = bound + guide  # the most the potentials ask of a joint, far from the goal
     damping_speed = np.zeros(n)
     for j in range(n):
@@ -491,7 +527,10 @@ def design(model: RobotModel, task: cl.Task, rate_hz: float = 1000.0,
         friction_position_band=FRICTION_POSITION_BAND_M,
         configuration_gain=guide.round(3).tolist(), configuration_radius=GUIDE_RADIUS_RAD,
         configuration_ramp=GUIDE_RAMP_RAD, damping_speed=damping_speed.round(3).tolist(),
-        goal_velocity_gain=GOAL_VELOCITY_GAIN)
+        goal_velocity_gain=GOAL_VELOCITY_GAIN,
+        preferred_configuration=(model.middle_of_ranges() if preferred_configuration_rad is None
+                                 else preferred_configuration_rad),
+        posture_weight=POSTURE_WEIGHT)
     kp_r = tuple(float(f'{v:.4g}') for v in kp)
     kv_r = tuple(float(f'{v:.4g}') for v in kv)
     lam_r = tuple(float(f'{v:.4g}') for v in lam)
@@ -509,6 +548,7 @@ def design(model: RobotModel, task: cl.Task, rate_hz: float = 1000.0,
         'spectral_radius': final, 'delays': tuple(delays),
         'damping_ratio': ratios, 'terminal_speed_rad_s': np.array(terminal),
         'velocity_limits_rad_s': velocity, 'friction_learning': friction_learning,
+        'cruise_fraction': cruise_fraction,
         'warnings': friction_warnings(model, friction, learning),
     }
     return Design(task, model.joint_names, model.base_link, model.tip_link, rate_hz, kp_r,
@@ -608,7 +648,8 @@ def to_yaml(d: Design, potential: str = 'tanh', command: str = '',
         f'radius {rho["tanh"]:.6f} (tanh), {rho["quadratic"]:.6f} (quadratic) < 1; median '
         f'damping ratios tanh {_fmt(zeta["tanh"])}, quadratic {_fmt(zeta["quadratic"])};',
         f'  cruising speeds far from the goal {_fmt(f["terminal_speed_rad_s"])} rad/s '
-        f'(velocity limits {_fmt(f["velocity_limits_rad_s"])}).',
+        f'(velocity limits {_fmt(f["velocity_limits_rad_s"])}, aimed at '
+        f'{f["cruise_fraction"]:g} x them).',
     ]
     header += [f'WARNING: {w}' for w in f.get('warnings', ())]
     lines = []
@@ -647,7 +688,7 @@ def to_yaml(d: Design, potential: str = 'tanh', command: str = '',
         f'    friction_position_band: {_float(s.friction_position_band_m)}   # m, the same for '
         '||p_d - p||',
         f'    configuration_gain: {_fmt(s.configuration_gain)}  # N m: '
-        f'{GUIDE_OVER_TASK:g} x the task bound',
+        f'{GUIDE_OVER_TASK:g} x the task bound, more on a joint it would leave slow',
         f'    configuration_radius: {_float(s.configuration_radius_rad)}   # rad, dead zone '
         'around q*',
         f'    configuration_ramp: {_float(s.configuration_ramp_rad)}   # rad, the torque rises '
@@ -656,6 +697,10 @@ def to_yaml(d: Design, potential: str = 'tanh', command: str = '',
         'damping (0 = none)',
         f'    goal_velocity_gain: {_float(s.goal_velocity_gain)}   # damping towards a streamed '
         "goal's velocity (0 = off)",
+        f'    preferred_configuration: {_fmt(s.preferred_configuration_rad)}  # rad, the '
+        "posture a redundant arm's q* leans to",
+        f'    posture_weight: {_float(s.posture_weight)}   # of that posture against the '
+        'distance to the arm (no effect without self-motion)',
         f'    joints: [{", ".join(d.joints)}]',
         f'    base_link: {d.base_link}',
         f'    tip_link: {d.tip_link}',
@@ -697,16 +742,35 @@ def main(argv: Optional[list] = None) -> int:
                         f'rest, x the estimates (default {FRICTION_LEARNING:g}; 0 = none)')
     parser.add_argument('--delays', type=int, nargs='+', default=[1],
                         help='ticks of delay the sampled loop must be stable with')
+    parser.add_argument('--cruise-fraction', type=float, default=CRUISE_FRACTION,
+                        help='the speed far from the goal, as a fraction of the URDF velocity '
+                        'limits: a strong joint gets a goal-configuration gain that drives it '
+                        f'this fast, within its budget (default {CRUISE_FRACTION:g})')
+    parser.add_argument('--preferred-configuration', type=float, nargs='+',
+                        help="rad per joint: the posture a redundant arm's goal configuration "
+                        'leans to (default: the middle of the ranges)')
     parser.add_argument('--potential', choices=[p.value for p in cl.Potential],
                         default='tanh', help='the potential the file selects')
     parser.add_argument('--robot-note', default='',
                         help='a note on robot_description for the file')
     parser.add_argument('--out', type=Path, help='write here (default: stdout)')
+    sim = parser.add_argument_group(
+        'simulator config', 'also write a wrist_sim_node parameter file for the same joints')
+    sim.add_argument('--sim-out', type=Path, help='write it here')
+    sim.add_argument('--initial-positions', type=float, nargs='+',
+                     help='rad per joint, where the robot starts at rest (default: the middle '
+                     'of the ranges)')
+    sim.add_argument('--sim-coulomb', type=float, nargs='+',
+                     help='the simulated Coulomb friction, N m per joint (default: none)')
+    sim.add_argument('--sim-viscous', type=float, nargs='+',
+                     help='the simulated viscous friction, N m s/rad per joint (default: none)')
     args = parser.parse_args(argv)
     urdf = args.urdf.read_text() if args.urdf else default_urdf_xml()
     model = RobotModel(urdf, args.base_link, args.tip_link, args.joints)
     result = design(model, cl.Task(args.task), args.rate, args.effort_limits, args.friction,
-                    tuple(args.delays), friction_learning=args.friction_learning)
+                    tuple(args.delays), friction_learning=args.friction_learning,
+                    cruise_fraction=args.cruise_fraction,
+                    preferred_configuration_rad=args.preferred_configuration)
     for warning in result.figures['warnings']:
         print(f'design_gains: WARNING: {warning}', file=sys.stderr)
     command = shlex.join(['python', '-m', 'quat_jt_controller.gain_design']
@@ -717,7 +781,69 @@ def main(argv: Optional[list] = None) -> int:
         print(f'wrote {args.out}', file=sys.stderr)
     else:
         sys.stdout.write(text)
+    if args.sim_out:
+        args.sim_out.write_text(sim_yaml(model, args.rate, args.initial_positions,
+                                         args.sim_coulomb, args.sim_viscous, command,
+                                         args.robot_note))
+        print(f'wrote {args.sim_out}', file=sys.stderr)
     return 0
+
+
+def sim_yaml(model: RobotModel, rate_hz: float,
+             initial_positions_rad: Optional[Sequence[float]],
+             coulomb_nm: Optional[Sequence[float]],
+             viscous_nm_s_per_rad: Optional[Sequence[float]],
+             command: str = '', robot_description_note: str = '') -> str:
+    """
+    Return a parameter file for wrist_sim_node in the format of config/*_sim.yaml.
+
+    The joints are the design's; the others of the URDF (a gripper's fingers) are held where
+    they are by the simulator. The start defaults to the middle of the ranges, the friction to
+    none. Raises ValueError on a list of the wrong length or a start outside the limits.
+    """
+    n = model.n
+    lower, upper = np.array(model.position_lower), np.array(model.position_upper)
+    start = (0.5 * (np.maximum(lower, -pi) + np.minimum(upper, pi))
+             if initial_positions_rad is None else np.array(initial_positions_rad, float))
+    coulomb = np.zeros(n) if coulomb_nm is None else np.array(coulomb_nm, float)
+    viscous = (np.zeros(n) if viscous_nm_s_per_rad is None
+               else np.array(viscous_nm_s_per_rad, float))
+    for name, values in (('--initial-positions', start), ('--sim-coulomb', coulomb),
+                         ('--sim-viscous', viscous)):
+        if values.size != n or not np.all(np.isfinite(values)):
+            raise ValueError(f'{name}: expected {n} finite values, got {values.tolist()}')
+    if np.any(start < lower) or np.any(start > upper):
+        raise ValueError(f'--initial-positions {start.tolist()} are outside the limits')
+    _, _, J = model.kinematics(start.tolist())
+    sigma = _sigma_min(np.array(J))
+    note = f'  # {robot_description_note}' if robot_description_note else ''
+    lines = [
+        f'# wrist_sim_node for {model.base_link} -> {model.tip_link}, joints '
+        f'{", ".join(model.joint_names)}.',
+        '# Generated by quat_jt_controller.gain_design with the controller config:',
+        *textwrap.wrap(command or 'python -m quat_jt_controller.gain_design ...',
+                       width=95, initial_indent='#   ', subsequent_indent='#     '),
+        '# Joints of the URDF not listed here are held by the simulator where they are (at 0).',
+        '# Floats are written as floats: ROS 2 parameters are strictly typed (1 is not 1.0).',
+        '/**:  # any node name and namespace',
+        '  ros__parameters:',
+        f"    robot_description: ''{note}",
+        f'    joints: [{", ".join(model.joint_names)}]',
+        f'    initial_positions: {_fmt(np.round(start, 4))}  # rad, at rest; sigma_min(J) '
+        f'{sigma:.3g}',
+        f'    rate_hz: {int(round(rate_hz))}',
+        '    use_gui: false                   # true opens the PyBullet window',
+        '    publish_clock: false             # real-time pacing',
+        '    lockstep_timeout: 0.05',
+        '    max_real_time_factor: 0.0',
+        f'    viscous_friction: {_fmt(viscous)}  # N m s/rad',
+        f'    coulomb_friction: {_fmt(coulomb)}  # N m (stiction level)',
+        '    command_timeout: 0.5             # s without a valid command -> zero torque',
+        '    enforce_velocity_limits: true    # the URDF velocity limits, as a drive holds them',
+        '    hold_until_first_command: true   # brakes on until the first command',
+        "    stats_file: ''",
+    ]
+    return '\n'.join(lines) + '\n'
 
 
 def _public_argv(argv: Sequence[str]) -> list[str]:

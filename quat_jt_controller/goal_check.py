@@ -24,7 +24,7 @@ import subprocess
 import sys
 import threading
 import time
-from typing import Callable, Optional, Sequence
+from typing import Callable, NamedTuple, Optional, Sequence
 
 import numpy as np
 
@@ -50,6 +50,13 @@ def _pose_residual(model: RobotModel, q: np.ndarray, q_desired: Sequence[float],
     if task is Task.POSE:
         return np.concatenate((np.subtract(p_desired, p), rot)), J
     return rot, J[3:]
+
+
+def _sigma_min(model: RobotModel, q: np.ndarray, task: Task) -> float:
+    """Return the smallest singular value of the task Jacobian at ``q``."""
+    _, _, rows = model.kinematics(q.tolist())
+    J = np.array(rows) if task is Task.POSE else np.array(rows)[3:]
+    return float(np.linalg.svd(J, compute_uv=False)[-1])
 
 
 def solve_ik(model: RobotModel, q_start: Sequence[float], q_desired: Sequence[float],
@@ -95,6 +102,61 @@ def polish(model: RobotModel, q: Sequence[float], q_desired: Sequence[float],
     return None
 
 
+POSTURE_ITERATIONS = 60  # null-space steps of posture(), at most
+POSTURE_MAX_STEP_RAD = 0.1  # the longest null-space step (any joint)
+POSTURE_STEP_RAD = 1e-7  # posture() stops once a step moves no joint more than this
+POSTURE_BAND_WEIGHT = 100.0  # of the joint-limit bands in the posture cost, x the others
+
+
+def posture(model: RobotModel, q: Sequence[float], q_desired: Sequence[float],
+            p_desired: Sequence[float], task: Task, q_measured: Sequence[float],
+            q_preferred: Sequence[float], weight: float,
+            margin_rad: float = 0.0) -> Optional[np.ndarray]:
+    """
+    Slide an IK solution along the self-motion of a redundant arm to its best posture.
+
+    Among the configurations that reach the goal, the one reached from ``q`` by steps in the
+    null space of J that minimise
+
+        c(q) = 1/2 ||q - q_measured||^2 + 1/2 weight ||q - q_preferred||^2
+               + 1/2 POSTURE_BAND_WEIGHT ||x(q)||^2
+
+    ``x`` the depth in the joint-limit bands of width ``margin_rad`` (section 2 of
+    docs/lyapunov.md): nearest the measured configuration, then the preferred posture, and out
+    of the bands where the self-motion allows. Each step is the projected Newton step
+    ``-(I - J^+ J) grad c / (1 + weight)``, at most ``POSTURE_MAX_STEP_RAD`` long, followed
+    by Newton steps back onto the goal;
+    the result is polished (:func:`polish`), or None. A robot with no more joints than task
+    rows has no self-motion: ``q`` comes back polished, unchanged.
+    """
+    q = np.array(q, dtype=float)
+    q_now = np.asarray(q_measured, dtype=float)
+    q_pref = np.asarray(q_preferred, dtype=float)
+    lower = np.array(model.position_lower, dtype=float)
+    upper = np.array(model.position_upper, dtype=float)
+    limited = (upper - lower) < 2.0 * pi - 1e-6
+    inner_lo = np.where(limited, lower + margin_rad, -np.inf)
+    inner_hi = np.where(limited, upper - margin_rad, np.inf)
+    for _ in range(POSTURE_ITERATIONS):
+        err, J = _pose_residual(model, q, q_desired, p_desired, task)
+        if J.shape[0] >= J.shape[1]:
+            break
+        band = np.minimum(q - inner_lo, 0.0) + np.maximum(q - inner_hi, 0.0)
+        grad = (q - q_now) + weight * (q - q_pref) + POSTURE_BAND_WEIGHT * band
+        J_pinv = np.linalg.pinv(J)
+        step = -(grad - J_pinv @ (J @ grad)) / (1.0 + weight)
+        largest = float(np.max(np.abs(step)))
+        if largest > POSTURE_MAX_STEP_RAD:  # the self-motion is curved: short steps
+            step *= POSTURE_MAX_STEP_RAD / largest
+        q = np.clip(q + step + J_pinv @ err, lower, upper)
+        for _ in range(2):  # back onto the goal
+            err, J = _pose_residual(model, q, q_desired, p_desired, task)
+            q = np.clip(q + np.linalg.lstsq(J, err, rcond=None)[0], lower, upper)
+        if largest < POSTURE_STEP_RAD:
+            break
+    return polish(model, q, q_desired, p_desired, task)
+
+
 MAX_STARTS = 12  # IK starts per check: measured q, mid-range, then seeded random ones
 
 
@@ -138,20 +200,28 @@ def check_goal(model: RobotModel, q_measured: Optional[Sequence[float]],
 
 
 def _representative(q: np.ndarray, near: np.ndarray, lower: np.ndarray,
-                    upper: np.ndarray) -> np.ndarray:
-    """Move each full-turn joint by whole turns to the angle within its range nearest ``near``."""
+                    upper: np.ndarray, margin_rad: float = 0.0) -> np.ndarray:
+    """
+    Move each full-turn joint by whole turns to the angle within its range nearest ``near``.
+
+    An angle at least ``margin_rad`` from both limits is preferred: a full-turn joint has no
+    joint-limit band, and a q* next to its stop leaves no room for an overshoot.
+    """
     out = q.copy()
     for j in range(q.size):
         if upper[j] - lower[j] >= 2.0 * pi - 1e-6 and np.isfinite(upper[j] - lower[j]):
             turns = np.round((near[j] - q[j]) / (2.0 * pi))
             best = None
-            for k in (turns - 1, turns, turns + 1):
+            for k in (turns - 2, turns - 1, turns, turns + 1, turns + 2):
                 c = q[j] + 2.0 * pi * k
-                closer = best is None or abs(c - near[j]) < abs(best - near[j])
-                if lower[j] <= c <= upper[j] and closer:
-                    best = c
+                if not lower[j] <= c <= upper[j]:
+                    continue
+                key = (not lower[j] + margin_rad <= c <= upper[j] - margin_rad,
+                       abs(c - near[j]))
+                if best is None or key < best[0]:
+                    best = (key, c)
             if best is not None:
-                out[j] = best
+                out[j] = best[1]
     return out
 
 
@@ -164,7 +234,9 @@ def goal_configuration(model: RobotModel, q_measured: Optional[Sequence[float]],
                        margin_rad: float = 0.0,
                        starts_range: tuple[int, int] = CONFIGURATION_STARTS,
                        seed: int = 0,
-                       q_warm: Optional[Sequence[float]] = None) -> Optional[np.ndarray]:
+                       q_warm: Optional[Sequence[float]] = None,
+                       q_preferred: Optional[Sequence[float]] = None,
+                       posture_weight: float = 0.0) -> Optional[np.ndarray]:
     """
     Return q*, a regular joint configuration within the limits that reaches the goal, or None.
 
@@ -183,12 +255,19 @@ def goal_configuration(model: RobotModel, q_measured: Optional[Sequence[float]],
     that is regular, within the limits, outside the bands and within ``WARM_STEP_RAD`` of it on
     every joint is returned at once. So a goal that moves keeps one IK branch, and each of its
     goals costs a few iterations instead of a dozen searches.
+
+    A redundant arm reaches a goal along a whole self-motion: each solution is slid along it
+    to its best posture (:func:`posture`: nearest ``q_measured``, then ``q_preferred``, by
+    default the middle of the ranges, with ``posture_weight``, and out of the bands), so q*
+    fixes the elbow where the arm already is (docs/lyapunov.md, section 9).
     """
     lower = np.array(model.position_lower, dtype=float)
     upper = np.array(model.position_upper, dtype=float)
     lo = np.maximum(lower, -pi)
     hi = np.minimum(upper, pi)
     q_now = (0.5 * (lo + hi) if q_measured is None else np.asarray(q_measured, float))
+    q_pref = np.asarray(model.middle_of_ranges() if q_preferred is None else q_preferred,
+                        dtype=float)
     rng = np.random.default_rng(seed)
     starts = [q_now, 0.5 * (lo + hi)]
     limited = (upper - lower) < 2.0 * pi - 1e-6
@@ -202,7 +281,12 @@ def goal_configuration(model: RobotModel, q_measured: Optional[Sequence[float]],
         q = polish(model, q, q_desired, p_desired, task)
         if q is None:
             return None
-        q = _representative(q, q_now, lower, upper)
+        q = _representative(q, q_now, lower, upper, margin_rad)
+        if J.shape[0] < J.shape[1]:
+            q = posture(model, q, q_desired, p_desired, task, q_now, q_pref, posture_weight,
+                        margin_rad)
+            if q is None or _sigma_min(model, q, task) < SINGULAR_SIGMA_MIN:
+                return None
         if np.any(q < lower) or np.any(q > upper):
             return None
         return bool(np.any(limited & ((q < lower + margin_rad) | (q > upper - margin_rad)))), q
@@ -242,6 +326,13 @@ def configuration_velocity(model: RobotModel, q_star: Sequence[float],
     if task is Task.ORIENTATION:
         J = J[3:]
     return np.linalg.lstsq(J, np.asarray(nu_desired, dtype=float), rcond=None)[0]
+
+
+class Posture(NamedTuple):
+    """How q* is chosen along a redundant arm's self-motion (:func:`posture`)."""
+
+    preferred_rad: Optional[Sequence[float]] = None  # None: the middle of the ranges
+    weight: float = 0.0
 
 
 @dataclass(frozen=True)
@@ -351,7 +442,8 @@ class GoalCheckWorker:
     def submit(self, key: object, q_measured: Optional[Sequence[float]],
                q_desired: Sequence[float], p_desired: Sequence[float],
                configuration_margin_rad: Optional[float] = None,
-               nu_desired: Optional[Sequence[float]] = None) -> None:
+               nu_desired: Optional[Sequence[float]] = None,
+               posture: Posture = Posture()) -> None:
         """
         Queue a check; ``key`` comes back with its verdict (e.g. the goal object).
 
@@ -360,12 +452,16 @@ class GoalCheckWorker:
         :meth:`take_configuration` once ``key`` has come back from :meth:`poll`. With
         ``nu_desired`` too (the goal's task velocity), also its joint velocity
         (:func:`configuration_velocity`), with :meth:`take_configuration_velocity`.
+        ``posture`` chooses q* along a redundant arm's self-motion.
         """
         request = {'q_measured': None if q_measured is None else [float(x) for x in q_measured],
                    'q_desired': [float(x) for x in q_desired],
                    'p_desired': [float(x) for x in p_desired],
                    'configuration_margin': configuration_margin_rad,
-                   'nu_desired': None if nu_desired is None else [float(x) for x in nu_desired]}
+                   'nu_desired': None if nu_desired is None else [float(x) for x in nu_desired],
+                   'preferred_configuration': None if posture.preferred_rad is None else
+                   [float(x) for x in posture.preferred_rad],
+                   'posture_weight': float(posture.weight)}
         self._next = (key, request)
         if self._running is None and self.available:
             self._start_next()
@@ -488,9 +584,11 @@ def _serve() -> None:
         try:
             margin = request.get('configuration_margin')
             if margin is not None:
-                q_star = goal_configuration(model, request['q_measured'], request['q_desired'],
-                                            request['p_desired'], task, float(margin),
-                                            q_warm=q_last)
+                q_star = goal_configuration(
+                    model, request['q_measured'], request['q_desired'], request['p_desired'],
+                    task, float(margin), q_warm=q_last,
+                    q_preferred=request.get('preferred_configuration'),
+                    posture_weight=float(request.get('posture_weight', 0.0)))
                 configuration = q_last = None if q_star is None else q_star.tolist()
                 if q_star is not None and request.get('nu_desired') is not None:
                     velocity = configuration_velocity(model, q_star, request['nu_desired'],

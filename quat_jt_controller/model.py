@@ -90,6 +90,11 @@ class RobotModel:
         # the URDF's <dynamics friction>, N m (0: not given); the simulator does not use it
         self.friction_nm = self._per_joint(model.friction)
 
+    def middle_of_ranges(self) -> tuple[float, ...]:
+        """Return the middle of each joint's range, its limits taken within [-pi, pi] (rad)."""
+        return tuple(0.5 * (max(lo, -np.pi) + min(hi, np.pi))
+                     for lo, hi in zip(self.position_lower, self.position_upper))
+
     def _per_joint(self, vec: np.ndarray) -> tuple[float, ...]:
         return tuple(float(vec[i]) for i in self._idx)
 

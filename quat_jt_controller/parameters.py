@@ -360,11 +360,18 @@ SHAPING_PARAMETERS = ('joint_limit_margin', 'joint_limit_gain', 'large_error_gai
                       'friction_compensation', 'friction_velocity', 'friction_error_band',
                       'friction_position_band', 'friction_learning_limit',
                       'friction_learning_time', 'configuration_gain', 'configuration_radius',
-                      'configuration_ramp', 'damping_speed', 'goal_velocity_gain')
+                      'configuration_ramp', 'damping_speed', 'goal_velocity_gain',
+                      'preferred_configuration', 'posture_weight')
 
 
-def default_shaping(n_joints: int) -> dict[str, Any]:
-    """Return the extensions' default values: all off (the paper's law)."""
+def default_shaping(n_joints: int,
+                    preferred_configuration: Optional[Sequence[float]] = None) -> dict[str, Any]:
+    """
+    Return the extensions' default values: all off (the paper's law).
+
+    ``preferred_configuration`` defaults to zeros; the controller passes the middle of its
+    robot's ranges (a ROS parameter needs a typed value, an empty list has none).
+    """
     s = Shaping()
     return {'joint_limit_margin': 0.0, 'joint_limit_gain': [0.0] * n_joints,
             'large_error_gain': 0.0, 'friction_compensation': [0.0] * n_joints,
@@ -377,20 +384,25 @@ def default_shaping(n_joints: int) -> dict[str, Any]:
             'configuration_radius': s.configuration_radius_rad,
             'configuration_ramp': s.configuration_ramp_rad,
             'damping_speed': [0.0] * n_joints,
-            'goal_velocity_gain': 0.0}
+            'goal_velocity_gain': 0.0,
+            'preferred_configuration': [float(v) for v in (preferred_configuration
+                                                           or [0.0] * n_joints)],
+            'posture_weight': s.posture_weight}
 
 
 def declare_shaping(node: Node, config: StructuralConfig,
                     check: Optional[Callable[[Shaping], Shaping]] = None,
-                    on_apply: Optional[Callable[[Shaping], None]] = None
+                    on_apply: Optional[Callable[[Shaping], None]] = None,
+                    preferred_configuration: Optional[Sequence[float]] = None
                     ) -> LiveParameters[Shaping]:
     """
     Declare the live extension parameters (docs/lyapunov.md); return them as a Shaping.
 
     ``check`` validates a Shaping against the robot (``Regulator.check_shaping``: the margin
     must fit inside the joint ranges) as part of the on-set validation; ``on_apply`` is called
-    with each new Shaping after a successful set. Raises ShapingError (naming the bad value)
-    if the start-up values are invalid.
+    with each new Shaping after a successful set; ``preferred_configuration`` is that
+    parameter's default (the middle of the robot's ranges). Raises ShapingError (naming the bad
+    value) if the start-up values are invalid.
     """
     n = len(config.joints)
     joint_vector = ParameterType.PARAMETER_DOUBLE_ARRAY
@@ -453,8 +465,20 @@ def declare_shaping(node: Node, config: StructuralConfig,
             'velocity of the stream, mapped to the joints by the goal-check worker), so a moving '
             'goal is followed without the lag of the damping. A fixed goal, or a stream that '
             'stops, has qdot*_d = 0. 0 = off. Live.', number, float_range=(0.0, 1.0)),
+        'preferred_configuration': _descriptor(
+            f'A comfortable posture (rad), one per joint ({n}), within the limits: of the goal '
+            "configurations along a redundant arm's self-motion, the goal check takes the one "
+            'nearest the measured joints, then nearest this posture with posture_weight, and '
+            'out of the joint-limit bands (docs/lyapunov.md, section 9). Default: the middle '
+            'of the ranges. Next goal on. Live.', joint_vector,
+            constraints=f'{n} finite values within the joint limits'),
+        'posture_weight': _descriptor(
+            'Weight of preferred_configuration against the distance to the measured joints '
+            "when a redundant arm's goal configuration is chosen (0: the nearest only). No "
+            'effect on an arm without self-motion. Next goal on. Live.', number,
+            float_range=(0.0, 100.0)),
     }
-    defaults = default_shaping(n)
+    defaults = default_shaping(n, preferred_configuration)
     for name in SHAPING_PARAMETERS:
         node.declare_parameter(name, defaults[name], descriptors[name])
 

@@ -134,6 +134,14 @@ class SampledRun:
         bad = np.flatnonzero(~ok)
         return float(self.t_s[bad[-1] + 1]) if bad.size else float(self.t_s[0])
 
+    def until(self, t_s: float) -> 'SampledRun':
+        """Return the run up to time ``t_s`` (the samples at or before it)."""
+        k = int(np.searchsorted(self.t_s, t_s + 1e-9, side='right'))
+        cut = (lambda a: None if a is None else a[:k])
+        return SampledRun(self.t_s[:k], self.position_error_m[:k], self.orientation_error[:k],
+                          self.max_abs_torque_nm[:k], self.saturated_ticks, self.all_finite,
+                          cut(self.q_rad), cut(self.tau_nm))
+
     def final(self, window_s: float = 0.5) -> tuple[float, float]:
         """Largest position error (m) and ||e|| over the last ``window_s``."""
         k = max(1, int(round(window_s / max(self.t_s[1] - self.t_s[0], 1e-12))))

@@ -220,6 +220,12 @@ class Regulator:
     def check_shaping(self, shaping: sh.Shaping) -> sh.Shaping:
         """Return ``shaping`` if it fits this robot; raise ShapingError saying why not."""
         self._band(shaping)
+        for name, lo, hi, v in zip(self.model.joint_names, self.model.position_lower,
+                                   self.model.position_upper,
+                                   shaping.preferred_configuration_rad):
+            if not lo <= v <= hi:
+                raise sh.ShapingError(f'preferred_configuration: {name} = {v} is outside its '
+                                      f'limits [{lo:g}, {hi:g}]')
         return shaping
 
     def set_shaping(self, shaping: sh.Shaping) -> None:
@@ -228,6 +234,7 @@ class Regulator:
 
         The friction learned so far is kept within the new limits (zero where none).
         """
+        self.check_shaping(shaping)
         band = self._band(shaping)
         limits = shaping.friction_learning_limit_nm or (0.0,) * self.n
         self._learned_friction_nm = [min(a, a_max) for a, a_max in

@@ -78,6 +78,23 @@ def _positive(name: str, value: float) -> float:
     return v
 
 
+def _angles(name: str, values: Optional[Sequence[float]], n: int) -> tuple[float, ...]:
+    """Return ``n`` finite joint positions, or () for None or an empty list (the default)."""
+    if values is None or len(values) == 0:
+        return ()
+    try:
+        vals = tuple(float(v) for v in values)
+    except (TypeError, ValueError):
+        raise ShapingError(f'{name} must be a list of numbers, got {values!r}') from None
+    if len(vals) != n:
+        raise ShapingError(f'{name} must have {n} values (one per joint), got {len(vals)}: '
+                           f'{list(vals)}')
+    for i, v in enumerate(vals):
+        if not isfinite(v):
+            raise ShapingError(f'{name}[{i}] must be finite, got {v}')
+    return vals
+
+
 def _per_joint(name: str, values: Optional[Sequence[float]], n: int) -> tuple[float, ...]:
     if values is None:
         return (0.0,) * n
@@ -127,6 +144,11 @@ class Shaping:
     friction_learning_limit_nm: tuple[float, ...] = ()
     # s: a_max is learned in this time while stuck, and leaks with it inside the band
     friction_learning_time_s: float = 1.0
+    # the goal check's choice of q* along a redundant arm's self-motion (goal_check.posture):
+    # nearest the measured q, then this posture (rad per joint; empty: the middle of the
+    # ranges) with this weight. Not read by the tick.
+    preferred_configuration_rad: tuple[float, ...] = ()
+    posture_weight: float = 0.0
 
     @classmethod
     def create(cls, n_joints: int, joint_limit_margin: float = 0.0,
@@ -140,7 +162,9 @@ class Shaping:
                damping_speed: Optional[Sequence[float]] = None,
                goal_velocity_gain: float = 0.0,
                friction_learning_limit: Optional[Sequence[float]] = None,
-               friction_learning_time: float = 1.0) -> 'Shaping':
+               friction_learning_time: float = 1.0,
+               preferred_configuration: Optional[Sequence[float]] = None,
+               posture_weight: float = 0.0) -> 'Shaping':
         """Validate and build; raise ShapingError naming the bad value."""
         if _nonnegative('goal_velocity_gain', goal_velocity_gain) > 1.0:
             raise ShapingError(f'goal_velocity_gain must be in [0, 1], got {goal_velocity_gain}')
@@ -162,7 +186,10 @@ class Shaping:
             friction_learning_limit_nm=_per_joint('friction_learning_limit',
                                                   friction_learning_limit, n_joints),
             friction_learning_time_s=_positive('friction_learning_time',
-                                               friction_learning_time))
+                                               friction_learning_time),
+            preferred_configuration_rad=_angles('preferred_configuration',
+                                                preferred_configuration, n_joints),
+            posture_weight=_nonnegative('posture_weight', posture_weight))
 
     def check_size(self, n_joints: int) -> 'Shaping':
         """Return self if the per-joint vectors fit ``n_joints`` (or are empty); else raise."""
@@ -170,7 +197,8 @@ class Shaping:
                              ('friction_compensation', self.friction_compensation_nm),
                              ('configuration_gain', self.configuration_gain),
                              ('damping_speed', self.damping_speed_rad_s),
-                             ('friction_learning_limit', self.friction_learning_limit_nm)):
+                             ('friction_learning_limit', self.friction_learning_limit_nm),
+                             ('preferred_configuration', self.preferred_configuration_rad)):
             if values and len(values) != n_joints:
                 raise ShapingError(f'{name} must have {n_joints} values (one per joint), got '
                                    f'{len(values)}')
@@ -449,7 +477,9 @@ def from_parameters(values: dict, n_joints: int) -> Shaping:
         goal_velocity_gain=values.get('goal_velocity_gain', 0.0),
         friction_learning_limit=values.get('friction_learning_limit'),
         friction_learning_time=values.get('friction_learning_time',
-                                          d.friction_learning_time_s))
+                                          d.friction_learning_time_s),
+        preferred_configuration=values.get('preferred_configuration'),
+        posture_weight=values.get('posture_weight', d.posture_weight))
 
 
 def describe(shaping: Shaping) -> str:
@@ -469,6 +499,10 @@ def describe(shaping: Shaping) -> str:
                      f'{shaping.goal_velocity_gain:g}')
     if shaping.friction_on:
         parts.append(f'friction compensation {list(shaping.friction_compensation_nm)} N m')
+    if shaping.posture_weight > 0.0 and shaping.configuration_on:
+        parts.append(f'q* nearest the arm, then posture '
+                     f'{list(shaping.preferred_configuration_rad) or "mid-range"} with weight '
+                     f'{shaping.posture_weight:g} (a redundant arm)')
     if shaping.learning_on:
         parts.append(f'learning up to {list(shaping.friction_learning_limit_nm)} N m more at '
                      f'rest in {shaping.friction_learning_time_s:g} s')

@@ -1,4 +1,4 @@
-"""Robot models shared by the core tests: the paper's wrist and a 6-DOF arm (xArm6)."""
+"""Robot models shared by the core tests: the paper's wrist, the xArm6 and the 7-DOF Panda."""
 from pathlib import Path
 
 import numpy as np
@@ -9,6 +9,8 @@ from quat_jt_controller.model import RobotModel
 from quat_jt_controller.resources import default_urdf_xml
 
 XARM6_URDF = Path(pybullet_data.getDataPath()) / 'xarm' / 'xarm6_robot.urdf'
+PANDA_URDF = Path(pybullet_data.getDataPath()) / 'franka_panda' / 'panda.urdf'
+PANDA_JOINTS = tuple(f'panda_joint{i}' for i in range(1, 8))  # the fingers are not regulated
 
 # The paper's experiment, from its one source in the package (docs/errata.md applied).
 Q_DESIRED = paper.Q_DESIRED
@@ -24,6 +26,10 @@ def wrist_model() -> RobotModel:
 
 def xarm6_model() -> RobotModel:
     return RobotModel(XARM6_URDF.read_text(), 'link_base', 'link6')
+
+
+def panda_model() -> RobotModel:
+    return RobotModel(PANDA_URDF.read_text(), 'panda_link0', 'panda_link8', PANDA_JOINTS)
 
 
 def random_q(model: RobotModel, rng: np.random.Generator, margin: float = 0.1) -> np.ndarray:

@@ -169,7 +169,8 @@ def test_parameters_are_declared_with_descriptors(make_node):
 
 def test_defaults_and_paper_config_file_are_the_paper_experiment(make_node):
     for node in (make_node(), make_node(cli_args=['--ros-args', '--params-file', str(CONFIG)])):
-        assert node.regulator.shaping == Shaping.create(3)  # no extension on
+        assert node.regulator.shaping == Shaping.create(  # no extension on
+            3, preferred_configuration=node.regulator.model.middle_of_ranges())
         g = node.gains
         assert node.get_parameter('task').value == 'orientation'
         assert g.kp == paper.KP and g.kv == paper.KV

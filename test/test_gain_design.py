@@ -18,7 +18,7 @@ from quat_jt_controller import control_law as cl
 from quat_jt_controller import gain_design as gd
 from quat_jt_controller import quaternion as quat
 from quat_jt_controller import shaping as sh
-from robots import random_q, wrist_model, xarm6_model
+from robots import PANDA_JOINTS, panda_model, PANDA_URDF, random_q, wrist_model, xarm6_model
 import yaml
 
 pytestmark = pytest.mark.unit
@@ -31,6 +31,15 @@ XARM6_ARGS = ['--urdf', str(Path(pybullet_data.getDataPath()) / 'xarm' / 'xarm6_
               '--base-link', 'link_base', '--tip-link', 'link6', '--task', 'pose',
               '--friction', '0.009', '0.009', '0.0045', '0.0018', '0.0018', '0.00045',
               '--delays', '1', '2']
+# ... and config/panda_controller.yaml with config/panda_sim.yaml
+PANDA_ARGS = ['--urdf', str(PANDA_URDF), '--base-link', 'panda_link0', '--tip-link',
+              'panda_link8', '--joints', *PANDA_JOINTS, '--task', 'pose',
+              '--friction', '0.09', '0.09', '0.09', '0.09', '0.045', '0.045', '0.045',
+              '--delays', '1', '2', '--cruise-fraction', '0.8',
+              '--preferred-configuration', '0', '-0.785', '0', '-2.356', '0', '1.571', '0.785']
+PANDA_SIM_ARGS = ['--initial-positions', '0', '-0.785', '0', '-2.356', '0', '1.571', '0.785',
+                  '--sim-coulomb', '0.1', '0.1', '0.1', '0.1', '0.05', '0.05', '0.05',
+                  '--sim-viscous', '0.1', '0.1', '0.1', '0.1', '0.05', '0.05', '0.05']
 
 
 @pytest.fixture(scope='module')
@@ -41,6 +50,9 @@ def designs():
         'xarm6': (xarm6_model(), gd.design(xarm6_model(), cl.Task.POSE,
                                            friction_nm=(0.009, 0.009, 0.0045, 0.0018, 0.0018,
                                                         0.00045), delays=(1, 2))),
+        'panda': (panda_model(), gd.design(panda_model(), cl.Task.POSE,
+                                           friction_nm=(0.09,) * 4 + (0.045,) * 3,
+                                           delays=(1, 2), cruise_fraction=0.8)),
     }
 
 
@@ -50,7 +62,7 @@ def params_of(text: str) -> dict:
     return data['/**']['ros__parameters']
 
 
-@pytest.mark.parametrize('robot', ['wrist', 'xarm6'])
+@pytest.mark.parametrize('robot', ['wrist', 'xarm6', 'panda'])
 def test_the_budget_holds_the_bound_and_the_bound_holds_the_torque(designs, robot):
     model, d = designs[robot]
     f = d.figures
@@ -76,7 +88,7 @@ def test_the_budget_holds_the_bound_and_the_bound_holds_the_torque(designs, robo
             assert np.all(tau <= f['task_bound_nm'] * (1 + 1e-9) + 1e-12), (potential, tau)
 
 
-@pytest.mark.parametrize('robot', ['wrist', 'xarm6'])
+@pytest.mark.parametrize('robot', ['wrist', 'xarm6', 'panda'])
 def test_the_sampled_loop_is_stable_with_the_delays_designed_for(designs, robot):
     model, d = designs[robot]
     data = gd.survey(model, d.task)
@@ -105,7 +117,8 @@ def test_spectral_radius_of_a_sampled_mass_spring_damper():
 
 
 @pytest.mark.parametrize('name, args', [('wrist_controller.yaml', WRIST_ARGS),
-                                        ('xarm6_controller.yaml', XARM6_ARGS)])
+                                        ('xarm6_controller.yaml', XARM6_ARGS),
+                                        ('panda_controller.yaml', PANDA_ARGS)])
 def test_the_configs_are_what_the_tool_writes(tmp_path, name, args):
     out = tmp_path / name
     result = subprocess.run([sys.executable, '-m', 'quat_jt_controller.gain_design', *args,
@@ -172,3 +185,43 @@ def test_the_learnable_friction_comes_out_of_the_budget():
                                gd.TORQUE_SHARE * gd.FRICTION_LEARNING * np.array(friction))
     with pytest.raises(ValueError, match='friction_learning'):
         gd.design(model, cl.Task.ORIENTATION, friction_nm=friction, friction_learning=-1.0)
+
+
+def test_the_simulator_config_is_what_the_tool_writes(tmp_path):
+    """config/panda_sim.yaml comes from the same command as the controller's, for its joints."""
+    out, sim_out = tmp_path / 'c.yaml', tmp_path / 's.yaml'
+    result = subprocess.run([sys.executable, '-m', 'quat_jt_controller.gain_design',
+                             *PANDA_ARGS, *PANDA_SIM_ARGS, '--out', str(out), '--sim-out',
+                             str(sim_out)], capture_output=True, text=True, timeout=120)
+    assert result.returncode == 0, result.stderr
+    shipped = params_of((REPO / 'config' / 'panda_sim.yaml').read_text())
+    assert params_of(sim_out.read_text()) == shipped
+    assert tuple(shipped['joints']) == PANDA_JOINTS  # the fingers are held, not driven
+    assert shipped['enforce_velocity_limits'] is True
+    with pytest.raises(ValueError, match='outside the limits'):  # joint 4 lies in [-3.14, 0]
+        gd.sim_yaml(panda_model(), 1000.0, [0.0, 0.0, 0.0, 0.5, 0.0, 1.0, 0.0], None, None)
+    with pytest.raises(ValueError, match='--sim-coulomb: expected 7'):
+        gd.sim_yaml(panda_model(), 1000.0, None, [0.1] * 6, None)
+
+
+def test_a_strong_joint_is_not_held_to_the_pace_of_the_weakest(designs):
+    """
+    The Panda's task bound is set by its 12 N m wrist; the 87 N m joints get a larger T_j.
+
+    Raised only as far as their budget allows, so both terms still fit in it, and still above
+    1.2 x the task bound, so the argument of docs/lyapunov.md, section 5 holds.
+    """
+    model, d = designs['panda']
+    f = d.figures
+    guide, bound = f['guide_nm'], f['task_bound_nm']
+    assert np.all(guide >= gd.GUIDE_OVER_TASK * bound - 1e-9)
+    strong = [0, 2, 3]  # joints 1, 3 and 4 (joint 2 lifts the arm: gravity takes its budget)
+    assert np.all(guide[strong] > 1.5 * gd.GUIDE_OVER_TASK * bound[strong])
+    assert np.all(bound + guide <= f['budget_nm'] + 1e-9)
+    assert np.all(f['terminal_speed_rad_s'] <= f['velocity_limits_rad_s'])
+    # the default aims at 0.6 of the limits: the strong joints are raised less
+    slower = gd.design(model, cl.Task.POSE, friction_nm=(0.09,) * 4 + (0.045,) * 3,
+                       delays=(1, 2))
+    assert np.all(slower.figures['guide_nm'][strong] < guide[strong])
+    with pytest.raises(ValueError, match='cruise_fraction'):
+        gd.design(model, cl.Task.POSE, cruise_fraction=1.5)

@@ -5,7 +5,7 @@ import pytest
 from quat_jt_controller import quaternion as quat
 from quat_jt_controller.control_law import Task
 from quat_jt_controller.goal_check import check_goal, solve_ik
-from robots import Q_DESIRED, wrist_model, xarm6_model
+from robots import panda_model, Q_DESIRED, wrist_model, xarm6_model
 
 pytestmark = pytest.mark.unit
 
@@ -84,3 +84,63 @@ def test_the_goal_configuration_is_polished_to_the_models_precision():
         assert np.linalg.norm(e) < POLISHED_TOLERANCE  # ||e|| = sin(angle / 2)
         if task is POSE:
             assert np.linalg.norm(np.subtract(p, p_d)) < POLISHED_TOLERANCE
+
+
+def test_a_redundant_arm_gets_the_goal_configuration_nearest_along_its_self_motion():
+    """
+    The Panda reaches a pose along a 1-D self-motion: q* is slid along it towards q.
+
+    It still reaches the goal exactly, it is nearer the measured q than the solution it was
+    slid from, and there the gradient of the posture cost has no part in the null space of J
+    (a minimum along the self-motion).
+    """
+    import numpy as np
+    from quat_jt_controller.goal_check import goal_configuration, polish, posture, \
+        POLISHED_TOLERANCE, solve_ik
+    model = panda_model()
+    q_now = np.array([0.3, -0.5, 0.2, -2.0, 0.1, 1.8, 0.6])
+    q_goal = [0.9, 0.1, -0.4, -1.6, 0.5, 1.5, 1.2]
+    q_d, p_d = goal_at(model, q_goal)
+    q_ik = polish(model, solve_ik(model, q_goal, q_d, p_d, POSE)[0], q_d, p_d, POSE)
+    q_mid = 0.5 * (np.array(model.position_lower) + np.array(model.position_upper))
+    q_star = posture(model, q_ik, q_d, p_d, POSE, q_now, q_mid, 0.0)
+    assert q_star is not None
+    p, R = model.forward_kinematics(q_star.tolist())
+    _, e = quat.orientation_error(quat.from_rotation_matrix(R), q_d)
+    assert np.linalg.norm(e) < POLISHED_TOLERANCE
+    assert np.linalg.norm(np.subtract(p, p_d)) < POLISHED_TOLERANCE
+    assert np.linalg.norm(q_star - q_now) < np.linalg.norm(q_ik - q_now) - 0.1
+    J = np.array(model.kinematics(q_star.tolist())[2])
+    null = np.eye(7) - np.linalg.pinv(J) @ J
+    assert np.linalg.norm(null @ (q_star - q_now)) < 1e-4
+    # the preferred posture pulls it along the self-motion, towards q_mid
+    q_pref = posture(model, q_ik, q_d, p_d, POSE, q_now, q_mid, 1.0)
+    assert np.linalg.norm(q_pref - q_mid) < np.linalg.norm(q_star - q_mid)
+    # goal_configuration does the same from its own starts
+    found = goal_configuration(model, q_now, q_d, p_d, POSE, 0.157)
+    assert found is not None and np.linalg.norm(found - q_now) <= np.linalg.norm(
+        q_ik - q_now)
+
+
+def test_an_arm_without_self_motion_keeps_its_solution():
+    """posture() changes nothing where J has as many rows as columns (the xArm6's pose)."""
+    import numpy as np
+    from quat_jt_controller.goal_check import polish, posture, solve_ik
+    model = xarm6_model()
+    q_goal = [0.4, -0.3, -1.2, 0.3, 1.1, 0.2]
+    q_d, p_d = goal_at(model, q_goal)
+    q_ik = polish(model, solve_ik(model, [0.3, -0.4, -1.1, 0.2, 1.0, 0.1], q_d, p_d,
+                                  POSE)[0], q_d, p_d, POSE)
+    moved = posture(model, q_ik, q_d, p_d, POSE, [0.0] * 6, [0.0] * 6, 1.0)
+    assert np.max(np.abs(moved - q_ik)) < 1e-9
+
+
+def test_a_full_turn_joint_keeps_away_from_its_stop_when_it_can():
+    """Of q*_j and q*_j -/+ 2 pi, both within the range, the one away from the stop is taken."""
+    import numpy as np
+    from quat_jt_controller.goal_check import _representative
+    lower, upper = np.array([-2.0 * math.pi]), np.array([2.0 * math.pi])
+    near_stop = np.array([6.21])  # 0.07 from the stop, 2.86 from the measured 3.35
+    assert _representative(near_stop, np.array([3.35]), lower, upper)[0] == pytest.approx(6.21)
+    away = _representative(near_stop, np.array([3.35]), lower, upper, margin_rad=0.2)
+    assert away[0] == pytest.approx(6.21 - 2.0 * math.pi)

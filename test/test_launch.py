@@ -1,7 +1,7 @@
 """
 The launch files, run against recording stand-ins of launch/launch_ros (not on PyPI).
 
-Both demos: the two nodes with the package's config files, the launch arguments, the nodes'
+Every demo: the two nodes with the package's config files, the launch arguments, the nodes'
 names (the xArm6's simulator has its own), and ``on_exit`` shutting the whole launch down when
 either node exits (so a simulator that cannot open its window does not leave a controller
 running alone).
@@ -13,7 +13,7 @@ import sys
 import types
 
 import pytest
-from robots import XARM6_URDF
+from robots import PANDA_URDF, XARM6_URDF
 
 pytestmark = pytest.mark.unit
 
@@ -23,6 +23,8 @@ DEMOS = {
     'wrist_demo.launch.py': ('wrist_sim', 'wrist_sim.yaml', 'wrist_controller.yaml', None),
     'xarm6_demo.launch.py': ('xarm6_sim', 'xarm6_sim.yaml', 'xarm6_controller.yaml',
                              XARM6_URDF),
+    'panda_demo.launch.py': ('panda_sim', 'panda_sim.yaml', 'panda_controller.yaml',
+                             PANDA_URDF),
 }
 
 

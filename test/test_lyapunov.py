@@ -9,6 +9,9 @@ The Lyapunov argument of docs/lyapunov.md, checked in the ideal loop and at rest
   the estimate plus what was learned, checked pointwise. The ideal loop has no stiction (a
   smooth friction vanishes at rest, the breakaway does not), so there the compensation is an
   energy source: V does increase (why the estimate must not exceed the friction).
+* A redundant arm (the Panda, section 9): on the goal's self-motion the task potential is zero
+  and without the goal-configuration term every point there is an equilibrium; with it, V never
+  increases and the arm slides along the self-motion to q*, elbow included.
 * On the PyBullet core (stiction), sampled with a tick of delay: with compensation the
   quadratic law's friction stall of the paper's experiment vanishes, and at rest the torque is
   steady, with no sign flips (no chattering, no limit cycle).
@@ -24,7 +27,7 @@ from quat_jt_controller import quaternion as quat
 from quat_jt_controller import shaping as sh
 from quat_jt_controller.reference_sim import ClosedLoop, run_sampled
 from quat_jt_controller.resources import default_urdf_xml
-from robots import wrist_model
+from robots import panda_model, wrist_model
 from wrist_sim.simulator import WristSimulator
 
 pytestmark = pytest.mark.unit
@@ -132,3 +135,41 @@ def test_at_rest_with_compensation_on_the_goal_the_torque_is_gravity_alone():
     np.testing.assert_allclose(out.tau_nm, expected, atol=1e-12)
     assert math.isclose(sh.fade(out.y_tilde, shaping), 0.0)
     assert dataclasses.replace(shaping, friction_error_band=1e-6).friction_on
+
+
+@pytest.mark.parametrize('potential', ['quadratic', 'tanh'])
+def test_a_redundant_arm_comes_to_rest_at_the_goal_configuration_elbow_included(potential):
+    """
+    Section 9 on the Panda (config/panda_controller.yaml, friction off: the ideal loop has none).
+
+    Start at rest on the goal's self-motion, 0.3 rad of elbow away from q*: the task error is
+    zero there. Without U_c the torque is g(q) alone, so the arm stays (every point of the
+    self-motion is an equilibrium). With U_c, V never increases and the arm ends at q*.
+    """
+    from quat_jt_controller.goal_check import polish
+    from quat_jt_controller.regulator import Regulator
+    from quat_jt_controller.resources import config_parameters
+    model = panda_model()
+    p = config_parameters('panda_controller.yaml')
+    gains = cl.Gains.create(potential, p['kp'], p['kv'], p['lambda'], cl.Task.POSE, 7)
+    shaping = dataclasses.replace(sh.from_parameters(p, 7), friction_compensation_nm=(),
+                                  friction_learning_limit_nm=())
+    q_star = np.array([0.3, -0.5, 0.2, -2.0, 0.1, 1.8, 0.9])
+    p_d, R_d = model.forward_kinematics(q_star.tolist())
+    q_d = quat.from_rotation_matrix(R_d)
+    J = np.array(model.kinematics(q_star.tolist())[2])
+    null = np.linalg.svd(J)[2][-1]  # the self-motion direction at q*
+    q_start = polish(model, q_star + 0.3 * null / np.abs(null).max(), q_d, p_d, cl.Task.POSE)
+    assert q_start is not None and np.abs(q_start - q_star).max() > 0.25
+    alone = Regulator(model, cl.Task.POSE, gains, None, None,
+                      dataclasses.replace(shaping, configuration_gain=()))
+    alone.set_goal(alone.pose(q_star.tolist()))
+    tau = alone.update(q_start.tolist(), [0.0] * 7).tau_nm
+    np.testing.assert_allclose(tau, model.gravity(q_start.tolist()), atol=1e-6)
+
+    loop = ClosedLoop(model, gains, cl.Task.POSE, q_d, p_d, shaping=shaping, q_star=q_star)
+    traj = loop.run(q_start, 2.5, dt_s=1e-3)
+    dV = np.diff(traj.lyapunov)
+    assert dV.max() <= 1e-9 * traj.lyapunov[0], f'V increased by {dV.max()}'
+    assert np.abs(traj.q_rad[-1] - q_star).max() < 1e-3
+    assert traj.error_norm[-1] < 1e-4

@@ -98,6 +98,31 @@ def test_namespaced_and_renamed_sim_keeps_its_config_file(context):
 
 
 @pytest.mark.node
+def test_the_panda_loads_from_its_config_with_its_meshes_missing(context, capfd):
+    """
+    config/panda_sim.yaml drives the seven arm joints; the fingers are held, not published.
+
+    A robot_description whose meshes cannot be found still loads, with one WARN naming them.
+    """
+    from quat_jt_controller.resources import share_path
+    from robots import PANDA_JOINTS, PANDA_URDF
+    from wrist_sim.sim_node import WristSimNode
+    urdf = PANDA_URDF.read_text().replace('package://meshes/', 'package://not_installed/')
+    node = WristSimNode(context=context, cli_args=[
+        '--ros-args', '--params-file', str(share_path('config/panda_sim.yaml'))],
+        parameter_overrides=[Parameter('robot_description', value=urdf)])
+    try:
+        assert node.sim.joint_names == PANDA_JOINTS
+        assert node.sim.missing_meshes
+        np.testing.assert_allclose(node.sim.q_rad, node.get_parameter('initial_positions').value)
+        err = capfd.readouterr().err
+        assert err.count('mesh file(s) of robot_description not found') == 1
+        assert 'package://not_installed/visual/link1.obj' in err
+    finally:
+        node.destroy_node()
+
+
+@pytest.mark.node
 def test_bad_startup_parameters_are_refused(context):
     with pytest.raises(SimulatorError):
         _make_node(context, viscous_friction=[0.1, 0.2])

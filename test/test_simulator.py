@@ -6,7 +6,7 @@ import pybullet_data
 import pytest
 from quat_jt_controller.model import RobotModel
 from quat_jt_controller.resources import default_urdf_xml
-from wrist_sim.simulator import resolve_package_uris, SimulatorError, WristSimulator
+from wrist_sim.simulator import resolve_meshes, SimulatorError, WristSimulator
 
 pytestmark = pytest.mark.unit
 
@@ -225,15 +225,51 @@ def test_unknown_or_repeated_joints_are_refused(urdf):
         WristSimulator(urdf, coulomb_nm=[1.0])
 
 
-def test_package_uris_resolve_from_search_dirs(tmp_path):
+def _link_with_meshes(*filenames: str) -> str:
+    shapes = ''.join(f'<visual><geometry><mesh filename="{f}"/></geometry></visual>'
+                     for f in filenames)
+    return (f'<robot name="r"><link name="base">{shapes}<inertial><mass value="1"/>'
+            '<inertia ixx="1" iyy="1" izz="1" ixy="0" ixz="0" iyz="0"/></inertial></link>'
+            '</robot>')
+
+
+def test_meshes_resolve_from_search_dirs_and_the_missing_ones_are_dropped(tmp_path):
     mesh = tmp_path / 'pkgs' / 'my_description' / 'meshes' / 'a.stl'
     mesh.parent.mkdir(parents=True)
     mesh.write_text('solid a\nendsolid a\n')
-    xml = ('<mesh filename="package://my_description/meshes/a.stl"/>'
-           '<mesh filename="package://missing/b.stl"/>')
-    out = resolve_package_uris(xml, [tmp_path])  # found one level down, in pkgs/
-    assert f'filename="{mesh.resolve()}"' in out
-    assert 'package://missing/b.stl' in out
+    xml = _link_with_meshes('package://my_description/meshes/a.stl', 'package://missing/b.stl',
+                            'my_description/meshes/a.stl', 'meshes/c.stl')
+    out, missing = resolve_meshes(xml, [tmp_path])  # found one level down, in pkgs/
+    assert out.count(f'filename="{mesh.resolve()}"') == 2  # package:// and relative
+    assert missing == ['package://missing/b.stl', 'meshes/c.stl']
+    assert 'b.stl' not in out and 'c.stl' not in out and '<inertial>' in out
+    assert resolve_meshes(_link_with_meshes(str(mesh)), []) == (
+        _link_with_meshes(str(mesh)), [])  # found as written: the XML is untouched
+
+
+def test_package_uris_resolve_through_the_ament_index(tmp_path, monkeypatch):
+    """A robot_description from a sourced workspace: package:// is share/<package>/."""
+    prefix = tmp_path / 'install'
+    mesh = prefix / 'share' / 'my_robot_description' / 'meshes' / 'a.stl'
+    mesh.parent.mkdir(parents=True)
+    mesh.write_text('solid a\nendsolid a\n')
+    index = prefix / 'share' / 'ament_index' / 'resource_index' / 'packages'
+    index.mkdir(parents=True)
+    (index / 'my_robot_description').write_text('')
+    monkeypatch.setenv('AMENT_PREFIX_PATH', f'/nonexistent:{prefix}')
+    out, missing = resolve_meshes(
+        _link_with_meshes('package://my_robot_description/meshes/a.stl'), [])
+    assert f'filename="{mesh.resolve()}"' in out and missing == []
+
+
+def test_a_robot_whose_meshes_are_missing_loads_without_them():
+    """The dynamics need only the inertias: the arm loads, moves and names what is missing."""
+    xml = XARM.read_text().replace('package://xarm_description/', 'package://nowhere/')
+    with WristSimulator(xml) as s:
+        assert s.n == 6
+        assert s.missing_meshes and all('package://nowhere/' in m for m in s.missing_meshes)
+        s.step(np.zeros(6))
+        assert np.all(np.isfinite(s.q_rad))
 
 
 @pytest.mark.skipif(not XARM.is_file(), reason='pybullet_data has no xArm6')

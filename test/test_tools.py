@@ -71,18 +71,21 @@ def test_benchmark_reports_every_figure(tmp_path):
     two_cpus = len(realtime.allowed_cpus()) >= 2  # else there is no pinned run
     assert ('| figure | ' + ('two processes, pinned | minimal pair, pinned | ' if two_cpus
                              else '') + 'two processes, not pinned | minimal pair, not pinned | '
-            'composed (3 s) | target |') in stdout
+            'composed (3 s) | Panda 7-DOF pose, two processes' + (', pinned' if two_cpus else '')
+            + ' | target |') in stdout
     for row in ('state rate (Hz)', 'command rate (Hz)', 'missed ticks: steps without a fresh',
                 'late publications', 'latency p50 / p99 / max (ms)',
                 'controller compute p50 (lowest-highest 1 s window) / p99 (us)',
                 'CPU % (sim / controller, or the one process)',
                 'paper experiment in lockstep (x real time)', 'host CPU steal during the run (%)',
                 'core tick Regulator.update, xArm6 6-DOF pose',
+                'core tick Regulator.update, Panda 7-DOF pose',
                 'controller throwaway ticks before a state (prewarm_lead; % of states)'):
         assert f'| {row}' in stdout, row
     result = json.loads((tmp_path / 'bench.json').read_text())
     pinned = ('two processes, pinned',) if two_cpus else ()
-    for mode in (*pinned, 'two processes, not pinned', 'composed'):
+    for mode in (*pinned, 'two processes, not pinned', 'composed',
+                 'Panda 7-DOF pose, two processes'):
         # the loop ran; figures are not asserted
         assert result['loops'][mode]['sim']['window_steps'] > 1000, mode
         assert result['loops'][mode]['command_rate_hz'] > 100.0, mode

@@ -84,6 +84,13 @@ class WristSimNode(Node):
                 enforce_velocity_limits=p['enforce_velocity_limits'])
         except SimulatorError as exc:
             raise SimulatorError(f'{exc}{bundled_urdf_hint(self._given_urdf)}') from None
+        if self.sim.missing_meshes:
+            self.get_logger().warning(
+                f'{len(self.sim.missing_meshes)} mesh file(s) of robot_description not found, '
+                f'simulated without those shapes (the dynamics need only the inertias): '
+                f'{", ".join(self.sim.missing_meshes)}. package:// URIs are looked for in the '
+                'sourced workspaces (AMENT_PREFIX_PATH) and in pybullet_data; relative paths '
+                'in pybullet_data')
         self.n = self.sim.n
         self._effort_limits = self.sim.effort_limits_nm.tolist()
         self._velocity_limits = self.sim.velocity_limits_rad_s.tolist()

@@ -43,6 +43,7 @@ from pathlib import Path
 import re
 import tempfile
 from typing import Optional, Sequence, Union
+import xml.etree.ElementTree as ET
 
 import numpy as np
 from wrist_sim.quiet import c_output_silenced, pybullet  # imported without its banner
@@ -71,28 +72,89 @@ class SimState:
     tau_applied_nm: np.ndarray
 
 
-def resolve_package_uris(urdf_xml: str, search_dirs: Sequence[PathLike]) -> str:
+def ament_package_dirs(package: str) -> list[Path]:
     """
-    Replace ``package://pkg/rest`` URIs by absolute paths where the file can be found.
+    Return ``<prefix>/share/<package>`` of each sourced workspace that has it.
 
-    For each directory ``d`` of ``search_dirs`` it tries ``d/pkg/rest`` and then
-    ``d/*/pkg/rest`` (so ``pybullet_data`` resolves ``package://xarm_description/...`` through
-    ``pybullet_data/xarm/xarm_description``). Unresolved URIs are left untouched: PyBullet then
-    warns and skips that mesh.
+    The prefixes are ``AMENT_PREFIX_PATH``'s, as ``ament_index_python`` reads them (a package
+    is in the index if ``<prefix>/share/ament_index/resource_index/packages/<package>``
+    exists); ROS-free, so a pip install without ROS finds nothing and goes on.
+    """
+    out = []
+    for prefix in os.environ.get('AMENT_PREFIX_PATH', '').split(os.pathsep):
+        if not prefix:
+            continue
+        marker = Path(prefix) / 'share' / 'ament_index' / 'resource_index' / 'packages'
+        share = Path(prefix) / 'share' / package
+        if (marker / package).is_file() and share.is_dir():
+            out.append(share)
+    return out
+
+
+def _find_mesh(filename: str, dirs: list[Path]) -> Optional[str]:
+    """Return the absolute path of a URDF mesh ``filename``, or None if it cannot be found."""
+    match = _PACKAGE_URI.fullmatch(filename)
+    if match:
+        pkg, rest = match.group(1), match.group(2)
+        candidates = [share / rest for share in ament_package_dirs(pkg)]
+        for d in dirs:
+            candidates.append(d / pkg / rest)
+            candidates += [sub / pkg / rest for sub in sorted(d.iterdir()) if sub.is_dir()]
+    else:
+        path = filename[len('file://'):] if filename.startswith('file://') else filename
+        if os.path.isabs(path):
+            candidates = [Path(path)]
+        else:  # relative to a file the XML string no longer has: try the search paths
+            candidates = [d / path for d in dirs]
+            for d in dirs:
+                candidates += [sub / path for sub in sorted(d.iterdir()) if sub.is_dir()]
+    for c in candidates:
+        if c.is_file():
+            return str(c.resolve())
+    return None
+
+
+def resolve_meshes(urdf_xml: str, search_dirs: Sequence[PathLike]) -> tuple[str, list[str]]:
+    """
+    Point every mesh of the URDF at a file that exists; drop the shapes whose mesh does not.
+
+    A mesh ``filename`` is looked for:
+
+    - ``package://pkg/rest``: in ``share/pkg/rest`` of the sourced workspaces (the ament index,
+      :func:`ament_package_dirs`), then for each directory ``d`` of ``search_dirs`` in
+      ``d/pkg/rest`` and ``d/*/pkg/rest`` (so ``pybullet_data`` resolves
+      ``package://xarm_description/...`` through ``pybullet_data/xarm/xarm_description``);
+    - a relative path: in ``d/path`` and ``d/*/path`` (the URDF's own folder is gone once it
+      is a ``robot_description`` string);
+    - an absolute path or ``file://`` URI: as it is.
+
+    The ``<visual>`` or ``<collision>`` whose mesh is not found is removed: the dynamics need
+    only the ``<inertial>`` elements. Returns the XML and the filenames not found (for one
+    warning); the XML is unchanged when every mesh is found as written.
     """
     dirs = [Path(d) for d in search_dirs if d and Path(d).is_dir()]
-
-    def find(match: re.Match) -> str:
-        pkg, rest = match.group(1), match.group(2)
-        for d in dirs:
-            candidates = [d / pkg / rest]
-            candidates += [sub / pkg / rest for sub in sorted(d.iterdir()) if sub.is_dir()]
-            for c in candidates:
-                if c.is_file():
-                    return str(c.resolve())
-        return match.group(0)
-
-    return _PACKAGE_URI.sub(find, urdf_xml)
+    try:
+        root = ET.fromstring(urdf_xml)
+    except ET.ParseError as exc:
+        raise SimulatorError(f'the URDF is not valid XML: {exc}') from exc
+    missing: list[str] = []
+    changed = False
+    for link in root.iter('link'):
+        for shape in [e for e in link if e.tag in ('visual', 'collision')]:
+            mesh = shape.find('geometry/mesh')
+            if mesh is None:
+                continue
+            filename = mesh.get('filename', '')
+            found = _find_mesh(filename, dirs)
+            if found is None:
+                link.remove(shape)
+                if filename not in missing:
+                    missing.append(filename)
+                changed = True
+            elif found != filename:
+                mesh.set('filename', found)
+                changed = True
+    return (ET.tostring(root, encoding='unicode') if changed else urdf_xml), missing
 
 
 def _as_vector(values: Optional[Sequence[float]], n: int, name: str,
@@ -135,8 +197,11 @@ class WristSimulator:
     :param viscous_nm_s_per_rad: viscous friction ``b`` per joint (default zeros).
     :param coulomb_nm: Coulomb friction / stiction level per joint (default zeros).
     :param initial_positions_rad: where the robot starts, at rest (default zeros).
-    :param search_dirs: extra directories in which ``package://`` meshes are looked for (before
-        ``pybullet_data``); the first also becomes PyBullet's additional search path.
+    :param search_dirs: extra directories in which meshes are looked for (before
+        ``pybullet_data``; :func:`resolve_meshes`); the first also becomes PyBullet's
+        additional search path. A shape whose mesh is found nowhere is left out, and its file
+        is listed in :attr:`missing_meshes` (the robot still loads: the dynamics need only the
+        inertias).
     :param solver_iterations: PyBullet constraint-solver iterations (for the friction motors).
     :param enforce_velocity_limits: hold each joint's speed at its URDF velocity limit, as a
         drive's speed limit would (see the module docstring).
@@ -155,7 +220,7 @@ class WristSimulator:
             raise SimulatorError('empty URDF')
         self.dt_s = float(dt_s)
         dirs = [str(d) for d in search_dirs] + [pybullet_data.getDataPath()]
-        xml = resolve_package_uris(urdf_xml, dirs)
+        xml, self.missing_meshes = resolve_meshes(urdf_xml, dirs)
 
         if use_gui and not os.environ.get('DISPLAY'):
             # PyBullet would exit the whole process ('cannot connect to X server'): say why.

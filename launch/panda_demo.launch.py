@@ -1,0 +1,83 @@
+"""
+The 7-DOF demo: the Franka Panda of pybullet_data in the simulator, regulated in full pose.
+
+    ros2 launch quat_jt_controller panda_demo.launch.py [potential:=tanh|quadratic]
+                                                       [use_gui:=true|false]
+                                                       [namespace:=left]
+
+A redundant arm (issue 21): the transpose-Jacobian law needs no inverse, so it runs unchanged on
+seven joints; the self-motion is held by the goal-configuration term, whose q* the goal check
+slides along the self-motion to the posture nearest the arm's (then ``preferred_configuration``,
+``posture_weight``; docs/lyapunov.md, section 9). The URDF ships inside the ``pybullet_data``
+Python package: it is read here into ``robot_description`` of both nodes (its
+``package://meshes/...`` files are found inside pybullet_data). The seven arm joints are
+regulated, ``panda_link0`` -> ``panda_link8`` (the flange); the two finger joints are held
+closed by the simulator and are not in ``/joint_states``. Parameters come from this package's
+``config/panda_sim.yaml`` and ``config/panda_controller.yaml`` (both written by
+``design_gains``). The simulator node is named ``panda_sim``. The arm starts at rest in the
+Panda's usual ready pose (flange at (0.307, 0, 0.590) m, pointing down) and holds it; then send
+a reachable goal, e.g. this one, 0.25 m away (the flange's pose at q = [0.3, -0.5, 0.2, -2.0,
+0.1, 1.8, 0.9]):
+
+    ros2 topic pub --once /quat_jt_controller/target_pose geometry_msgs/msg/PoseStamped \
+      "{header: {frame_id: panda_link0},
+        pose: {position: {x: 0.3514, y: 0.2278, z: 0.6777},
+               orientation: {x: -0.9678, y: 0.2055, z: -0.1104, w: 0.0942}}}"
+
+and watch ``/quat_jt_controller/position_error`` and ``/quat_jt_controller/orientation_error``;
+``/diagnostics`` gives the goal configuration q* the elbow settles at.
+``ros2 service call /panda_sim/reset std_srvs/srv/Trigger`` puts the arm back at its start.
+Self-collision is not simulated (docs/panda.md).
+"""
+import os
+from pathlib import Path
+
+from ament_index_python.packages import get_package_share_directory
+from launch import LaunchDescription
+from launch.actions import DeclareLaunchArgument, Shutdown
+from launch.substitutions import LaunchConfiguration
+from launch_ros.actions import Node
+from launch_ros.parameter_descriptions import ParameterValue
+import pybullet_data
+
+PANDA_URDF = Path(pybullet_data.getDataPath()) / 'franka_panda' / 'panda.urdf'
+
+# /clock is absolute (rclpy's time source subscribes to it): remapped to the relative 'clock',
+# it becomes <namespace>/clock, so two robots in lockstep (publish_clock) keep their own time.
+CLOCK_IN_NAMESPACE = [('/clock', 'clock')]
+
+
+def generate_launch_description() -> LaunchDescription:
+    share = get_package_share_directory('quat_jt_controller')
+    sim_config = os.path.join(share, 'config', 'panda_sim.yaml')
+    controller_config = os.path.join(share, 'config', 'panda_controller.yaml')
+    robot_description = PANDA_URDF.read_text()
+    potential = LaunchConfiguration('potential')
+    use_gui = LaunchConfiguration('use_gui')
+    namespace = LaunchConfiguration('namespace')
+    return LaunchDescription([
+        DeclareLaunchArgument('potential', default_value='tanh',
+                              choices=['tanh', 'quadratic'],
+                              description="controller potential: 'tanh' (Eq. 32) or "
+                                          "'quadratic' (Eq. 24)"),
+        DeclareLaunchArgument('use_gui', default_value='false', choices=['true', 'false'],
+                              description='open the PyBullet window of the simulator'),
+        DeclareLaunchArgument('namespace', default_value='',
+                              description='namespace of both nodes, their topics and their '
+                                          'simulated clock, e.g. left (one robot per '
+                                          'namespace)'),
+        Node(package='quat_jt_controller', executable='wrist_sim_node', name='panda_sim',
+             output='screen', emulate_tty=True, namespace=namespace,
+             remappings=CLOCK_IN_NAMESPACE,
+             on_exit=Shutdown(reason='the simulator exited'),
+             parameters=[sim_config,
+                         {'robot_description': robot_description,
+                          'use_gui': ParameterValue(use_gui, value_type=bool)}]),
+        Node(package='quat_jt_controller', executable='controller_node',
+             name='quat_jt_controller', output='screen', emulate_tty=True, namespace=namespace,
+             remappings=CLOCK_IN_NAMESPACE,
+             on_exit=Shutdown(reason='the controller exited'),
+             parameters=[controller_config,
+                         {'robot_description': robot_description,
+                          'potential': ParameterValue(potential, value_type=str)}]),
+    ])
