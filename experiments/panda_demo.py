@@ -32,10 +32,10 @@ import numpy as np
 import pybullet_data
 from quat_jt_controller import control_law as cl
 from quat_jt_controller import quaternion as quat
-from quat_jt_controller import shaping as sh
+from quat_jt_controller.controller_config import controller_from_package_config
 from quat_jt_controller.goal_check import goal_configuration
 from quat_jt_controller.model import RobotModel
-from quat_jt_controller.regulator import Goal, Regulator
+from quat_jt_controller.regulator import Goal
 from quat_jt_controller.resources import config_parameters
 from wrist_sim.quiet import c_output_silenced
 from wrist_sim.simulator import WristSimulator
@@ -78,16 +78,12 @@ def null_space_speed(model: RobotModel, q: np.ndarray, qdot: np.ndarray) -> floa
 
 def run(potential: str, hold_s: float) -> tuple[SequenceRun, RobotModel, str]:
     """Drive the Panda through GOALS_Q_RAD with the config's controller; return the run."""
-    ctrl = config_parameters('panda_controller.yaml')
     simp = config_parameters('panda_sim.yaml')
     urdf_xml = PANDA_URDF.read_text()
-    model = RobotModel(urdf_xml, ctrl['base_link'], ctrl['tip_link'], ctrl['joints'])
-    gains = cl.Gains.create(potential, ctrl['kp'], ctrl['kv'], ctrl['lambda'], cl.Task.POSE,
-                            model.n, ctrl['gravity_compensation'])
-    shaping = sh.from_parameters(ctrl, model.n)
-    regulator = Regulator(model, cl.Task.POSE, gains, None, None, shaping)
+    regulator = controller_from_package_config('panda_controller.yaml', urdf_xml, potential)
+    model, shaping = regulator.model, regulator.shaping
     with c_output_silenced((1, 2)):
-        sim = WristSimulator(urdf_xml, ctrl['joints'], dt_s=1.0 / simp['rate_hz'],
+        sim = WristSimulator(urdf_xml, model.joint_names, dt_s=1.0 / simp['rate_hz'],
                              viscous_nm_s_per_rad=simp['viscous_friction'],
                              coulomb_nm=simp['coulomb_friction'],
                              initial_positions_rad=simp['initial_positions'],

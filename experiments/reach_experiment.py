@@ -56,6 +56,7 @@ import numpy as np
 from quat_jt_controller import control_law as cl
 from quat_jt_controller import quaternion as quat
 from quat_jt_controller import shaping as sh
+from quat_jt_controller.controller_config import controller_from_package_config
 from quat_jt_controller.goal_check import goal_configuration
 from quat_jt_controller.model import RobotModel
 from quat_jt_controller.reference_sim import ClosedLoop, run_sampled
@@ -113,11 +114,9 @@ def robot_urdf(robot: Robot) -> str:
 def load_controller(robot: Robot, potential: Optional[str] = None,
                     overrides: Optional[dict] = None):
     """Return ``(model, gains, shaping)`` of the robot's controller config (+ ``overrides``)."""
-    p = dict(config_parameters(robot.controller_config), **(overrides or {}))
-    model = RobotModel(robot_urdf(robot), p['base_link'], p['tip_link'], p['joints'])
-    gains = cl.Gains.create(potential or p['potential'], p['kp'], p['kv'], p['lambda'],
-                            cl.Task(p['task']), model.n, p.get('gravity_compensation', True))
-    return model, gains, sh.from_parameters(p, model.n)
+    regulator = controller_from_package_config(robot.controller_config, robot_urdf(robot),
+                                               potential, overrides)
+    return regulator.model, regulator.gains, regulator.shaping
 
 
 def cases(model: RobotModel, robot: Robot, count: int, seed: int) -> list:

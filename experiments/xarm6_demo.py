@@ -31,7 +31,7 @@ import numpy as np
 import pybullet_data
 from quat_jt_controller import control_law as cl
 from quat_jt_controller import quaternion as quat
-from quat_jt_controller import shaping as sh
+from quat_jt_controller.controller_config import controller_from_package_config
 from quat_jt_controller.goal_check import goal_configuration
 from quat_jt_controller.model import RobotModel
 from quat_jt_controller.reference_sim import ClosedLoop
@@ -61,12 +61,10 @@ class PoseRun:
 def run(potential: str, duration_s: float, urdf_xml: str) -> tuple[PoseRun, RobotModel,
                                                                    tuple, tuple]:
     """Regulate the xArm6 to the goal with ``potential``; return the run, model and goal."""
-    ctrl = config_parameters('xarm6_controller.yaml')
     simp = config_parameters('xarm6_sim.yaml')
-    model = RobotModel(urdf_xml, ctrl['base_link'], ctrl['tip_link'], ctrl['joints'])
-    gains = cl.Gains.create(potential, ctrl['kp'], ctrl['kv'], ctrl['lambda'], cl.Task.POSE,
-                            model.n, ctrl['gravity_compensation'])
-    shaping = sh.from_parameters(ctrl, model.n)  # the config's extensions, as the node runs
+    # the config's gains and extensions, as the node runs them
+    regulator = controller_from_package_config('xarm6_controller.yaml', urdf_xml, potential)
+    model, gains, shaping = regulator.model, regulator.gains, regulator.shaping
     p_d, R_d = model.forward_kinematics(Q_GOAL_RAD)
     q_d = quat.from_rotation_matrix(R_d)
     # q*, as the node's goal-check worker gives it (docs/lyapunov.md, section 5).
@@ -78,7 +76,7 @@ def run(potential: str, duration_s: float, urdf_xml: str) -> tuple[PoseRun, Robo
     t = np.empty(steps + 1)
     q, qdot, tau = (np.empty((steps + 1, model.n)) for _ in range(3))
     pos, ori = np.empty(steps + 1), np.empty(steps + 1)
-    with WristSimulator(urdf_xml, ctrl['joints'], dt_s=1.0 / simp['rate_hz'],
+    with WristSimulator(urdf_xml, model.joint_names, dt_s=1.0 / simp['rate_hz'],
                         viscous_nm_s_per_rad=simp['viscous_friction'],
                         coulomb_nm=simp['coulomb_friction'],
                         initial_positions_rad=simp['initial_positions'],

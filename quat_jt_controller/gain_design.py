@@ -627,8 +627,8 @@ def to_yaml(d: Design, potential: str = 'tanh', command: str = '',
         f'  {command or "python -m quat_jt_controller.gain_design ..."}',
         'Live parameters (ros2 param set): potential, kp, kv, lambda, gravity_compensation and '
         'the extensions (joint_limit_*, large_error_gain, friction_*, '
-        'configuration_*, damping_speed, goal_velocity_gain; docs/lyapunov.md). The rest is '
-        'read-only.',
+        'configuration_*, damping_speed, goal_velocity_gain, preferred_configuration, '
+        'posture_weight; docs/lyapunov.md). The rest is read-only.',
         'The design, per joint (N m unless said):',
         f'  effort limits {_fmt(f["effort_limits_nm"])}, largest |g(q)| '
         f'{_fmt(np.round(f["gravity_max_nm"], 4))}, friction estimates '

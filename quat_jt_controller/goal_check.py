@@ -247,7 +247,8 @@ def goal_configuration(model: RobotModel, q_measured: Optional[Sequence[float]],
     ``starts_range[0]`` of them, and more, up to ``starts_range[1]``, until a solution outside
     the joint-limit bands is found); among the solutions with ``sigma_min(J) >=
     SINGULAR_SIGMA_MIN``, full-turn joints moved by whole turns to the angle nearest the
-    measured one (the joint box is convex: the way there stays within the limits), it prefers
+    measured one, but ``margin_rad`` from their stops when a whole turn allows (the joint box
+    is convex: the way there stays within the limits), it prefers
     those outside the joint-limit bands (``margin_rad``), then the nearest to ``q_measured``.
     Deterministic.
 

@@ -20,25 +20,29 @@ from typing import Optional, Sequence
 import numpy as np
 from quat_jt_controller import control_law as cl
 from quat_jt_controller import quaternion as quat
+from quat_jt_controller.controller_config import controller_from_package_config
 from quat_jt_controller.gain_design import linearized_spectral_radius, time_constant_s
 from quat_jt_controller.model import RobotModel
 from quat_jt_controller.reference_sim import ClosedLoop, run_sampled
 from quat_jt_controller.resources import config_parameters
-from quat_jt_controller.shaping import from_parameters, Shaping
+from quat_jt_controller.shaping import Shaping
+
+
+def _xarm6_controller(potential: Optional[str] = None):
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    from robots import XARM6_URDF
+    return controller_from_package_config('xarm6_controller.yaml', XARM6_URDF.read_text(),
+                                          potential)
 
 
 def xarm6_gains(potential: Optional[str] = None) -> cl.Gains:
     """Return the gains of ``config/xarm6_controller.yaml`` (its potential unless given)."""
-    p = config_parameters('xarm6_controller.yaml')
-    return cl.Gains.create(potential or p['potential'], p['kp'], p['kv'], p['lambda'],
-                           cl.Task(p['task']), len(p['joints']),
-                           p.get('gravity_compensation', True))
+    return _xarm6_controller(potential).gains
 
 
 def xarm6_shaping() -> Shaping:
-    """Return the issue-10 extensions of ``config/xarm6_controller.yaml``."""
-    p = config_parameters('xarm6_controller.yaml')
-    return from_parameters(p, len(p['joints']))
+    """Return the extensions of ``config/xarm6_controller.yaml``."""
+    return _xarm6_controller().shaping
 
 
 def goal_of(model: RobotModel, q_goal_rad: Sequence[float]):

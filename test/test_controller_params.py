@@ -167,6 +167,26 @@ def test_parameters_are_declared_with_descriptors(make_node):
     assert node.describe_parameter('publish_rate_divider').integer_range
 
 
+@pytest.mark.parametrize('name, urdf', [('wrist_controller.yaml', None),
+                                        ('xarm6_controller.yaml', 'xarm6'),
+                                        ('panda_controller.yaml', 'panda')])
+def test_the_tools_build_the_controller_the_node_runs_from_a_config(make_node, name, urdf):
+    """controller_from_config gives the node's gains, extensions, model and ceilings."""
+    from quat_jt_controller.controller_config import controller_from_package_config
+    from robots import PANDA_URDF, XARM6_URDF
+    xml = {'xarm6': XARM6_URDF, 'panda': PANDA_URDF}[urdf].read_text() if urdf else ''
+    node = make_node({'robot_description': xml} if xml else None,
+                     cli_args=['--ros-args', '--params-file',
+                               str(CONFIG.parent / name)])
+    tools = controller_from_package_config(name, xml)
+    assert tools.gains == node.regulator.gains
+    assert tools.shaping == node.regulator.shaping
+    assert tools.model.joint_names == node.regulator.model.joint_names
+    with pytest.raises(GainsError, match='kv'):  # the node's ceilings, here too
+        controller_from_package_config(name, xml, overrides={
+            'kv': [1e6] * tools.n})
+
+
 def test_defaults_and_paper_config_file_are_the_paper_experiment(make_node):
     for node in (make_node(), make_node(cli_args=['--ros-args', '--params-file', str(CONFIG)])):
         assert node.regulator.shaping == Shaping.create(  # no extension on

@@ -27,7 +27,7 @@ from quat_jt_controller import quaternion as quat
 from quat_jt_controller import shaping as sh
 from quat_jt_controller.reference_sim import ClosedLoop, run_sampled
 from quat_jt_controller.resources import default_urdf_xml
-from robots import panda_model, wrist_model
+from robots import wrist_model
 from wrist_sim.simulator import WristSimulator
 
 pytestmark = pytest.mark.unit
@@ -146,13 +146,14 @@ def test_a_redundant_arm_comes_to_rest_at_the_goal_configuration_elbow_included(
     zero there. Without U_c the torque is g(q) alone, so the arm stays (every point of the
     self-motion is an equilibrium). With U_c, V never increases and the arm ends at q*.
     """
+    from quat_jt_controller.controller_config import controller_from_package_config
     from quat_jt_controller.goal_check import polish
     from quat_jt_controller.regulator import Regulator
-    from quat_jt_controller.resources import config_parameters
-    model = panda_model()
-    p = config_parameters('panda_controller.yaml')
-    gains = cl.Gains.create(potential, p['kp'], p['kv'], p['lambda'], cl.Task.POSE, 7)
-    shaping = dataclasses.replace(sh.from_parameters(p, 7), friction_compensation_nm=(),
+    from robots import PANDA_URDF
+    controller = controller_from_package_config('panda_controller.yaml',
+                                                PANDA_URDF.read_text(), potential)
+    model, gains = controller.model, controller.gains
+    shaping = dataclasses.replace(controller.shaping, friction_compensation_nm=(),
                                   friction_learning_limit_nm=())
     q_star = np.array([0.3, -0.5, 0.2, -2.0, 0.1, 1.8, 0.9])
     p_d, R_d = model.forward_kinematics(q_star.tolist())

@@ -1,0 +1,45 @@
+"""
+The controller from its parameters, ROS-free: what a config file makes of the regulator.
+
+``controller_node`` declares these parameters one by one (``parameters.py``) and validates
+them with the same constructors: ``Gains.create`` with the URDF effort limits as ceilings,
+``shaping.from_parameters`` and ``Regulator.set_shaping``. :func:`controller_from_config` does
+the same from a mapping (a config file's ``ros__parameters``), so the experiments, the
+benchmark and the tests run the controller the node would run from that file.
+"""
+from typing import Any, Mapping, Optional
+
+from quat_jt_controller import control_law as cl
+from quat_jt_controller import shaping as sh
+from quat_jt_controller.model import RobotModel
+from quat_jt_controller.regulator import Regulator
+from quat_jt_controller.resources import config_parameters, default_urdf_xml
+
+
+def controller_from_config(params: Mapping[str, Any], urdf_xml: str = '',
+                           potential: Optional[str] = None,
+                           overrides: Optional[Mapping[str, Any]] = None) -> Regulator:
+    """
+    Build the Regulator of controller parameters keyed by their ROS names (no goal yet).
+
+    ``urdf_xml`` is the robot (default: the parameters' ``robot_description``, and if that is
+    empty the bundled wrist, as for the node); ``potential`` and ``overrides`` replace the
+    parameters' values. Raises the node's errors (ModelError, GainsError, ShapingError), each
+    naming the bad value.
+    """
+    p = {**params, **(overrides or {})}
+    model = RobotModel(urdf_xml or p.get('robot_description') or default_urdf_xml(),
+                       p['base_link'], p['tip_link'], p['joints'])
+    task = cl.Task(p['task'])
+    gains = cl.Gains.create(potential or p['potential'], p['kp'], p['kv'], p['lambda'], task,
+                            model.n, p.get('gravity_compensation', True), model.effort_limits)
+    regulator = Regulator(model, task, gains)
+    regulator.set_shaping(sh.from_parameters(p, model.n))
+    return regulator
+
+
+def controller_from_package_config(name: str, urdf_xml: str = '',
+                                   potential: Optional[str] = None,
+                                   overrides: Optional[Mapping[str, Any]] = None) -> Regulator:
+    """Build the Regulator of the package's ``config/<name>`` (see controller_from_config)."""
+    return controller_from_config(config_parameters(name), urdf_xml, potential, overrides)
