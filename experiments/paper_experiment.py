@@ -47,9 +47,9 @@ from quat_jt_controller.resources import default_urdf_xml
 
 POTENTIALS = ('quadratic', 'tanh')
 EQUATION = {'quadratic': 'Eq. 37', 'tanh': 'Eq. 38'}
-# Issue 10: a third run, the tanh law with the product defaults (designed gains, extensions).
+# A third run: the tanh law with the product defaults (designed gains, extensions).
 EXTENDED = 'tanh_extended'
-EQUATION[EXTENDED] = 'Eq. 38 + issue 10, config/wrist_controller.yaml'
+EQUATION[EXTENDED] = 'Eq. 38 + extensions, config/wrist_controller.yaml'
 CONTROLLER = 'quat_jt_controller'  # node name; its private topics live under /<name>/
 REACH_THRESHOLD = 0.05
 ANIMATION_FPS = 25.0  # frames per second of simulated time

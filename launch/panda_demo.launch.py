@@ -5,7 +5,7 @@ The 7-DOF demo: the Franka Panda of pybullet_data in the simulator, regulated in
                                                        [use_gui:=true|false]
                                                        [namespace:=left]
 
-A redundant arm (issue 21): the transpose-Jacobian law needs no inverse, so it runs unchanged on
+A redundant arm: the transpose-Jacobian law needs no inverse, so it runs unchanged on
 seven joints; the self-motion is held by the goal-configuration term, whose q* the goal check
 slides along the self-motion to the posture nearest the arm's (then ``preferred_configuration``,
 ``posture_weight``; docs/lyapunov.md, section 9). The URDF ships inside the ``pybullet_data``

@@ -11,9 +11,17 @@ from typing import Any, Mapping, Optional
 
 from quat_jt_controller import control_law as cl
 from quat_jt_controller import shaping as sh
+from quat_jt_controller.errors import QuatJtError
 from quat_jt_controller.model import RobotModel
 from quat_jt_controller.regulator import Regulator
 from quat_jt_controller.resources import config_parameters, default_urdf_xml
+
+
+class ConfigError(QuatJtError):
+    """The controller parameters lack a value the controller needs."""
+
+
+REQUIRED = ('task', 'potential', 'kp', 'kv', 'lambda', 'joints', 'base_link', 'tip_link')
 
 
 def controller_from_config(params: Mapping[str, Any], urdf_xml: str = '',
@@ -25,15 +33,22 @@ def controller_from_config(params: Mapping[str, Any], urdf_xml: str = '',
     ``urdf_xml`` is the robot (default: the parameters' ``robot_description``, and if that is
     empty the bundled wrist, as for the node); ``potential`` and ``overrides`` replace the
     parameters' values. Raises the node's errors (ModelError, GainsError, ShapingError), each
-    naming the bad value.
+    naming the bad value, or ConfigError naming a missing one. A missing
+    ``preferred_configuration`` is the middle of the ranges, as the node's default.
     """
     p = {**params, **(overrides or {})}
+    missing = [name for name in REQUIRED if name not in p and not (
+        name == 'potential' and potential)]
+    if missing:
+        raise ConfigError(f'the controller parameters lack {missing}')
     model = RobotModel(urdf_xml or p.get('robot_description') or default_urdf_xml(),
                        p['base_link'], p['tip_link'], p['joints'])
     task = cl.Task(p['task'])
     gains = cl.Gains.create(potential or p['potential'], p['kp'], p['kv'], p['lambda'], task,
                             model.n, p.get('gravity_compensation', True), model.effort_limits)
     regulator = Regulator(model, task, gains)
+    if not p.get('preferred_configuration'):
+        p['preferred_configuration'] = list(model.middle_of_ranges())
     regulator.set_shaping(sh.from_parameters(p, model.n))
     return regulator
 

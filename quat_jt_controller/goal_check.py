@@ -104,6 +104,7 @@ def polish(model: RobotModel, q: Sequence[float], q_desired: Sequence[float],
 
 POSTURE_ITERATIONS = 60  # null-space steps of posture(), at most
 POSTURE_MAX_STEP_RAD = 0.1  # the longest null-space step (any joint)
+POSTURE_HALVINGS = 12  # of a step that does not lower the posture cost, before giving up
 POSTURE_STEP_RAD = 1e-7  # posture() stops once a step moves no joint more than this
 POSTURE_BAND_WEIGHT = 100.0  # of the joint-limit bands in the posture cost, x the others
 
@@ -123,11 +124,13 @@ def posture(model: RobotModel, q: Sequence[float], q_desired: Sequence[float],
 
     ``x`` the depth in the joint-limit bands of width ``margin_rad`` (section 2 of
     docs/lyapunov.md): nearest the measured configuration, then the preferred posture, and out
-    of the bands where the self-motion allows. Each step is the projected Newton step
-    ``-(I - J^+ J) grad c / (1 + weight)``, at most ``POSTURE_MAX_STEP_RAD`` long, followed
-    by Newton steps back onto the goal;
-    the result is polished (:func:`polish`), or None. A robot with no more joints than task
-    rows has no self-motion: ``q`` comes back polished, unchanged.
+    of the bands where the self-motion allows. Each step is the Newton step of ``c`` within the
+    null space of J (a basis ``Z`` from the SVD of J: ``-Z (Z^T H Z)^-1 Z^T grad c``, ``H``
+    the diagonal Hessian of ``c``), at most ``POSTURE_MAX_STEP_RAD`` long, taken back onto the
+    goal by Newton steps, and halved until ``c`` decreases there (a backtracking line search:
+    ``c`` never increases, so the search settles at a local minimum of ``c`` along the
+    self-motion). The result is polished (:func:`polish`), or None. A robot with no more joints
+    than task rows has no self-motion: ``q`` comes back polished, unchanged.
     """
     q = np.array(q, dtype=float)
     q_now = np.asarray(q_measured, dtype=float)
@@ -137,23 +140,46 @@ def posture(model: RobotModel, q: Sequence[float], q_desired: Sequence[float],
     limited = (upper - lower) < 2.0 * pi - 1e-6
     inner_lo = np.where(limited, lower + margin_rad, -np.inf)
     inner_hi = np.where(limited, upper - margin_rad, np.inf)
+
+    def depth(x: np.ndarray) -> np.ndarray:  # signed depth in the bands (0 outside them)
+        return np.minimum(x - inner_lo, 0.0) + np.maximum(x - inner_hi, 0.0)
+
+    def cost(x: np.ndarray) -> float:
+        return 0.5 * (float(np.sum((x - q_now) ** 2)) + weight * float(np.sum((x - q_pref) ** 2))
+                      + POSTURE_BAND_WEIGHT * float(np.sum(depth(x) ** 2)))
+
+    def onto_goal(x: np.ndarray) -> np.ndarray:
+        for _ in range(2):
+            err, J = _pose_residual(model, x, q_desired, p_desired, task)
+            x = np.clip(x + np.linalg.lstsq(J, err, rcond=None)[0], lower, upper)
+        return x
+
+    _, J = _pose_residual(model, q, q_desired, p_desired, task)
+    rows = J.shape[0]
+    if rows >= J.shape[1]:
+        return polish(model, q, q_desired, p_desired, task)
+    c_now = cost(q)
     for _ in range(POSTURE_ITERATIONS):
-        err, J = _pose_residual(model, q, q_desired, p_desired, task)
-        if J.shape[0] >= J.shape[1]:
-            break
-        band = np.minimum(q - inner_lo, 0.0) + np.maximum(q - inner_hi, 0.0)
+        _, J = _pose_residual(model, q, q_desired, p_desired, task)
+        Z = np.linalg.svd(J)[2][rows:].T  # the self-motion's directions at q
+        band = depth(q)
         grad = (q - q_now) + weight * (q - q_pref) + POSTURE_BAND_WEIGHT * band
-        J_pinv = np.linalg.pinv(J)
-        step = -(grad - J_pinv @ (J @ grad)) / (1.0 + weight)
+        hessian = 1.0 + weight + POSTURE_BAND_WEIGHT * (band != 0.0)
+        step = -Z @ np.linalg.solve(Z.T @ (hessian[:, None] * Z), Z.T @ grad)
         largest = float(np.max(np.abs(step)))
-        if largest > POSTURE_MAX_STEP_RAD:  # the self-motion is curved: short steps
-            step *= POSTURE_MAX_STEP_RAD / largest
-        q = np.clip(q + step + J_pinv @ err, lower, upper)
-        for _ in range(2):  # back onto the goal
-            err, J = _pose_residual(model, q, q_desired, p_desired, task)
-            q = np.clip(q + np.linalg.lstsq(J, err, rcond=None)[0], lower, upper)
         if largest < POSTURE_STEP_RAD:
             break
+        if largest > POSTURE_MAX_STEP_RAD:  # the self-motion is curved: short steps
+            step *= POSTURE_MAX_STEP_RAD / largest
+        for _ in range(POSTURE_HALVINGS):
+            q_try = onto_goal(np.clip(q + step, lower, upper))
+            c_try = cost(q_try)
+            if c_try < c_now:
+                break
+            step *= 0.5
+        else:
+            break  # no step along the self-motion lowers c: a local minimum
+        q, c_now = q_try, c_try
     return polish(model, q, q_desired, p_desired, task)
 
 
@@ -288,6 +314,7 @@ def goal_configuration(model: RobotModel, q_measured: Optional[Sequence[float]],
                         margin_rad)
             if q is None or _sigma_min(model, q, task) < SINGULAR_SIGMA_MIN:
                 return None
+            q = _representative(q, q_now, lower, upper, margin_rad)  # it may have slid
         if np.any(q < lower) or np.any(q > upper):
             return None
         return bool(np.any(limited & ((q < lower + margin_rad) | (q > upper - margin_rad)))), q

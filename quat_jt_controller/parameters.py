@@ -22,7 +22,8 @@ from quat_jt_controller.control_law import gain_ceiling, Gains, MAX_LAMBDA, Pote
 from quat_jt_controller.joints import DEFAULT_MAX_STATE_AGE_S, DEFAULT_STATE_TIMEOUT_S
 from quat_jt_controller.realtime import check_cpus, DEFAULT_PREWARM_LEAD_S
 from quat_jt_controller.resources import default_urdf_xml
-from quat_jt_controller.shaping import from_parameters as shaping_from_parameters, Shaping
+from quat_jt_controller.shaping import from_parameters as shaping_from_parameters
+from quat_jt_controller.shaping import MAX_POSTURE_WEIGHT, Shaping
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 from rcl_interfaces.msg import ParameterType, SetParametersResult
 from rclpy.clock import Clock, ClockType
@@ -476,7 +477,7 @@ def declare_shaping(node: Node, config: StructuralConfig,
             'Weight of preferred_configuration against the distance to the measured joints '
             "when a redundant arm's goal configuration is chosen (0: the nearest only). No "
             'effect on an arm without self-motion. Next goal on. Live.', number,
-            float_range=(0.0, 100.0)),
+            float_range=(0.0, MAX_POSTURE_WEIGHT)),
     }
     defaults = default_shaping(n, preferred_configuration)
     for name in SHAPING_PARAMETERS:

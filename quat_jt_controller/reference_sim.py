@@ -135,7 +135,12 @@ class SampledRun:
         return float(self.t_s[bad[-1] + 1]) if bad.size else float(self.t_s[0])
 
     def until(self, t_s: float) -> 'SampledRun':
-        """Return the run up to time ``t_s`` (the samples at or before it)."""
+        """
+        Return the run up to time ``t_s`` (the samples at or before it).
+
+        ``saturated_ticks`` and ``all_finite`` stay the whole run's (the cut cannot tell them
+        apart): a verdict on the cut run is, if anything, stricter.
+        """
         k = int(np.searchsorted(self.t_s, t_s + 1e-9, side='right'))
         cut = (lambda a: None if a is None else a[:k])
         return SampledRun(self.t_s[:k], self.position_error_m[:k], self.orientation_error[:k],

@@ -78,6 +78,15 @@ def _positive(name: str, value: float) -> float:
     return v
 
 
+MAX_POSTURE_WEIGHT = 100.0  # of the preferred posture against the distance to the arm
+
+
+def _at_most(name: str, value: float, ceiling: float) -> float:
+    if value > ceiling:
+        raise ShapingError(f'{name} must be at most {ceiling:g}, got {value}')
+    return value
+
+
 def _angles(name: str, values: Optional[Sequence[float]], n: int) -> tuple[float, ...]:
     """Return ``n`` finite joint positions, or () for None or an empty list (the default)."""
     if values is None or len(values) == 0:
@@ -189,7 +198,9 @@ class Shaping:
                                                friction_learning_time),
             preferred_configuration_rad=_angles('preferred_configuration',
                                                 preferred_configuration, n_joints),
-            posture_weight=_nonnegative('posture_weight', posture_weight))
+            posture_weight=_at_most('posture_weight', _nonnegative('posture_weight',
+                                                                   posture_weight),
+                                    MAX_POSTURE_WEIGHT))
 
     def check_size(self, n_joints: int) -> 'Shaping':
         """Return self if the per-joint vectors fit ``n_joints`` (or are empty); else raise."""

@@ -1,5 +1,5 @@
 """
-The controller node as a separate process over real DDS (issue 4).
+The controller node as a separate process over real DDS.
 
 Two plants drive it:
 

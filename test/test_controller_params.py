@@ -21,7 +21,7 @@ from quat_jt_controller.controller_node import NODE_NAME, QuatJtController
 from quat_jt_controller.goal_motion import MAX_GAP_S
 from quat_jt_controller.model import ModelError
 from quat_jt_controller.parameters import GAIN_PARAMETERS, SHAPING_PARAMETERS
-from quat_jt_controller.shaping import Shaping
+from quat_jt_controller.shaping import Shaping, ShapingError
 from rcl_interfaces.msg import Log, ParameterType
 import rclpy
 from rclpy.executors import SingleThreadedExecutor
@@ -167,7 +167,8 @@ def test_parameters_are_declared_with_descriptors(make_node):
     assert node.describe_parameter('publish_rate_divider').integer_range
 
 
-@pytest.mark.parametrize('name, urdf', [('wrist_controller.yaml', None),
+@pytest.mark.parametrize('name, urdf', [('paper_wrist_controller.yaml', None),
+                                        ('wrist_controller.yaml', None),
                                         ('xarm6_controller.yaml', 'xarm6'),
                                         ('panda_controller.yaml', 'panda')])
 def test_the_tools_build_the_controller_the_node_runs_from_a_config(make_node, name, urdf):
@@ -185,6 +186,17 @@ def test_the_tools_build_the_controller_the_node_runs_from_a_config(make_node, n
     with pytest.raises(GainsError, match='kv'):  # the node's ceilings, here too
         controller_from_package_config(name, xml, overrides={
             'kv': [1e6] * tools.n})
+    with pytest.raises(ShapingError, match='posture_weight'):  # and the node's ranges
+        controller_from_package_config(name, xml, overrides={'posture_weight': 101.0})
+
+
+def test_a_config_without_gains_is_refused_by_name():
+    from quat_jt_controller.controller_config import ConfigError, controller_from_config
+    from quat_jt_controller.resources import config_parameters
+    params = dict(config_parameters('wrist_controller.yaml'))
+    del params['kv']
+    with pytest.raises(ConfigError, match="lack \\['kv'\\]"):
+        controller_from_config(params)
 
 
 def test_defaults_and_paper_config_file_are_the_paper_experiment(make_node):
@@ -468,7 +480,7 @@ def test_a_second_commander_and_a_name_twin_are_warned_about(make_probe, context
         twin.destroy_node()
 
 
-# ------------------------------------------------------------------------------- issue 10
+# --------------------------------------------------------------------------- the extensions
 def test_product_config_turns_the_extensions_on(make_node):
     node = make_node(cli_args=['--ros-args', '--params-file', str(PRODUCT)])
     s = node.regulator.shaping

@@ -225,3 +225,16 @@ def test_a_strong_joint_is_not_held_to_the_pace_of_the_weakest(designs):
     assert np.all(slower.figures['guide_nm'][strong] < guide[strong])
     with pytest.raises(ValueError, match='cruise_fraction'):
         gd.design(model, cl.Task.POSE, cruise_fraction=1.5)
+    with pytest.raises(ValueError, match='within the joint limits'):  # the node would refuse it
+        gd.design(model, cl.Task.POSE,
+                  preferred_configuration_rad=[0.0, 0.0, 0.0, 0.5, 0.0, 1.0, 0.0])
+
+
+def test_a_bad_simulator_argument_writes_neither_file(tmp_path):
+    out, sim_out = tmp_path / 'c.yaml', tmp_path / 's.yaml'
+    result = subprocess.run([sys.executable, '-m', 'quat_jt_controller.gain_design',
+                             *PANDA_ARGS, '--out', str(out), '--sim-out', str(sim_out),
+                             '--sim-coulomb', '0.1'], capture_output=True, text=True,
+                            timeout=120)
+    assert result.returncode != 0 and '--sim-coulomb: expected 7' in result.stderr
+    assert not out.exists() and not sim_out.exists()

@@ -122,6 +122,41 @@ def test_a_redundant_arm_gets_the_goal_configuration_nearest_along_its_self_moti
         q_ik - q_now)
 
 
+def test_the_posture_search_settles_where_a_band_holds_it_back():
+    """
+    Measured joints deep in a band: the nearest posture lies against the band (margin > 0).
+
+    The search stops at a local minimum of its cost along the self-motion: there the cost's
+    gradient has no part in the null space of J, and more iterations change nothing.
+    """
+    import numpy as np
+    from quat_jt_controller import goal_check as gc
+    model = panda_model()
+    margin = 0.157
+    lower, upper = np.array(model.position_lower), np.array(model.position_upper)
+    q_now = np.array([0.5, -0.2, 0.4, -3.05, 0.3, 2.0, 0.5])  # joint 4 deep in its band
+    q_goal = [0.3, -0.4, 0.2, -3.0, 0.1, 2.0, 0.5]  # joint 4 in its band too
+    q_d, p_d = goal_at(model, q_goal)
+    q_ik = gc.polish(model, gc.solve_ik(model, q_goal, q_d, p_d, POSE)[0], q_d, p_d, POSE)
+    q_mid = np.array(model.middle_of_ranges())
+    found = gc.posture(model, q_ik, q_d, p_d, POSE, q_now, q_mid, 0.1, margin)
+    assert found is not None
+    inner_lo, inner_hi = lower + margin, upper - margin
+    depth = np.minimum(found - inner_lo, 0.0) + np.maximum(found - inner_hi, 0.0)
+    grad = (found - q_now) + 0.1 * (found - q_mid) + gc.POSTURE_BAND_WEIGHT * depth
+    J = np.array(model.kinematics(found.tolist())[2])
+    Z = np.linalg.svd(J)[2][6:].T
+    assert depth[3] < 0.0 and np.count_nonzero(depth) == 1  # against joint 4's band
+    assert np.abs(Z.T @ grad).max() < 1e-3 * np.abs(grad).max()  # stationary along S
+    more = gc.POSTURE_ITERATIONS
+    try:
+        gc.POSTURE_ITERATIONS = 10 * more
+        again = gc.posture(model, q_ik, q_d, p_d, POSE, q_now, q_mid, 0.1, margin)
+    finally:
+        gc.POSTURE_ITERATIONS = more
+    assert np.abs(again - found).max() < 1e-6
+
+
 def test_an_arm_without_self_motion_keeps_its_solution():
     """posture() changes nothing where J has as many rows as columns (the xArm6's pose)."""
     import numpy as np

@@ -1,7 +1,7 @@
 """
-Issue 6, ROS-free: full pose regulation (Section 4, Eqs. 24 and 32) of the 6-DOF xArm6.
+ROS-free: full pose regulation (Section 4, Eqs. 24 and 32) of the 6-DOF xArm6.
 
-With the gains and issue-10 extensions of config/xarm6_controller.yaml (designed by
+With the gains and extensions of config/xarm6_controller.yaml (designed by
 quat_jt_controller.gain_design), from the non-singular start of config/xarm6_sim.yaml, with
 both potentials:
 

@@ -1,5 +1,5 @@
 """
-Issue 6 over real DDS: the pose task (Section 4, Eqs. 24 and 32) on the 6-DOF xArm6.
+Over real DDS: the pose task (Section 4, Eqs. 24 and 32) on the 6-DOF xArm6.
 
 ``wrist_sim_node`` (PyBullet, 1 kHz real time) loads the xArm6 URDF of pybullet_data and
 ``controller_node`` regulates the full pose of link6 in link_base, each in its own process

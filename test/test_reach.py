@@ -1,5 +1,5 @@
 """
-Issue 10 end to end on the simulator core: a handful of the reach experiment's cases.
+The extensions end to end on the simulator core: a handful of the reach experiment's cases.
 
 experiments/reach_experiment.py runs hundreds (README); here a few of each robot and potential,
 with the package's configs, PyBullet, friction and a tick of delay: every one reached, no stop
@@ -46,7 +46,7 @@ def test_xarm6_reaches_the_documented_goal_after_an_unreachable_one():
     """
     The issue's xArm6 case: after an unreachable goal, the reachable goal of the launch file.
 
-    Before issue 10 the arm stayed 26.6 mm / ||e|| 0.466 off, joint 3 in its limit. Here the
+    Without the extensions the arm stayed 26.6 mm / ||e|| 0.466 off, joint 3 in its limit. Here the
     unreachable goal (no q*: the goal-configuration term stays off) is held for 3 s, then the
     reachable one, whose q* arrives 0.1 s later, as from the worker.
     """

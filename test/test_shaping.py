@@ -1,5 +1,5 @@
 """
-The issue-10 terms of the law (quat_jt_controller.shaping, docs/lyapunov.md), ROS-free.
+The extensions of the law (quat_jt_controller.shaping, docs/lyapunov.md), ROS-free.
 
 Each potential term's torque is minus the gradient of its energy (finite differences) through
 the one tick, ``Regulator.update``; the joint-limit term is C1 and zero away from the limits;

@@ -56,12 +56,12 @@ def test_paper_experiment_reproduces_the_qualitative_result(tmp_path, mode):
     # the tanh law gets within a few 1e-3.
     assert 0.1 < final['quadratic'] < 0.4, final
     assert final['tanh'] < 0.02, final
-    # Issue 10: the product config (designed gains, extensions) reaches the goal too.
+    # The product config (designed gains, extensions) reaches the goal too.
     assert final['tanh_extended'] < 0.005, final
     assert (tmp_path / 'fig2_error_norm.png').stat().st_size > 10_000
     assert '| quadratic (Eq. 37) |' in stdout and '| tanh (Eq. 38) |' in stdout
     assert stdout.count('Animation ') == 3 and 'rendered in' in stdout  # two + the extended
-    assert '| tanh_extended (Eq. 38 + issue 10' in stdout
+    assert '| tanh_extended (Eq. 38 + extensions' in stdout
 
 
 def test_benchmark_reports_every_figure(tmp_path):

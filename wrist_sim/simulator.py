@@ -128,6 +128,8 @@ def resolve_meshes(urdf_xml: str, search_dirs: Sequence[PathLike]) -> tuple[str,
       is a ``robot_description`` string);
     - an absolute path or ``file://`` URI: as it is.
 
+    The first file found is taken: a generic name (``package://meshes/...``) could match another
+    robot's folder one level down in a search directory, so give the URDF's own folder first.
     The ``<visual>`` or ``<collision>`` whose mesh is not found is removed: the dynamics need
     only the ``<inertial>`` elements. Returns the XML and the filenames not found (for one
     warning); the XML is unchanged when every mesh is found as written.
