@@ -1,8 +1,9 @@
 """
 ``wrist_sim_node``: the simulated wrist (or any fixed-base serial URDF) as a ROS 2 node.
 
-A thin rclpy layer over :class:`wrist_sim.simulator.WristSimulator`, with the interface of a
-ros2_control robot driven by a JointGroupEffortController:
+A thin rclpy layer over :class:`wrist_sim.simulator.WristSimulator` and the command path of
+:class:`wrist_sim.command_gate.CommandGate` (validation, watchdog, hold, reset gate; ROS-free),
+with the interface of a ros2_control robot driven by a JointGroupEffortController:
 
 - publishes ``joint_states`` (sensor_msgs/JointState) after every step: name, position,
   velocity and effort = the motor torque applied in that step (clamped to the URDF effort
@@ -34,12 +35,10 @@ the last ``stats_window_steps`` steps), logged at shutdown and written as JSON t
 ``stats_file`` if set. ``cpu_affinity`` pins the process (``realtime.py``).
 """
 import json
-import math
 from pathlib import Path
 import time
 from typing import Any, Callable, Optional
 
-import numpy as np
 from quat_jt_controller import lifecycle
 from quat_jt_controller import realtime
 from quat_jt_controller.joints import movable_joints
@@ -55,6 +54,7 @@ from rosgraph_msgs.msg import Clock
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 from std_srvs.srv import Trigger
+from wrist_sim.command_gate import CommandGate, RESUMED, TRIPPED
 from wrist_sim.config import LIVE_PARAMETERS, SimConfig
 from wrist_sim.simulator import SimulatorError, WristSimulator
 
@@ -102,18 +102,11 @@ class WristSimNode(Node):
         # (time.time_ns) rather than through rclpy's Clock object on every tick.
         self._system_clock = not self.get_parameter('use_sim_time').value
 
-        # Command state (touched only from the executor thread, which is also the loop's).
-        self._cmd = np.zeros(self.n)
-        self._zero = np.zeros(self.n)
-        self._have_cmd = False
-        self._cmd_seq = 0           # valid commands received
-        self._seq_at_publish = 0    # _cmd_seq when the last state was published
-        self._cmd_sim_ns = 0        # simulation time when the last valid command arrived
+        # The command path (touched only from the executor thread, which is also the loop's).
+        self.gate = CommandGate(self._effort_limits, self.dt_ns,
+                                p['hold_until_first_command'])
         self._publish_wall_s = time.perf_counter()
-        self._watchdog_tripped = False
         self._last_stamp_ns = -1
-        # After ~/reset, until the reset state is published: commands then answer older states.
-        self._reset_unpublished = False
 
         self._js = JointState()
         self._js.name = list(self.sim.joint_names)
@@ -237,35 +230,28 @@ class WristSimNode(Node):
         self._command_publishers = info.current_count
 
     def _on_command(self, msg: Float64MultiArray) -> None:
-        if self._reset_unpublished:  # it answers a state from before ~/reset: not applied
-            return
         data = msg.data
-        if len(data) != self.n:
+        offer = self.gate.offer(data, self.sim.step_count)
+        if offer.reason:  # one log line per cause and second (throttled per call site)
             self.stats.rejected_commands += 1
-            self.get_logger().warning(
-                f'rejected command: {len(data)} values for {self.n} joints '
-                f'{list(self.sim.joint_names)}', throttle_duration_sec=THROTTLE_S)
-            return
-        if not all(math.isfinite(v) for v in data):
-            self.stats.rejected_commands += 1
-            self.get_logger().warning(f'rejected command with non-finite values: {list(data)}',
-                                      throttle_duration_sec=THROTTLE_S)
-            return
-        limits = self._effort_limits
-        for v, limit in zip(data, limits):
-            if v > limit or v < -limit:
-                self.stats.clamped_commands += 1
+            if offer.nonfinite:
+                self.get_logger().warning(f'rejected command with {offer.reason}',
+                                          throttle_duration_sec=THROTTLE_S)
+            else:
                 self.get_logger().warning(
-                    f'command {list(data)} N m exceeds the effort limits {limits} N m: applied '
-                    f'clamped ({self.stats.clamped_commands} clamped commands so far)',
+                    f'rejected command: {offer.reason} {list(self.sim.joint_names)}',
                     throttle_duration_sec=THROTTLE_S)
-                break
-        if self._cmd_seq == self._seq_at_publish:  # first command since the last state
+            return
+        if not offer.applied:  # it answers a state from before ~/reset
+            return
+        if offer.clamped:
+            self.stats.clamped_commands += 1
+            self.get_logger().warning(
+                f'command {list(data)} N m exceeds the effort limits {self._effort_limits} N m: '
+                f'applied clamped ({self.stats.clamped_commands} clamped commands so far)',
+                throttle_duration_sec=THROTTLE_S)
+        if offer.first_since_state:
             self.stats.record_latency(time.perf_counter() - self._publish_wall_s)
-        self._cmd[:] = data
-        self._cmd_seq += 1
-        self._cmd_sim_ns = self.sim.step_count * self.dt_ns
-        self._have_cmd = True
 
     def _on_reset(self, request: Trigger.Request, response: Trigger.Response
                   ) -> Trigger.Response:
@@ -275,10 +261,7 @@ class WristSimNode(Node):
             response.success = False
             response.message = str(exc)
             return response
-        self._cmd[:] = 0.0
-        self._have_cmd = False
-        self._watchdog_tripped = False
-        self._reset_unpublished = True
+        self.gate.reset()
         response.success = True
         response.message = f'reset to {list(self.live.current.initial_positions_rad)} at rest'
         self.get_logger().info(response.message)
@@ -292,33 +275,27 @@ class WristSimNode(Node):
 
         Until the first valid command after start-up or ``~/reset`` (with
         ``hold_until_first_command``) the joints are held at rest, like a drive whose brakes
-        release when its controller connects; only time advances.
+        release when its controller connects; only time advances. The command watchdog
+        (``command_timeout``) is the gate's (:class:`wrist_sim.command_gate.CommandGate`).
         """
-        if self._have_cmd or not self.structural['hold_until_first_command']:
-            self.sim.step(self._torque_to_apply())
-        else:
-            self.sim.hold()
-
-    def _torque_to_apply(self) -> np.ndarray:
-        timeout_ns = self.live.current.command_timeout_ns
-        age_ns = self.sim.step_count * self.dt_ns - self._cmd_sim_ns
-        if self._have_cmd and (timeout_ns <= 0 or age_ns <= timeout_ns):
-            if self._watchdog_tripped:
-                self._watchdog_tripped = False
-                self.get_logger().info('commands are back: applying them again')
-            return self._cmd
-        if self._have_cmd and not self._watchdog_tripped:
-            self._watchdog_tripped = True
+        config = self.live.current
+        tau, event = self.gate.torque(self.sim.step_count, config.command_timeout_ns)
+        if event == RESUMED:
+            self.get_logger().info('commands are back: applying them again')
+        elif event == TRIPPED:
             self.stats.watchdog_trips += 1
             self.get_logger().warning(
-                f'no command for {age_ns * 1e-9:.3f} s (> command_timeout '
-                f'{self.live.current.command_timeout_s} s): torque set to zero')
-        return self._zero
+                f'no command for {self.gate.silence_s(self.sim.step_count):.3f} s (> '
+                f'command_timeout {config.command_timeout_s} s): torque set to zero')
+        if tau is None:
+            self.sim.hold()
+        else:
+            self.sim.step(tau)
 
     def tick(self, late_s: float = 0.0) -> None:
         """Apply the latest command, step once, publish the new state (and /clock)."""
         t0 = time.perf_counter()
-        fresh = self._cmd_seq != self._seq_at_publish
+        fresh = self.gate.answered
         self._advance_simulation()
         self.publish_state()
         self.stats.record_step(t0, time.perf_counter() - t0, late_s, fresh)
@@ -352,8 +329,7 @@ class WristSimNode(Node):
             self._clock_msg.clock.sec = sec
             self._clock_msg.clock.nanosec = nsec
             self.clock_pub.publish(self._clock_msg)
-        self._seq_at_publish = self._cmd_seq
-        self._reset_unpublished = False
+        self.gate.published()
         self._publish_wall_s = time.perf_counter()
         self.js_pub.publish(js)
 
@@ -404,14 +380,12 @@ class WristSimNode(Node):
         next_t = clock() + period
         last_log = [clock(), 0]
         ok = self._ok
-
-        def answered() -> bool:
-            return self._cmd_seq != self._seq_at_publish
+        gate = self.gate
         while ok():
             realtime.await_answer(
-                executor, answered, realtime.answer_deadline(next_t, self._publish_wall_s,
-                                                             period), ok)
-            fresh = answered()
+                executor, lambda: gate.answered, realtime.answer_deadline(
+                    next_t, self._publish_wall_s, period), ok)
+            fresh = gate.answered
             t0 = clock()
             self._advance_simulation()
             step_s = clock() - t0
@@ -437,7 +411,7 @@ class WristSimNode(Node):
         while ok():
             config = self.live.current
             deadline = last_step + config.lockstep_timeout_s
-            while self._cmd_seq == self._seq_at_publish:
+            while not self.gate.answered:
                 remaining = deadline - clock()
                 if remaining <= 0.0:
                     self.stats.lockstep_timeouts += 1
