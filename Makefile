@@ -5,7 +5,7 @@ VENV ?= .venv
 PY := $(VENV)/bin/python
 STAMP := $(VENV)/.installed
 
-.PHONY: venv test test-unit demo panda bench soak flood lint clean
+.PHONY: venv test test-unit demo panda bench soak flood lint docs clean
 
 venv: $(STAMP)
 
@@ -22,6 +22,10 @@ test: $(STAMP)
 # The ROS-free unit tier alone (seconds).
 test-unit: $(STAMP)
 	$(PY) -m pytest -m unit test
+
+# docs/parameters.md from the nodes' parameter tables (a test checks it is current).
+docs: $(STAMP)
+	$(PY) -m quat_jt_bringup.parameter_docs --output docs/parameters.md
 
 # The main job: the paper's experiment, both potentials, real nodes over DDS.
 # DEMO_ARGS go to the experiment, e.g. make demo DEMO_ARGS='--lockstep --duration 12 --composed'

@@ -8,8 +8,11 @@ package_name = 'quat_jt_controller'
 setup(
     name=package_name,
     version='0.1.0',
+    # The controller (core and node), the simulator (core and node), the runtime both share,
+    # and the bringup above both (console scripts, the composed process).
     packages=find_packages(include=['quat_jt_controller', 'quat_jt_controller.*',
-                                    'wrist_sim', 'wrist_sim.*']),
+                                    'wrist_sim', 'wrist_sim.*', 'quat_jt_runtime',
+                                    'quat_jt_bringup']),
     data_files=[
         ('share/ament_index/resource_index/packages', ['resource/' + package_name]),
         ('share/' + package_name, ['package.xml']),
@@ -45,9 +48,9 @@ setup(
     entry_points={
         'console_scripts': [
             # the stop flag first, then the node's slow imports (entry_points.py)
-            'controller_node = quat_jt_controller.entry_points:controller_node',
-            'wrist_sim_node = quat_jt_controller.entry_points:wrist_sim_node',
-            'composed = quat_jt_controller.entry_points:composed',
+            'controller_node = quat_jt_bringup.entry_points:controller_node',
+            'wrist_sim_node = quat_jt_bringup.entry_points:wrist_sim_node',
+            'composed = quat_jt_bringup.entry_points:composed',
             'design_gains = quat_jt_controller.gain_design:main',
         ],
     },

@@ -55,10 +55,10 @@ from experiments import local_ros
 from quat_jt_controller import control_law as cl
 from quat_jt_controller import paper
 from quat_jt_controller import quaternion as quat
-from quat_jt_controller import realtime
 from quat_jt_controller.model import RobotModel
 from quat_jt_controller.regulator import Goal, Regulator
-from quat_jt_controller.resources import default_urdf_xml
+from quat_jt_runtime import realtime
+from quat_jt_runtime.resources import default_urdf_xml
 
 CONTROLLER = 'quat_jt_controller'
 TARGETS = {'command rate (Hz)': '>= 995', 'missed ticks (%)': 'two: floor + 0.1 pt; composed: 0',

@@ -20,7 +20,7 @@ import time
 from typing import Optional
 
 from experiments import local_ros
-from quat_jt_controller.resources import share_path
+from quat_jt_runtime.resources import share_path
 
 
 def one_round(mode: str, within_s: float, work_dir: Path, rng: random.Random) -> list[dict]:

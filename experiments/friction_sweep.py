@@ -23,7 +23,7 @@ from quat_jt_controller import control_law as cl
 from quat_jt_controller import paper
 from quat_jt_controller.model import RobotModel
 from quat_jt_controller.reference_sim import ClosedLoop, run_sampled
-from quat_jt_controller.resources import default_urdf_xml
+from quat_jt_runtime.resources import default_urdf_xml
 from wrist_sim.simulator import WristSimulator
 
 

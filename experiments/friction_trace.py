@@ -23,7 +23,7 @@ from quat_jt_controller import paper
 from quat_jt_controller import shaping as sh
 from quat_jt_controller.goal_check import goal_configuration
 from quat_jt_controller.reference_sim import ClosedLoop, run_sampled, SampledRun
-from quat_jt_controller.resources import default_urdf_xml
+from quat_jt_runtime.resources import default_urdf_xml
 
 TIMES_S = (0.25, 0.5, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0)
 

@@ -39,7 +39,7 @@ from geometry_msgs.msg import PoseStamped
 from quat_jt_controller import paper
 from quat_jt_controller import quaternion as quat
 from quat_jt_controller.model import RobotModel
-from quat_jt_controller.resources import default_urdf_xml
+from quat_jt_runtime.resources import default_urdf_xml
 from rclpy.serialization import deserialize_message
 from sensor_msgs.msg import JointState
 

@@ -16,16 +16,16 @@ import sys
 import tempfile
 from typing import Any, Mapping, Optional
 
-from quat_jt_controller.resources import share_path
+from quat_jt_runtime.resources import share_path
 
 REPOSITORY = Path(__file__).resolve().parent.parent  # the folder that holds experiments/
 
 # How each executable starts: the package's nodes through their console-script entry points
 # (the stop flag before the slow imports, as ``ros2 run`` does), the baseline as a module.
 NODE_COMMANDS = {
-    'controller_node': ('-m', 'quat_jt_controller.entry_points', 'controller_node'),
-    'wrist_sim_node': ('-m', 'quat_jt_controller.entry_points', 'wrist_sim_node'),
-    'composed': ('-m', 'quat_jt_controller.entry_points', 'composed'),  # both in one process
+    'controller_node': ('-m', 'quat_jt_bringup.entry_points', 'controller_node'),
+    'wrist_sim_node': ('-m', 'quat_jt_bringup.entry_points', 'wrist_sim_node'),
+    'composed': ('-m', 'quat_jt_bringup.entry_points', 'composed'),  # both in one process
     'minimal_pair': ('-m', 'experiments.minimal_pair'),  # the benchmark's baseline
 }
 

@@ -18,8 +18,8 @@ import json
 from pathlib import Path
 import time
 
-from quat_jt_controller import realtime
-from quat_jt_controller.loop_stats import LoopStats
+from quat_jt_runtime import realtime
+from quat_jt_runtime.loop_stats import LoopStats
 import rclpy
 from rclpy.executors import ExternalShutdownException
 from rclpy.experimental import EventsExecutor

@@ -36,7 +36,7 @@ from quat_jt_controller.controller_config import controller_from_package_config
 from quat_jt_controller.goal_check import goal_configuration
 from quat_jt_controller.model import RobotModel
 from quat_jt_controller.regulator import Goal
-from quat_jt_controller.resources import config_parameters
+from quat_jt_runtime.resources import config_parameters
 from wrist_sim.quiet import c_output_silenced
 from wrist_sim.simulator import WristSimulator
 

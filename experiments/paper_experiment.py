@@ -41,9 +41,9 @@ from quat_jt_controller import control_law as cl
 from quat_jt_controller import paper
 from quat_jt_controller import quaternion as quat
 from quat_jt_controller.model import RobotModel
-from quat_jt_controller.parameters import history_qos
 from quat_jt_controller.reference_sim import ClosedLoop
-from quat_jt_controller.resources import default_urdf_xml
+from quat_jt_runtime.params import history_qos
+from quat_jt_runtime.resources import default_urdf_xml
 
 POTENTIALS = ('quadratic', 'tanh')
 EQUATION = {'quadratic': 'Eq. 37', 'tanh': 'Eq. 38'}

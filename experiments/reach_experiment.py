@@ -61,8 +61,8 @@ from quat_jt_controller.goal_check import goal_configuration
 from quat_jt_controller.model import RobotModel
 from quat_jt_controller.reference_sim import ClosedLoop, run_sampled
 from quat_jt_controller.regulator import Regulator
-from quat_jt_controller.resources import config_parameters, default_urdf_xml
 from quat_jt_controller.stall import StallDetector
+from quat_jt_runtime.resources import config_parameters, default_urdf_xml
 import yaml
 
 TOUCH_RAD = 1e-3  # closer than this to a URDF limit: the stop was touched

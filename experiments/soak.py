@@ -41,7 +41,7 @@ from geometry_msgs.msg import PoseStamped
 from quat_jt_controller import paper
 from quat_jt_controller import quaternion as quat
 from quat_jt_controller.model import RobotModel
-from quat_jt_controller.resources import default_urdf_xml
+from quat_jt_runtime.resources import default_urdf_xml
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 

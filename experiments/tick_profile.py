@@ -18,11 +18,11 @@ from typing import Callable, Optional
 
 from quat_jt_controller import control_law as cl
 from quat_jt_controller import paper
-from quat_jt_controller.joints import stamp_problem, StateLayout
-from quat_jt_controller.loop_stats import LoopStats, TickStats
 from quat_jt_controller.model import RobotModel
 from quat_jt_controller.regulator import Goal, Regulator
-from quat_jt_controller.resources import default_urdf_xml
+from quat_jt_runtime.joints import stamp_problem, StateLayout
+from quat_jt_runtime.loop_stats import LoopStats, TickStats
+from quat_jt_runtime.resources import default_urdf_xml
 
 
 def best_us(fn: Callable[[], object], calls: int) -> float:
@@ -46,7 +46,7 @@ def sleep_overshoot(executor, sleeps: int, sleep_s: float = 7e-4) -> dict[str, t
     """
     import threading
 
-    from quat_jt_controller import realtime
+    from quat_jt_runtime import realtime
     result = {}
 
     def measure(label: str, slack_ns: Optional[int]) -> None:

@@ -35,7 +35,7 @@ from quat_jt_controller.controller_config import controller_from_package_config
 from quat_jt_controller.goal_check import goal_configuration
 from quat_jt_controller.model import RobotModel
 from quat_jt_controller.reference_sim import ClosedLoop
-from quat_jt_controller.resources import config_parameters
+from quat_jt_runtime.resources import config_parameters
 from wrist_sim.simulator import WristSimulator
 
 XARM6_URDF = Path(pybullet_data.getDataPath()) / 'xarm' / 'xarm6_robot.urdf'

@@ -23,8 +23,8 @@ from math import asin, exp, isfinite, log, log1p, sqrt, tanh
 from typing import Optional, Sequence
 
 from quat_jt_controller import quaternion as quat
-from quat_jt_controller.errors import QuatJtError
 from quat_jt_controller.shaping import LARGE_ERROR_DELTA
+from quat_jt_runtime.errors import QuatJtError
 
 LN2 = log(2.0)
 

@@ -11,10 +11,10 @@ from typing import Any, Mapping, Optional
 
 from quat_jt_controller import control_law as cl
 from quat_jt_controller import shaping as sh
-from quat_jt_controller.errors import QuatJtError
 from quat_jt_controller.model import RobotModel
 from quat_jt_controller.regulator import Regulator
-from quat_jt_controller.resources import config_parameters, default_urdf_xml
+from quat_jt_runtime.errors import QuatJtError
+from quat_jt_runtime.resources import config_parameters, default_urdf_xml
 
 
 class ConfigError(QuatJtError):

@@ -16,24 +16,23 @@ from typing import Optional
 from diagnostic_msgs.msg import DiagnosticArray, DiagnosticStatus, KeyValue
 from geometry_msgs.msg import PoseStamped, Vector3Stamped
 from quat_jt_controller import diagnostics
-from quat_jt_controller import lifecycle
 from quat_jt_controller import quaternion as quat
-from quat_jt_controller import realtime
 from quat_jt_controller.control_law import Gains, GainsError, Task
 from quat_jt_controller.goal_check import GoalCheckWorker, ModelSpec, Posture
-from quat_jt_controller.joints import stamp_problem, StateLayout
-from quat_jt_controller.loop_stats import TickStats
 from quat_jt_controller.model import ModelError, RobotModel
-from quat_jt_controller.parameters import ChangeLog, declare_cpu_affinity, declare_gains
-from quat_jt_controller.parameters import declare_shaping, declare_structural, describe_gains
-from quat_jt_controller.parameters import GAIN_PARAMETERS, SHAPING_PARAMETERS
-from quat_jt_controller.parameters import history_qos
+from quat_jt_controller.parameters import declare_gains, declare_shaping, declare_structural
+from quat_jt_controller.parameters import describe_gains, GAIN_PARAMETERS, SHAPING_PARAMETERS
 from quat_jt_controller.regulator import Goal, Regulator, TickOutput
-from quat_jt_controller.resources import bundled_urdf_hint
 from quat_jt_controller.shaping import describe as describe_shaping
 from quat_jt_controller.stall import StallDetector
 from quat_jt_controller.supervision import Supervisor
-from quat_jt_controller.throttle import cause, Throttle
+from quat_jt_runtime import lifecycle
+from quat_jt_runtime import realtime
+from quat_jt_runtime.joints import stamp_problem, StateLayout
+from quat_jt_runtime.loop_stats import TickStats
+from quat_jt_runtime.params import ChangeLog, declare_cpu_affinity, history_qos
+from quat_jt_runtime.resources import bundled_urdf_hint
+from quat_jt_runtime.throttle import cause, Throttle
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from sensor_msgs.msg import JointState

@@ -39,9 +39,9 @@ from typing import Optional, Sequence
 import numpy as np
 
 from quat_jt_controller import control_law as cl
-from quat_jt_controller.joints import DEFAULT_MAX_STATE_AGE_S, DEFAULT_STATE_TIMEOUT_S
 from quat_jt_controller.model import RobotModel
 from quat_jt_controller.shaping import FULL_TURN_RAD, Shaping
+from quat_jt_runtime.joints import DEFAULT_MAX_STATE_AGE_S, DEFAULT_STATE_TIMEOUT_S
 
 TORQUE_SHARE = 0.8  # of what gravity and friction compensation leave; the rest: damping
 GUIDE_OVER_TASK = 1.2  # the goal-configuration term must overcome the task term at a stop
@@ -726,7 +726,7 @@ def to_yaml(d: Design, potential: str = 'tanh', command: str = '',
 
 def main(argv: Optional[list] = None) -> int:
     """``ros2 run quat_jt_controller design_gains`` / ``python -m ...gain_design``."""
-    from quat_jt_controller.resources import default_urdf_xml
+    from quat_jt_runtime.resources import default_urdf_xml
 
     parser = argparse.ArgumentParser(
         prog='design_gains', description='Compute K_p, K_v, Lambda and the '

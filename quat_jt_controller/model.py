@@ -18,8 +18,8 @@ except ModuleNotFoundError as exc:  # e.g. a colcon workspace whose rosdep skipp
         'package on PyPI is another project) or ros-jazzy-pinocchio from the ROS apt '
         'repository') from exc
 
-from quat_jt_controller.errors import QuatJtError
-from quat_jt_controller.joints import movable_joints, select_joints
+from quat_jt_runtime.errors import QuatJtError
+from quat_jt_runtime.joints import movable_joints, select_joints
 
 
 class ModelError(QuatJtError):

@@ -44,7 +44,7 @@ from functools import cached_property
 from math import isfinite, pi, sqrt, tanh
 from typing import Optional, Sequence
 
-from quat_jt_controller.errors import QuatJtError
+from quat_jt_runtime.errors import QuatJtError
 
 # A joint whose URDF range is at least this long turns freely: it gets no limit term.
 FULL_TURN_RAD = 2.0 * pi - 1e-6

@@ -3,7 +3,7 @@ from pathlib import Path
 import sys
 
 import pytest
-from quat_jt_controller import realtime
+from quat_jt_runtime import realtime
 
 linux_only = pytest.mark.skipif(not sys.platform.startswith('linux'), reason='Linux only')
 two_cpus = pytest.mark.skipif(len(realtime.allowed_cpus()) < 2,

@@ -12,7 +12,7 @@ import numpy as np
 from quat_jt_controller import paper
 from quat_jt_controller import quaternion as quat
 from quat_jt_controller.model import RobotModel
-from quat_jt_controller.resources import default_urdf_xml
+from quat_jt_runtime.resources import default_urdf_xml
 from wrist_sim.simulator import WristSimulator
 
 AXIS_LENGTH_M = 0.1

@@ -24,8 +24,8 @@ from quat_jt_controller.controller_config import controller_from_package_config
 from quat_jt_controller.gain_design import linearized_spectral_radius, time_constant_s
 from quat_jt_controller.model import RobotModel
 from quat_jt_controller.reference_sim import ClosedLoop, run_sampled
-from quat_jt_controller.resources import config_parameters
 from quat_jt_controller.shaping import Shaping
+from quat_jt_runtime.resources import config_parameters
 
 
 def _xarm6_controller(potential: Optional[str] = None):

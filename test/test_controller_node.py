@@ -32,7 +32,7 @@ from quat_jt_controller import quaternion as quat
 from quat_jt_controller.control_law import Gains, Task
 from quat_jt_controller.model import RobotModel
 from quat_jt_controller.regulator import Goal, Regulator
-from quat_jt_controller.resources import default_urdf_xml
+from quat_jt_runtime.resources import default_urdf_xml
 from rcl_interfaces.msg import Log
 import rclpy
 from rclpy.experimental import EventsExecutor

@@ -167,6 +167,27 @@ def test_parameters_are_declared_with_descriptors(make_node):
     assert node.describe_parameter('publish_rate_divider').integer_range
 
 
+def test_the_node_declares_exactly_its_table(make_node):
+    """Every parameter the node has is a row of its table, with the row's type and range."""
+    from quat_jt_controller import parameters as table
+    from quat_jt_runtime.params import CPU_AFFINITY
+    node = make_node()
+    rows = {spec.name: spec for spec in table.STRUCTURE + table.GAINS + table.SHAPING
+            + (CPU_AFFINITY,)}
+    declared = set(node._parameters) - {'use_sim_time', 'start_type_description_service'}
+    assert declared == set(rows)
+    for name, spec in rows.items():
+        d = node.describe_parameter(name)
+        assert d.type == spec.kind.descriptor_type, name
+        assert d.read_only == spec.read_only, name
+        assert node.get_parameter(name).type_ is spec.kind.rclpy_type, name
+        if spec.bounds is not None:
+            limits = d.floating_point_range or d.integer_range
+            assert (limits[0].from_value, limits[0].to_value) == spec.bounds, name
+    assert 'values in (0, ' in node.describe_parameter('kv').additional_constraints
+    assert '3 values' in node.describe_parameter('kv').additional_constraints  # n filled in
+
+
 @pytest.mark.parametrize('name, urdf', [('paper_wrist_controller.yaml', None),
                                         ('wrist_controller.yaml', None),
                                         ('xarm6_controller.yaml', 'xarm6'),
@@ -192,7 +213,7 @@ def test_the_tools_build_the_controller_the_node_runs_from_a_config(make_node, n
 
 def test_a_config_without_gains_is_refused_by_name():
     from quat_jt_controller.controller_config import ConfigError, controller_from_config
-    from quat_jt_controller.resources import config_parameters
+    from quat_jt_runtime.resources import config_parameters
     params = dict(config_parameters('wrist_controller.yaml'))
     del params['kv']
     with pytest.raises(ConfigError, match="lack \\['kv'\\]"):
@@ -612,3 +633,12 @@ def test_friction_is_learned_at_rest_off_the_goal_and_reported(make_probe):
         return bool(text) and all(float(x) > 0.0 for x in text.strip('[]').split(','))
     probe.spin_until(learned_reported, 'learned friction on /diagnostics', timeout=15.0)
     assert 'goal_configuration_rad' in reported()
+
+
+def test_the_parameter_page_is_generated_from_the_tables():
+    """docs/parameters.md is what ``make docs`` writes from both nodes' tables."""
+    from quat_jt_bringup.parameter_docs import page
+    written = (Path(__file__).resolve().parent.parent / 'docs' / 'parameters.md').read_text()
+    assert written == page(), 'docs/parameters.md is stale: run make docs'
+    for name in ('kp', 'goal_velocity_gain', 'coulomb_friction', 'cpu_affinity'):
+        assert f'| `{name}` |' in written, name

@@ -21,7 +21,7 @@ from process_harness import call_service, ProcessHarnessMixin
 import pytest
 from quat_jt_controller import paper
 from quat_jt_controller import quaternion as quat
-from quat_jt_controller.resources import share_path
+from quat_jt_runtime.resources import share_path
 from rcl_interfaces.msg import Parameter as ParameterMsg, ParameterType
 import rclpy
 from rclpy.experimental import EventsExecutor
@@ -111,7 +111,7 @@ class Pair(ProcessHarnessMixin):
 
     def error_norm(self) -> float:
         from quat_jt_controller.model import RobotModel
-        from quat_jt_controller.resources import default_urdf_xml
+        from quat_jt_runtime.resources import default_urdf_xml
         if not hasattr(self, '_model'):
             self._model = RobotModel(default_urdf_xml(), 'base_link', 'tool0')
         _, R = self._model.forward_kinematics(self.q())

@@ -26,7 +26,7 @@ from quat_jt_controller import paper
 from quat_jt_controller import quaternion as quat
 from quat_jt_controller import shaping as sh
 from quat_jt_controller.reference_sim import ClosedLoop, run_sampled
-from quat_jt_controller.resources import default_urdf_xml
+from quat_jt_runtime.resources import default_urdf_xml
 from robots import wrist_model
 from wrist_sim.simulator import WristSimulator
 

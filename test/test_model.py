@@ -5,7 +5,7 @@ import pytest
 
 from quat_jt_controller import quaternion as quat
 from quat_jt_controller.model import ModelError, RobotModel
-from quat_jt_controller.resources import default_urdf_xml
+from quat_jt_runtime.resources import default_urdf_xml
 from robots import (Q_DESIRED, Q_JOINT_DESIRED, random_q, wrist_model, xarm6_model,
                     XARM6_URDF)
 

@@ -47,7 +47,7 @@ def test_install_tree_has_index_marker_executables_and_data(colcon_install):
 def test_installed_package_finds_its_data_through_the_ament_prefix(colcon_install, tmp_path):
     site = next((colcon_install / 'lib').glob('python3*/site-packages'))
     env = dict(os.environ, PYTHONPATH=str(site), AMENT_PREFIX_PATH=str(colcon_install))
-    code = ('import quat_jt_controller.resources as r; '
+    code = ('import quat_jt_runtime.resources as r; '
             "print(r.__file__); print(r.share_path('urdf/spherical_wrist.urdf'))")
     out = subprocess.run([sys.executable, '-c', code], env=env, cwd=tmp_path,
                          capture_output=True, text=True, timeout=60)
@@ -61,8 +61,10 @@ def test_the_experiments_are_not_installed(colcon_install):
     """What runs on a robot is installed; the experiments and benchmarks stay in the repo."""
     site = next((colcon_install / 'lib').glob('python3*/site-packages'))
     assert (site / 'quat_jt_controller' / 'regulator.py').is_file()
+    for package in ('quat_jt_runtime', 'wrist_sim', 'quat_jt_bringup'):  # the other floors
+        assert (site / package / '__init__.py').is_file(), package
     assert not (site / 'quat_jt_controller' / 'tools').exists()
     assert not (site / 'experiments').exists()
-    importing = [p.name for p in (site / 'quat_jt_controller').rglob('*.py')
+    importing = [p.name for p in site.glob('*/*.py')
                  if re.search(r'^\s*(from|import) experiments\b', p.read_text(), re.M)]
     assert not importing, importing  # the arrows point one way

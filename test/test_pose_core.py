@@ -20,7 +20,7 @@ import numpy as np
 import pytest
 from quat_jt_controller import control_law as cl
 from quat_jt_controller.reference_sim import ClosedLoop, run_sampled
-from quat_jt_controller.resources import config_parameters
+from quat_jt_runtime.resources import config_parameters
 from robots import xarm6_model, XARM6_URDF
 from sampled_loop import goal_of, linearized_spectral_radius
 from sampled_loop import time_constant_s, xarm6_gains, xarm6_shaping

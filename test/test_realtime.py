@@ -12,9 +12,9 @@ import time
 
 from cpus import linux_only, thread_cpus, two_cpus
 import pytest
-from quat_jt_controller import realtime
-from quat_jt_controller.realtime import answer_deadline, await_answer, DRAIN_EVENTS
-from quat_jt_controller.realtime import MIN_ANSWER_FRACTION, STEP_LEAD_S
+from quat_jt_runtime import realtime
+from quat_jt_runtime.realtime import answer_deadline, await_answer, DRAIN_EVENTS
+from quat_jt_runtime.realtime import MIN_ANSWER_FRACTION, STEP_LEAD_S
 
 pytestmark = pytest.mark.unit
 
@@ -37,7 +37,7 @@ def test_pin_process_pins_every_thread_and_later_threads_inherit_it():
     cpu = max(realtime.allowed_cpus())
     script = (
         'import threading, time, json, os\n'
-        'from quat_jt_controller import realtime\n'
+        'from quat_jt_runtime import realtime\n'
         'stop = threading.Event()\n'
         'before = [threading.Thread(target=stop.wait) for _ in range(3)]\n'
         'for t in before: t.start()\n'
@@ -129,7 +129,7 @@ def test_before_the_deadline_the_wait_is_bounded_by_it():
 
 
 def test_run_check_asks_the_context_at_most_every_period_and_the_flag_every_time():
-    from quat_jt_controller.realtime import CONTEXT_CHECK_S, RunCheck
+    from quat_jt_runtime.realtime import CONTEXT_CHECK_S, RunCheck
     now, asked, running, alive = [100.0], [], [True], [True]
 
     def context_ok() -> bool:

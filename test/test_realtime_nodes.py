@@ -13,8 +13,8 @@ from cpus import linux_only, thread_cpus, two_cpus
 from experiments import local_ros
 from process_harness import ProcessHarnessMixin
 import pytest
-from quat_jt_controller import lifecycle
-from quat_jt_controller import realtime
+from quat_jt_runtime import lifecycle
+from quat_jt_runtime import realtime
 import rclpy
 from rclpy.experimental import EventsExecutor
 from rclpy.parameter import Parameter

@@ -13,7 +13,7 @@ import numpy as np
 import pytest
 from quat_jt_controller import paper
 from quat_jt_controller import quaternion as quat
-from quat_jt_controller.resources import default_urdf_xml
+from quat_jt_runtime.resources import default_urdf_xml
 from robots import wrist_model, xarm6_model, XARM6_URDF
 
 pytestmark = pytest.mark.unit

@@ -59,6 +59,24 @@ def test_parameters_default_from_the_urdf(context):
 
 
 @pytest.mark.node
+def test_the_node_declares_exactly_its_table(context):
+    from quat_jt_runtime.params import CPU_AFFINITY
+    from wrist_sim import parameters as table
+    node = _make_node(context)
+    try:
+        rows = {spec.name: spec for spec in table.STRUCTURE + table.LIVE + (CPU_AFFINITY,)}
+        declared = set(node._parameters) - {'use_sim_time', 'start_type_description_service'}
+        assert declared == set(rows)
+        for name, spec in rows.items():
+            d = node.describe_parameter(name)
+            assert (d.type, d.read_only) == (spec.kind.descriptor_type, spec.read_only), name
+            assert node.get_parameter(name).type_ is spec.kind.rclpy_type, name
+            assert d.description, name
+    finally:
+        node.destroy_node()
+
+
+@pytest.mark.node
 def test_friction_parameters_are_validated_and_applied(context):
     node = _make_node(context, coulomb_friction=[0.5, 0.5, 0.5])
     try:
@@ -84,7 +102,7 @@ def test_friction_parameters_are_validated_and_applied(context):
 @pytest.mark.node
 def test_namespaced_and_renamed_sim_keeps_its_config_file(context):
     """config/wrist_sim.yaml is keyed /**: a namespace and a new name keep its values."""
-    from quat_jt_controller.resources import share_path
+    from quat_jt_runtime.resources import share_path
     from wrist_sim.sim_node import WristSimNode
     node = WristSimNode(context=context, cli_args=[
         '--ros-args', '-r', '__ns:=/arm', '-r', '__node:=xarm6_sim', '--params-file',
@@ -104,7 +122,7 @@ def test_the_panda_loads_from_its_config_with_its_meshes_missing(context, capfd)
 
     A robot_description whose meshes cannot be found still loads, with one WARN naming them.
     """
-    from quat_jt_controller.resources import share_path
+    from quat_jt_runtime.resources import share_path
     from robots import PANDA_JOINTS, PANDA_URDF
     from wrist_sim.sim_node import WristSimNode
     urdf = PANDA_URDF.read_text().replace('package://meshes/', 'package://not_installed/')

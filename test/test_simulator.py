@@ -5,7 +5,7 @@ import numpy as np
 import pybullet_data
 import pytest
 from quat_jt_controller.model import RobotModel
-from quat_jt_controller.resources import default_urdf_xml
+from quat_jt_runtime.resources import default_urdf_xml
 from wrist_sim.simulator import resolve_meshes, SimulatorError, WristSimulator
 
 pytestmark = pytest.mark.unit

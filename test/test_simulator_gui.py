@@ -102,7 +102,7 @@ def test_gui_window_shows_the_robot_and_the_goal_frame(display, tmp_path):
 
 
 def test_without_gui_show_frame_draws_nothing():
-    from quat_jt_controller.resources import default_urdf_xml
+    from quat_jt_runtime.resources import default_urdf_xml
     from wrist_sim.simulator import WristSimulator
     with WristSimulator(default_urdf_xml()) as sim:
         assert sim.show_frame('goal', (0.0, 0.0, 0.45), (0.0, 0.0, 0.0, 1.0)) is False

@@ -11,10 +11,10 @@ import pytest
 from quat_jt_controller import paper
 from quat_jt_controller.control_law import Task
 from quat_jt_controller.goal_check import check_goal, GoalCheckWorker, ModelSpec
-from quat_jt_controller.joints import movable_joints, StateLayout
-from quat_jt_controller.loop_stats import LoopStats, Ring, TickStats
-from quat_jt_controller.resources import default_urdf_xml
-from quat_jt_controller.throttle import cause, Throttle
+from quat_jt_runtime.joints import movable_joints, StateLayout
+from quat_jt_runtime.loop_stats import LoopStats, Ring, TickStats
+from quat_jt_runtime.resources import default_urdf_xml
+from quat_jt_runtime.throttle import cause, Throttle
 from robots import wrist_model
 from wrist_sim.config import SimConfig
 from wrist_sim.simulator import SimulatorError
@@ -200,7 +200,7 @@ def test_goal_check_unavailability_is_a_diagnostics_warning():
 
 def test_fresh_command_figures_find_the_lowest_window_and_the_largest_gap():
     import numpy as np
-    from quat_jt_controller.loop_stats import fresh_command_figures
+    from quat_jt_runtime.loop_stats import fresh_command_figures
     t = np.arange(2000) * 1e-3  # 2 s at 1 kHz
     fresh = np.ones(2000, dtype=bool)
     fresh[600:640] = False  # 40 stale steps in the third window
@@ -232,7 +232,7 @@ def test_goal_check_worker_says_when_it_is_ready():
 def test_every_unusable_value_error_has_one_base_class():
     """A caller can catch them all at once (QuatJtError, a ValueError) or each by its kind."""
     from quat_jt_controller.control_law import GainsError
-    from quat_jt_controller.errors import QuatJtError
+    from quat_jt_runtime.errors import QuatJtError
     from quat_jt_controller.model import ModelError
     from quat_jt_controller.shaping import ShapingError
     for kind in (GainsError, ModelError, ShapingError, SimulatorError):

@@ -10,7 +10,7 @@ from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 from PIL import Image
 import pytest
-from quat_jt_controller import realtime
+from quat_jt_runtime import realtime
 
 pytestmark = pytest.mark.e2e
 

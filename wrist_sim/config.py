@@ -12,9 +12,6 @@ from typing import Any, Mapping, Sequence
 
 from wrist_sim.simulator import SimulatorError
 
-LIVE_PARAMETERS = ('initial_positions', 'viscous_friction', 'coulomb_friction',
-                   'command_timeout', 'lockstep_timeout', 'max_real_time_factor')
-
 
 def _per_joint(name: str, values: Sequence[float], n: int, nonnegative: bool) -> tuple:
     vals = tuple(float(v) for v in values)

@@ -39,14 +39,11 @@ from pathlib import Path
 import time
 from typing import Any, Callable, Optional
 
-from quat_jt_controller import lifecycle
-from quat_jt_controller import realtime
-from quat_jt_controller.joints import movable_joints
-from quat_jt_controller.loop_stats import LoopStats
-from quat_jt_controller.parameters import ChangeLog, declare_cpu_affinity, history_qos
-from quat_jt_controller.parameters import LiveParameters
-from quat_jt_controller.resources import bundled_urdf_hint, default_urdf_xml
-from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
+from quat_jt_runtime import lifecycle
+from quat_jt_runtime import realtime
+from quat_jt_runtime.loop_stats import LoopStats
+from quat_jt_runtime.params import ChangeLog, history_qos
+from quat_jt_runtime.resources import bundled_urdf_hint
 from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.node import Node
 from rclpy.qos import QoSProfile
@@ -55,7 +52,9 @@ from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
 from std_srvs.srv import Trigger
 from wrist_sim.command_gate import CommandGate, RESUMED, TRIPPED
-from wrist_sim.config import LIVE_PARAMETERS, SimConfig
+from wrist_sim.config import SimConfig
+from wrist_sim.parameters import declare_live, declare_structure, describe_config
+from wrist_sim.parameters import LIVE_PARAMETERS
 from wrist_sim.simulator import SimulatorError, WristSimulator
 
 NODE_NAME = 'wrist_sim'
@@ -63,27 +62,27 @@ LOG_PERIOD_S = 1.0
 THROTTLE_S = 1.0
 
 
-def _float_range(lo: float, hi: float) -> list[FloatingPointRange]:
-    return [FloatingPointRange(from_value=lo, to_value=hi, step=0.0)]
-
-
 class WristSimNode(Node):
     """The simulated robot; build it, then call :meth:`run` with an executor."""
 
     def __init__(self, **kwargs: Any) -> None:
         super().__init__(NODE_NAME, **kwargs)
-        self._declare_parameters()
-        p, c = self.structural, self.live.current
-        self.rate_hz = int(p['rate_hz'])
-        self.dt_ns = int(round(1e9 / self.rate_hz))
+        p = self.structure = declare_structure(self)
+        self.cpu_affinity = p.cpu_affinity  # pinned by lifecycle.run_node
+        self.live = declare_live(self, len(p.joints), on_apply=self._apply_config)
+        self._change_log = ChangeLog(self, ((LIVE_PARAMETERS,
+                                             lambda: describe_config(self.live.current)),))
+        c = self.live.current
+        self.rate_hz = p.rate_hz
+        self.dt_ns = p.dt_ns
         try:
             self.sim = WristSimulator(
-                self._urdf_xml, p['joints'], dt_s=self.dt_ns * 1e-9, use_gui=p['use_gui'],
+                p.urdf_xml, p.joints, dt_s=self.dt_ns * 1e-9, use_gui=p.use_gui,
                 viscous_nm_s_per_rad=c.viscous_nm_s_per_rad, coulomb_nm=c.coulomb_nm,
                 initial_positions_rad=c.initial_positions_rad,
-                enforce_velocity_limits=p['enforce_velocity_limits'])
+                enforce_velocity_limits=p.enforce_velocity_limits)
         except SimulatorError as exc:
-            raise SimulatorError(f'{exc}{bundled_urdf_hint(self._given_urdf)}') from None
+            raise SimulatorError(f'{exc}{bundled_urdf_hint(p.given_urdf)}') from None
         if self.sim.missing_meshes:
             self.get_logger().warning(
                 f'{len(self.sim.missing_meshes)} mesh file(s) of robot_description not found, '
@@ -95,16 +94,15 @@ class WristSimNode(Node):
         self._effort_limits = self.sim.effort_limits_nm.tolist()
         self._velocity_limits = self.sim.velocity_limits_rad_s.tolist()
         self._at_velocity_limit = [0.999 * v for v in self._velocity_limits]
-        self.publish_clock = bool(p['publish_clock'])
-        self._clock_divider = int(p['clock_divider'])
-        self.stats = LoopStats(capacity=int(p['stats_window_steps']))
+        self.publish_clock = p.publish_clock
+        self._clock_divider = p.clock_divider
+        self.stats = LoopStats(capacity=p.stats_window_steps)
         # Without use_sim_time the node's ROS clock is the system clock: stamp from it directly
         # (time.time_ns) rather than through rclpy's Clock object on every tick.
         self._system_clock = not self.get_parameter('use_sim_time').value
 
         # The command path (touched only from the executor thread, which is also the loop's).
-        self.gate = CommandGate(self._effort_limits, self.dt_ns,
-                                p['hold_until_first_command'])
+        self.gate = CommandGate(self._effort_limits, self.dt_ns, p.hold_until_first_command)
         self._publish_wall_s = time.perf_counter()
         self._last_stamp_ns = -1
 
@@ -127,101 +125,13 @@ class WristSimNode(Node):
             f'effort limits {self.sim.effort_limits_nm.tolist()} N m, '
             + ('lockstep with /clock' if self.publish_clock else 'real time'))
 
-    # -- parameters ----------------------------------------------------------------------
-
-    def _declare_parameters(self) -> None:
-        """
-        Declare every parameter, in one place.
-
-        ``joints`` and the per-joint arrays default from the URDF, so ``robot_description`` is
-        read first.
-        """
-        def desc(text: str, read_only: bool = False, **ranges: Any) -> ParameterDescriptor:
-            return ParameterDescriptor(description=text, read_only=read_only, **ranges)
-
-        self.declare_parameter('robot_description', '', desc(
-            'URDF as an XML string; empty = the bundled spherical wrist', read_only=True))
-        self._given_urdf = self.get_parameter('robot_description').value
-        urdf = self._given_urdf or default_urdf_xml()
-        self._urdf_xml = urdf
-        try:
-            movable = movable_joints(urdf)
-        except ValueError as exc:
-            raise SimulatorError(f'robot_description: {exc}') from None
-        if not movable:
-            raise SimulatorError('the URDF has no movable joints')
-        self.declare_parameter('joints', movable, desc(
-            'joints to drive, in command/state order; default the URDF movable joints',
-            read_only=True))
-        n = len(self.get_parameter('joints').value)
-        zeros = [0.0] * n
-        self.declare_parameter('initial_positions', zeros, desc(
-            'joint positions (rad or m) at start and on ~/reset'))
-        self.declare_parameter('rate_hz', 1000, desc(
-            'steps per second; the time step is 1 / rate_hz', read_only=True,
-            integer_range=[IntegerRange(from_value=1, to_value=20000, step=1)]))
-        self.declare_parameter('use_gui', False, desc('open the PyBullet window',
-                                                      read_only=True))
-        self.declare_parameter('publish_clock', False, desc(
-            'publish /clock with the simulation time and step in lockstep with the commands '
-            'instead of in real time', read_only=True))
-        self.declare_parameter('clock_divider', 10, desc(
-            'with publish_clock: publish /clock every N-th step (10 at 1 kHz: 100 Hz of '
-            'simulated time); each /clock costs a publish here and a callback in every node on '
-            'simulated time', read_only=True,
-            integer_range=[IntegerRange(from_value=1, to_value=1000, step=1)]))
-        self.declare_parameter('lockstep_timeout', 0.05, desc(
-            'lockstep: wall seconds to wait for the command of the last state before stepping '
-            'anyway', floating_point_range=_float_range(1e-4, 10.0)))
-        self.declare_parameter('max_real_time_factor', 0.0, desc(
-            'lockstep: at most this many times faster than real time; 0 = no limit',
-            floating_point_range=_float_range(0.0, 1000.0)))
-        self.declare_parameter('viscous_friction', zeros, desc(
-            'viscous friction per joint, N m s/rad (>= 0)'))
-        self.declare_parameter('coulomb_friction', zeros, desc(
-            'Coulomb friction / stiction level per joint, N m (>= 0)'))
-        self.declare_parameter('command_timeout', 0.5, desc(
-            'seconds (simulation time) without a valid command before the torque goes to '
-            'zero; 0 disables the watchdog', floating_point_range=_float_range(0.0, 60.0)))
-        self.declare_parameter('hold_until_first_command', True, desc(
-            'hold the joints at rest (brakes) until the first valid command after start-up or '
-            '~/reset, so the robot does not fall while a controller connects',
-            read_only=True))
-        self.declare_parameter('enforce_velocity_limits', True, desc(
-            'hold each joint at its URDF velocity limit, as a drive would; off, a joint past '
-            'it is only reported', read_only=True))
-        self.declare_parameter('stats_file', '', desc(
-            'if set, timing statistics are written there as JSON at shutdown', read_only=True))
-        self.declare_parameter('stats_window_steps', 30000, desc(
-            'the timing percentiles and stale-step counts cover the last N steps (30000: 30 s '
-            'at 1 kHz)', read_only=True,
-            integer_range=[IntegerRange(from_value=100, to_value=10_000_000, step=1)]))
-        try:
-            self.cpu_affinity = declare_cpu_affinity(self)  # pinned by lifecycle.run_node
-        except ValueError as exc:
-            raise SimulatorError(str(exc)) from None
-        self.structural = {k: self.get_parameter(k).value for k in (
-            'joints', 'rate_hz', 'use_gui', 'publish_clock', 'clock_divider',
-            'hold_until_first_command',
-            'enforce_velocity_limits', 'stats_file', 'stats_window_steps')}
-        self.live = LiveParameters(self, LIVE_PARAMETERS,
-                                   lambda values: SimConfig.create(values, n),
-                                   on_apply=self._apply_config)
-        self._change_log = ChangeLog(self, ((LIVE_PARAMETERS, self._describe_config),))
+    # -- parameters (wrist_sim/parameters.py) ------------------------------------------
 
     def _apply_config(self, config: SimConfig) -> None:
         """Take a new live config: push its friction to the simulator."""
         friction = (list(config.viscous_nm_s_per_rad), list(config.coulomb_nm))
         if friction != [a.tolist() for a in self.sim.friction]:
             self.sim.set_friction(*friction)
-
-    def _describe_config(self) -> str:
-        """Describe the live settings in force (logged once per parameter request)."""
-        c = self.live.current
-        return (f'initial_positions {list(c.initial_positions_rad)} rad, friction: viscous '
-                f'{list(c.viscous_nm_s_per_rad)} N m s/rad, Coulomb {list(c.coulomb_nm)} N m, '
-                f'command_timeout {c.command_timeout_s} s, lockstep_timeout '
-                f'{c.lockstep_timeout_s} s, max_real_time_factor {c.max_real_time_factor}')
 
     # -- callbacks -----------------------------------------------------------------------
 
@@ -434,7 +344,7 @@ class WristSimNode(Node):
         """Log (and write) the timing statistics, close the simulator, destroy the node."""
         summary = self.stats.summary()
         self.get_logger().info('stats ' + json.dumps(summary, sort_keys=True))
-        path = self.structural['stats_file']
+        path = self.structure.stats_file
         if path:
             try:
                 Path(path).write_text(json.dumps(summary, indent=1, sort_keys=True))

@@ -49,8 +49,8 @@ import numpy as np
 from wrist_sim.quiet import c_output_silenced, pybullet  # imported without its banner
 import pybullet_data  # noqa: I100 - after pybullet, which wrist_sim.quiet imports silenced
 from pybullet_utils.bullet_client import BulletClient
-from quat_jt_controller.errors import QuatJtError
-from quat_jt_controller.joints import movable_joints, select_joints
+from quat_jt_runtime.errors import QuatJtError
+from quat_jt_runtime.joints import movable_joints, select_joints
 
 GRAVITY_MPS2 = 9.81
 _PACKAGE_URI = re.compile(r'package://([^/"\'\s]+)/([^"\'\s<>]*)')

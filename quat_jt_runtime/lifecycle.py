@@ -11,8 +11,8 @@ destroyed and the context shut down, in that order, and the process exits with s
 import gc
 from typing import Callable, Optional
 
-from quat_jt_controller import realtime
-from quat_jt_controller import shutdown_signals
+from quat_jt_runtime import realtime
+from quat_jt_runtime import shutdown_signals
 import rclpy
 from rclpy.signals import SignalHandlerOptions
 

@@ -15,10 +15,10 @@ are keyed ``/**``: each node takes the parameters it declares and ignores the ot
 """
 from typing import Optional
 
-from quat_jt_controller import lifecycle
 from quat_jt_controller.control_law import GainsError
 from quat_jt_controller.controller_node import QuatJtController
 from quat_jt_controller.model import ModelError
+from quat_jt_runtime import lifecycle
 from wrist_sim.sim_node import WristSimNode
 from wrist_sim.simulator import SimulatorError
 

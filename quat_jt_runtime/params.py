@@ -1,0 +1,255 @@
+"""
+The parameter machinery of every node: declared once, validated once, applied whole.
+
+:class:`LiveParameters` is the idiom: the live parameters of a node are validated in the on-set
+callback by building the node's immutable snapshot from the current values merged with the
+incoming ones (a ValueError rejects the whole set, with its message as the reason), and the
+post-set callback swaps the snapshot in; the 1 kHz tick reads the snapshot, never
+``get_parameter``. Structural parameters are read-only and read once at start-up.
+:class:`ChangeLog` logs one line per parameter request.
+"""
+from dataclasses import dataclass
+import enum
+from typing import Any, Callable, Collection, Generic, Mapping, Optional, Sequence, TypeVar
+
+from quat_jt_runtime.realtime import check_cpus
+from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
+from rcl_interfaces.msg import ParameterType, SetParametersResult
+from rclpy.clock import Clock, ClockType
+from rclpy.node import Node
+from rclpy.parameter import Parameter
+from rclpy.qos import HistoryPolicy, QoSProfile
+
+
+def history_qos(simulated_time: bool) -> QoSProfile:
+    """
+    Return the QoS of the 1 kHz topics (joint_states, effort commands): reliable, a history.
+
+    On simulated time (lockstep), every subscriber gets every message: KEEP_ALL, so a slow
+    recorder slows simulated time down instead of losing messages. In real time a late
+    subscriber must never stall the loop: KEEP_LAST 1000, which never blocks and lets a
+    subscriber that lags for a moment catch up.
+    """
+    if simulated_time:
+        return QoSProfile(history=HistoryPolicy.KEEP_ALL, depth=1000)
+    return QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1000)
+
+
+Snapshot = TypeVar('Snapshot')
+
+
+class LiveParameters(Generic[Snapshot]):
+    """
+    Live parameters of ``node`` named ``names`` (already declared), as one immutable snapshot.
+
+    ``build`` turns a complete ``{name: value}`` mapping into the snapshot or raises ValueError
+    naming the bad value. ``current`` is the snapshot in force; ``on_apply`` is called with
+    each new one after a successful set (to push it to a model; :class:`ChangeLog` logs it).
+    """
+
+    def __init__(self, node: Node, names: Sequence[str],
+                 build: Callable[[Mapping[str, Any]], Snapshot],
+                 on_apply: Optional[Callable[[Snapshot], None]] = None) -> None:
+        self._node = node
+        self._names = frozenset(names)
+        self._build = build
+        self._on_apply = on_apply
+        self.values = {name: node.get_parameter(name).value for name in names}
+        self.current: Snapshot = build(self.values)  # a bad start-up value raises here
+        self._pending: Optional[tuple[dict, Snapshot]] = None
+        node.add_on_set_parameters_callback(self._validate)
+        node.add_post_set_parameters_callback(self._apply)
+
+    def _validate(self, params) -> SetParametersResult:
+        merged = dict(self.values)
+        touched = [p.name for p in params if p.name in self._names]
+        if not touched:
+            return SetParametersResult(successful=True)
+        merged.update({p.name: p.value for p in params if p.name in self._names})
+        try:
+            self._pending = (merged, self._build(merged))
+        except ValueError as exc:
+            self._pending = None
+            reason = f'rejected, nothing changed: {exc}'
+            self._node.get_logger().warn(f'parameter set {touched} {reason}')
+            return SetParametersResult(successful=False, reason=reason)
+        return SetParametersResult(successful=True)
+
+    def _apply(self, params) -> None:
+        if self._pending is None or not any(p.name in self._names for p in params):
+            return
+        self.values, self.current = self._pending
+        self._pending = None
+        if self._on_apply is not None:
+            self._on_apply(self.current)
+
+
+class ChangeLog:
+    """
+    One INFO line per parameter request, however many parameters it sets.
+
+    ``ros2 param load`` sends a whole file in one set-parameters request, which rclpy applies
+    one parameter at a time: each is validated and its snapshot applied whole, all within the
+    one service callback, so no tick runs in between. Each post-set callback here only notes the
+    names and (re)arms a one-shot steady-clock timer, which fires after the request's callback
+    and logs the new values of every group touched, once. (The EventsExecutor takes no guard
+    conditions.) ``groups`` pairs parameter names with a function that describes their snapshot
+    in force.
+    """
+
+    def __init__(self, node: Node,
+                 groups: Sequence[tuple[Collection[str], Callable[[], str]]]) -> None:
+        self._node = node
+        self._groups = groups
+        self._names: list[str] = []
+        self._timer = node.create_timer(1e-3, self._flush, autostart=False,
+                                        clock=Clock(clock_type=ClockType.STEADY_TIME))
+        node.add_post_set_parameters_callback(self._note)
+
+    def _note(self, params) -> None:
+        self._names += [p.name for p in params if p.name not in self._names]
+        self._timer.reset()
+
+    def _flush(self) -> None:
+        self._timer.cancel()
+        if not self._names:
+            return
+        names, self._names = self._names, []
+        parts = [describe() for group, describe in self._groups
+                 if any(name in group for name in names)]
+        self._node.get_logger().info(
+            f'parameters updated ({", ".join(names)})' + (': ' + '; '.join(parts) if parts
+                                                          else ''))
+
+
+class Kind(enum.Enum):
+    """A parameter's type: the descriptor's, rclpy's and the docs' names for it."""
+
+    BOOL = (ParameterType.PARAMETER_BOOL, Parameter.Type.BOOL, 'bool')
+    INT = (ParameterType.PARAMETER_INTEGER, Parameter.Type.INTEGER, 'int')
+    DOUBLE = (ParameterType.PARAMETER_DOUBLE, Parameter.Type.DOUBLE, 'double')
+    STRING = (ParameterType.PARAMETER_STRING, Parameter.Type.STRING, 'string')
+    INT_ARRAY = (ParameterType.PARAMETER_INTEGER_ARRAY, Parameter.Type.INTEGER_ARRAY, 'int[]')
+    DOUBLE_ARRAY = (ParameterType.PARAMETER_DOUBLE_ARRAY, Parameter.Type.DOUBLE_ARRAY,
+                    'double[]')
+    STRING_ARRAY = (ParameterType.PARAMETER_STRING_ARRAY, Parameter.Type.STRING_ARRAY,
+                    'string[]')
+
+    def __init__(self, descriptor_type: int, rclpy_type: Parameter.Type, label: str) -> None:
+        self.descriptor_type = descriptor_type
+        self.rclpy_type = rclpy_type
+        self.label = label
+
+
+@dataclass(frozen=True)
+class Spec:
+    """
+    One row of a node's parameter table: everything about a parameter, in one place.
+
+    The declaration, its ``ParameterDescriptor`` and the docs' table are generated from it. The
+    ``description``, ``constraints`` and a callable ``default`` take the node's context (the
+    number of joints ``n``, say): text through ``str.format``, the default called with it.
+    ``bounds`` is a scalar's range (enforced by rclpy on every set); what ``constraints`` says
+    of an array is checked by the snapshot the parameter belongs to (``LiveParameters``).
+    """
+
+    name: str
+    kind: Kind
+    default: Any  # a value, or a function of the context that returns it
+    description: str
+    read_only: bool = False
+    bounds: Optional[tuple[float, float]] = None
+    constraints: str = ''
+    default_text: str = ''  # the docs' default when ``default`` is a function
+
+    def default_value(self, context: Mapping[str, Any]) -> Any:
+        """Return the default for this node (a function default is called with the context)."""
+        return self.default(context) if callable(self.default) else self.default
+
+    def descriptor(self, context: Mapping[str, Any]) -> ParameterDescriptor:
+        """Return the ``ParameterDescriptor`` (``ros2 param describe``) for this node."""
+        d = ParameterDescriptor(
+            description=self.description.format(**context), type=self.kind.descriptor_type,
+            read_only=self.read_only, additional_constraints=self.constraints.format(**context),
+            dynamic_typing=False)
+        if self.bounds is not None and self.kind is Kind.DOUBLE:
+            d.floating_point_range = [FloatingPointRange(
+                from_value=float(self.bounds[0]), to_value=float(self.bounds[1]), step=0.0)]
+        elif self.bounds is not None and self.kind is Kind.INT:
+            d.integer_range = [IntegerRange(
+                from_value=int(self.bounds[0]), to_value=int(self.bounds[1]), step=1)]
+        return d
+
+
+def names(specs: Sequence[Spec]) -> tuple[str, ...]:
+    """Return the parameter names of a table, in order."""
+    return tuple(spec.name for spec in specs)
+
+
+def declare(node: Node, specs: Sequence[Spec],
+            context: Optional[Mapping[str, Any]] = None) -> dict[str, Any]:
+    """
+    Declare every parameter of ``specs`` on ``node``; return ``{name: value}``.
+
+    An array whose default is empty is declared by type, then set to ``[]`` unless given: rclpy
+    infers a byte array from an empty default, and an unset parameter has no value (``ros2
+    param get`` says "Parameter not set", and ``ros2 param dump`` prints ``{}`` for a node
+    that has one). The descriptor (read-only or not) is put in place after.
+    """
+    context = context or {}
+    values = {}
+    for spec in specs:
+        default = spec.default_value(context)
+        descriptor = spec.descriptor(context)
+        if isinstance(default, (list, tuple)) and not default:
+            ptype = spec.kind.rclpy_type
+            param = node.declare_parameter(
+                spec.name, ptype, ParameterDescriptor(type=spec.kind.descriptor_type))
+            if param.type_ is Parameter.Type.NOT_SET:
+                node.set_parameters([Parameter(spec.name, ptype, [])])
+            node.set_descriptor(spec.name, descriptor)
+            values[spec.name] = list(node.get_parameter(spec.name).value)
+        else:
+            values[spec.name] = node.declare_parameter(spec.name, default, descriptor).value
+    return values
+
+
+def markdown_table(specs: Sequence[Spec], context: Mapping[str, Any]) -> str:
+    """Return the table of ``specs`` as Markdown (the docs' parameter tables)."""
+    def text(value: Any) -> str:
+        if isinstance(value, str):
+            return f"`'{value}'`" if value else "`''`"
+        if isinstance(value, bool):
+            return f'`{str(value).lower()}`'
+        if isinstance(value, (list, tuple)):
+            return '`[' + ', '.join(f'{v:g}' if isinstance(v, float) else str(v)
+                                    for v in value) + ']`'
+        return f'`{value:g}`' if isinstance(value, float) else f'`{value}`'
+
+    rows = ['| name | type | default | range | live | description |', '|---|---|---|---|---|---|']
+    for spec in specs:
+        default = spec.default_text or text(spec.default_value(context))
+        bounds = (f'[{spec.bounds[0]:g}, {spec.bounds[1]:g}]' if spec.bounds is not None
+                  else spec.constraints.format(**context))
+        description = ' '.join(spec.description.format(**context).split()).replace('|', '/')
+        rows.append(f'| `{spec.name}` | {spec.kind.label} | {default} | {bounds} | '
+                    f'{"no" if spec.read_only else "yes"} | {description} |')
+    return '\n'.join(rows) + '\n'
+
+
+CPU_AFFINITY = Spec(
+    'cpu_affinity', Kind.INT_ARRAY, [],
+    'CPUs to pin this process to (all its threads), e.g. [1]; [] (the default) = not pinned. '
+    'A 1 kHz node on a CPU of its own keeps its caches warm between ticks (docs/ros.md, '
+    'Real-time settings).', read_only=True, constraints='CPUs this process may run on')
+
+
+def declare_cpu_affinity(node: Node) -> tuple[int, ...]:
+    """
+    Declare the read-only ``cpu_affinity`` (every node of this package has it) and return it.
+
+    Empty (the default) leaves the process where the OS puts it. ``lifecycle.run_node`` pins
+    the process once its nodes are built (``realtime.pin_process``). Raises ValueError if a CPU
+    is not available to the process.
+    """
+    return check_cpus(declare(node, (CPU_AFFINITY,))['cpu_affinity'])

@@ -1,0 +1,147 @@
+"""
+The simulator's ROS parameters, as one table.
+
+One table (``STRUCTURE``, ``LIVE``) of
+:class:`~quat_jt_runtime.params.Spec` rows, in the idiom of ``quat_jt_runtime.params``.
+
+The declarations, the descriptors and docs/parameters.md are generated from the table. The
+read-only rows are read once into a :class:`SimStructure`; the live rows are applied whole as
+the immutable :class:`~wrist_sim.config.SimConfig` (validated by ``SimConfig.create``).
+``joints`` and the per-joint rows default from the URDF, so ``robot_description`` is read first.
+"""
+from dataclasses import dataclass
+from typing import Any, Callable, Mapping, Optional
+
+from quat_jt_runtime.joints import movable_joints
+from quat_jt_runtime.params import CPU_AFFINITY, declare, Kind, LiveParameters, names, Spec
+from quat_jt_runtime.realtime import check_cpus
+from quat_jt_runtime.resources import default_urdf_xml
+from rclpy.node import Node
+from wrist_sim.config import SimConfig
+from wrist_sim.simulator import SimulatorError
+
+
+def _zeros(context: Mapping[str, Any]) -> list[float]:
+    return [0.0] * context['n']
+
+
+ROBOT_DESCRIPTION = Spec('robot_description', Kind.STRING, '',
+                         'URDF as an XML string; empty = the bundled spherical wrist',
+                         read_only=True)
+JOINTS = Spec('joints', Kind.STRING_ARRAY, lambda context: list(context['movable']),
+              'joints to drive, in command/state order; default the URDF movable joints',
+              read_only=True, default_text="the URDF's movable joints")
+STRUCTURE = (
+    ROBOT_DESCRIPTION, JOINTS,
+    Spec('rate_hz', Kind.INT, 1000, 'steps per second; the time step is 1 / rate_hz',
+         read_only=True, bounds=(1, 20000)),
+    Spec('use_gui', Kind.BOOL, False, 'open the PyBullet window', read_only=True),
+    Spec('publish_clock', Kind.BOOL, False,
+         'publish /clock with the simulation time and step in lockstep with the commands '
+         'instead of in real time', read_only=True),
+    Spec('clock_divider', Kind.INT, 10,
+         'with publish_clock: publish /clock every N-th step (10 at 1 kHz: 100 Hz of simulated '
+         'time); each /clock costs a publish here and a callback in every node on simulated '
+         'time', read_only=True, bounds=(1, 1000)),
+    Spec('hold_until_first_command', Kind.BOOL, True,
+         'hold the joints at rest (brakes) until the first valid command after start-up or '
+         '~/reset, so the robot does not fall while a controller connects', read_only=True),
+    Spec('enforce_velocity_limits', Kind.BOOL, True,
+         'hold each joint at its URDF velocity limit, as a drive would; off, a joint past it '
+         'is only reported', read_only=True),
+    Spec('stats_file', Kind.STRING, '',
+         'if set, timing statistics are written there as JSON at shutdown', read_only=True),
+    Spec('stats_window_steps', Kind.INT, 30000,
+         'the timing percentiles and stale-step counts cover the last N steps (30000: 30 s at '
+         '1 kHz)', read_only=True, bounds=(100, 10_000_000)),
+)
+# Context: n (the number of joints).
+LIVE = (
+    Spec('initial_positions', Kind.DOUBLE_ARRAY, _zeros,
+         'joint positions (rad or m) at start and on ~/reset', constraints='{n} finite values',
+         default_text='`0` per joint'),
+    Spec('viscous_friction', Kind.DOUBLE_ARRAY, _zeros,
+         'viscous friction per joint, N m s/rad (>= 0)', constraints='{n} finite values >= 0',
+         default_text='`0` per joint'),
+    Spec('coulomb_friction', Kind.DOUBLE_ARRAY, _zeros,
+         'Coulomb friction / stiction level per joint, N m (>= 0)',
+         constraints='{n} finite values >= 0', default_text='`0` per joint'),
+    Spec('command_timeout', Kind.DOUBLE, 0.5,
+         'seconds (simulation time) without a valid command before the torque goes to zero; '
+         '0 disables the watchdog', bounds=(0.0, 60.0)),
+    Spec('lockstep_timeout', Kind.DOUBLE, 0.05,
+         'lockstep: wall seconds to wait for the command of the last state before stepping '
+         'anyway', bounds=(1e-4, 10.0)),
+    Spec('max_real_time_factor', Kind.DOUBLE, 0.0,
+         'lockstep: at most this many times faster than real time; 0 = no limit',
+         bounds=(0.0, 1000.0)),
+)
+LIVE_PARAMETERS = names(LIVE)
+DOCS_CONTEXT = {'n': 'n', 'movable': ()}
+
+
+@dataclass(frozen=True)
+class SimStructure:
+    """The read-only parameters, read once at start-up."""
+
+    urdf_xml: str  # the URDF in use (the bundled wrist's if none was given)
+    given_urdf: str  # robot_description as given ('' = none)
+    joints: tuple[str, ...]
+    rate_hz: int
+    use_gui: bool
+    publish_clock: bool
+    clock_divider: int
+    hold_until_first_command: bool
+    enforce_velocity_limits: bool
+    stats_file: str
+    stats_window_steps: int
+    cpu_affinity: tuple[int, ...]
+
+    @property
+    def dt_ns(self) -> int:
+        """Return the time step in nanoseconds (1 / rate_hz)."""
+        return int(round(1e9 / self.rate_hz))
+
+
+def declare_structure(node: Node) -> SimStructure:
+    """Declare the read-only parameters and return them; raise SimulatorError if unusable."""
+    given = declare(node, (ROBOT_DESCRIPTION,))['robot_description']
+    urdf = given or default_urdf_xml()
+    try:
+        movable = movable_joints(urdf)
+    except ValueError as exc:
+        raise SimulatorError(f'robot_description: {exc}') from None
+    if not movable:
+        raise SimulatorError('the URDF has no movable joints')
+    values = declare(node, STRUCTURE[1:] + (CPU_AFFINITY,), {'movable': movable})
+    try:
+        cpus = check_cpus(values['cpu_affinity'])  # pinned by lifecycle.run_node
+    except ValueError as exc:
+        raise SimulatorError(str(exc)) from None
+    return SimStructure(
+        urdf_xml=urdf, given_urdf=given, joints=tuple(values['joints']),
+        rate_hz=int(values['rate_hz']), use_gui=bool(values['use_gui']),
+        publish_clock=bool(values['publish_clock']),
+        clock_divider=int(values['clock_divider']),
+        hold_until_first_command=bool(values['hold_until_first_command']),
+        enforce_velocity_limits=bool(values['enforce_velocity_limits']),
+        stats_file=values['stats_file'], stats_window_steps=int(values['stats_window_steps']),
+        cpu_affinity=cpus)
+
+
+def declare_live(node: Node, n_joints: int,
+                 on_apply: Optional[Callable[[SimConfig], None]] = None
+                 ) -> LiveParameters[SimConfig]:
+    """Declare the live parameters; return them as LiveParameters of a SimConfig."""
+    declare(node, LIVE, {'n': n_joints})
+    return LiveParameters(node, LIVE_PARAMETERS,
+                          lambda values: SimConfig.create(values, n_joints), on_apply)
+
+
+def describe_config(config: SimConfig) -> str:
+    """Describe the live settings in force (logged once per parameter request)."""
+    c = config
+    return (f'initial_positions {list(c.initial_positions_rad)} rad, friction: viscous '
+            f'{list(c.viscous_nm_s_per_rad)} N m s/rad, Coulomb {list(c.coulomb_nm)} N m, '
+            f'command_timeout {c.command_timeout_s} s, lockstep_timeout '
+            f'{c.lockstep_timeout_s} s, max_real_time_factor {c.max_real_time_factor}')
