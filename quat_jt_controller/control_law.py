@@ -24,7 +24,7 @@ from typing import Optional, Sequence
 
 from quat_jt_controller import quaternion as quat
 from quat_jt_controller.shaping import LARGE_ERROR_DELTA
-from quat_jt_runtime.errors import QuatJtError
+from quat_jt_runtime.errors import checked_vector, QuatJtError
 
 LN2 = log(2.0)
 
@@ -63,22 +63,6 @@ def gain_ceiling(effort_limits_nm: Sequence[float]) -> float:
     """Return the largest sane K_p or K_v entry for these effort limits (see SATURATING_ERROR)."""
     finite = [lim for lim in effort_limits_nm if isfinite(lim) and lim > 0.0]
     return max(finite) / SATURATING_ERROR if finite else MAX_GAIN_WITHOUT_LIMITS
-
-
-def _vector(name: str, values: Sequence[float], size: int,
-            upper: float = float('inf'), why: str = '') -> tuple[float, ...]:
-    try:
-        vals = tuple(float(v) for v in values)
-    except (TypeError, ValueError) as exc:
-        raise GainsError(f'{name} must be a list of numbers, got {values!r}') from exc
-    if len(vals) != size:
-        raise GainsError(f'{name} must have {size} values, got {len(vals)}: {list(vals)}')
-    for i, v in enumerate(vals):
-        if not isfinite(v) or v <= 0.0:
-            raise GainsError(f'{name}[{i}] must be finite and > 0, got {v}')
-        if v > upper:
-            raise GainsError(f'{name}[{i}] = {v:g} is above {upper:g}: {why}')
-    return vals
 
 
 @dataclass(frozen=True)
@@ -124,9 +108,12 @@ class Gains:
                    '(rad, m or rad/s): the joints would only saturate')
             lam_why = 'tanh(lambda y) would switch like sign(y) within sensor noise (chatter)'
         return cls(potential=pot,
-                   kp=_vector('kp', kp, task.dim, ceiling, why),
-                   kv=_vector('kv', kv, n_joints, ceiling, why),
-                   lam=_vector('lambda', lam, task.dim, lam_ceiling, lam_why),
+                   kp=checked_vector('kp', kp, task.dim, GainsError, lower=0.0, strict=True,
+                                     upper=ceiling, why=why),
+                   kv=checked_vector('kv', kv, n_joints, GainsError, lower=0.0, strict=True,
+                                     upper=ceiling, why=why),
+                   lam=checked_vector('lambda', lam, task.dim, GainsError, lower=0.0,
+                                      strict=True, upper=lam_ceiling, why=lam_why),
                    gravity_compensation=bool(gravity_compensation))
 
 

@@ -8,7 +8,7 @@ from dataclasses import dataclass
 from math import nan
 from typing import NamedTuple, Optional, Sequence
 
-from quat_jt_controller.regulator import Goal, TickOutput
+from quat_jt_controller.regulator import Goal, Regulator, TickOutput
 
 OK, WARN, ERROR = 0, 1, 2
 # |eta_e| below this means the error is within ~11.5 degrees of 180 degrees, where
@@ -160,3 +160,12 @@ class ConfigurationState(NamedTuple):
             return (f'the goal configuration lies in the joint-limit band of '
                     f'{", ".join(self.in_band)}: the band ends there')
         return ''
+
+
+def configuration_state(regulator: Regulator) -> ConfigurationState:
+    """Return the goal configuration in force and the friction learned, from the regulator."""
+    names = regulator.model.joint_names
+    return ConfigurationState(
+        regulator.shaping.configuration_on, regulator.goal_configuration,
+        [names[j] for j in regulator.goal_in_band()],
+        regulator.learned_friction_nm if regulator.shaping.learning_on else ())

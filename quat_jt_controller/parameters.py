@@ -20,10 +20,12 @@ from typing import Any, Callable, Mapping, Optional, Sequence
 from quat_jt_controller import paper
 from quat_jt_controller.control_law import gain_ceiling, Gains, MAX_LAMBDA, Potential
 from quat_jt_controller.control_law import SATURATING_ERROR, Task
+from quat_jt_controller.regulator import Regulator
+from quat_jt_controller.shaping import describe as describe_shaping
 from quat_jt_controller.shaping import from_parameters as shaping_from_parameters
 from quat_jt_controller.shaping import MAX_POSTURE_WEIGHT, Shaping
 from quat_jt_runtime.joints import DEFAULT_MAX_STATE_AGE_S, DEFAULT_STATE_TIMEOUT_S
-from quat_jt_runtime.params import declare, Kind, LiveParameters, names, Spec
+from quat_jt_runtime.params import ChangeLog, declare, Kind, LiveParameters, names, Spec
 from quat_jt_runtime.realtime import DEFAULT_PREWARM_LEAD_S
 from quat_jt_runtime.resources import default_urdf_xml
 from rclpy.node import Node
@@ -256,6 +258,24 @@ def declare_gains(node: Node, config: StructuralConfig, effort_limits_nm: Sequen
     return LiveParameters(
         node, GAIN_PARAMETERS, lambda values: build_gains(values, config, effort_limits_nm),
         on_apply)
+
+
+def describe_start(config: StructuralConfig, regulator: Regulator) -> list[str]:
+    """Describe the controller at start-up: its extensions, then its task, robot and gains."""
+    gains = regulator.gains
+    return [f'extensions: {describe_shaping(regulator.shaping)}',
+            f'{config.task.value} task, joints {list(config.joints)}, {config.base_link} -> '
+            f'{config.tip_link}, potential {gains.potential.value}, kp {list(gains.kp)}, kv '
+            f'{list(gains.kv)}, lambda {list(gains.lam)}, effort limits '
+            f'{list(regulator.effort_limits_nm)} N m; holding the first measured pose until a '
+            'goal arrives on ~/target_pose']
+
+
+def change_log(node: Node, regulator: Regulator) -> ChangeLog:
+    """Log each parameter request once, with the gains and the extensions then in force."""
+    return ChangeLog(node, (
+        (GAIN_PARAMETERS, lambda: describe_gains(regulator.gains)),
+        (SHAPING_PARAMETERS, lambda: f'extensions: {describe_shaping(regulator.shaping)}')))
 
 
 def describe_gains(gains: Gains) -> str:

@@ -44,7 +44,7 @@ from functools import cached_property
 from math import isfinite, pi, sqrt, tanh
 from typing import Optional, Sequence
 
-from quat_jt_runtime.errors import QuatJtError
+from quat_jt_runtime.errors import checked_vector, QuatJtError
 
 # A joint whose URDF range is at least this long turns freely: it gets no limit term.
 FULL_TURN_RAD = 2.0 * pi - 1e-6
@@ -87,37 +87,18 @@ def _at_most(name: str, value: float, ceiling: float) -> float:
     return value
 
 
-def _angles(name: str, values: Optional[Sequence[float]], n: int) -> tuple[float, ...]:
-    """Return ``n`` finite joint positions, or () for None or an empty list (the default)."""
-    if values is None or len(values) == 0:
-        return ()
-    try:
-        vals = tuple(float(v) for v in values)
-    except (TypeError, ValueError):
-        raise ShapingError(f'{name} must be a list of numbers, got {values!r}') from None
-    if len(vals) != n:
-        raise ShapingError(f'{name} must have {n} values (one per joint), got {len(vals)}: '
-                           f'{list(vals)}')
-    for i, v in enumerate(vals):
-        if not isfinite(v):
-            raise ShapingError(f'{name}[{i}] must be finite, got {v}')
-    return vals
+def _per_joint(name: str, values: Optional[Sequence[float]], n: int,
+               nonnegative: bool = True) -> tuple[float, ...]:
+    """
+    Return ``n`` finite values (>= 0 if ``nonnegative``).
 
-
-def _per_joint(name: str, values: Optional[Sequence[float]], n: int) -> tuple[float, ...]:
-    if values is None:
-        return (0.0,) * n
-    try:
-        vals = tuple(float(v) for v in values)
-    except (TypeError, ValueError):
-        raise ShapingError(f'{name} must be a list of numbers, got {values!r}') from None
-    if len(vals) != n:
-        raise ShapingError(f'{name} must have {n} values (one per joint), got {len(vals)}: '
-                           f'{list(vals)}')
-    for i, v in enumerate(vals):
-        if not isfinite(v) or v < 0.0:
-            raise ShapingError(f'{name}[{i}] must be finite and >= 0, got {v}')
-    return vals
+    None is the default: zeros for a gain, () for a posture (``nonnegative`` False), as is an
+    empty posture.
+    """
+    if values is None or (not nonnegative and len(values) == 0):
+        return (0.0,) * n if nonnegative else ()
+    return checked_vector(name, values, n, ShapingError, lower=0.0 if nonnegative else None,
+                          per_joint=True)
 
 
 @dataclass(frozen=True)
@@ -196,8 +177,9 @@ class Shaping:
                                                   friction_learning_limit, n_joints),
             friction_learning_time_s=_positive('friction_learning_time',
                                                friction_learning_time),
-            preferred_configuration_rad=_angles('preferred_configuration',
-                                                preferred_configuration, n_joints),
+            preferred_configuration_rad=_per_joint('preferred_configuration',
+                                                   preferred_configuration, n_joints,
+                                                   nonnegative=False),
             posture_weight=_at_most('posture_weight', _nonnegative('posture_weight',
                                                                    posture_weight),
                                     MAX_POSTURE_WEIGHT))

@@ -9,15 +9,18 @@ tests drive them with plain numbers:
 - a goal equal to the one in force is not a new goal (no log, no new check);
 - the state watchdog: after ``state_timeout`` without a valid state, zero the command once;
 - feedback every ``publish_rate_divider``-th tick, its quaternion kept in one hemisphere;
-- ``/diagnostics``: right after the next command while states flow, else at once.
+- ``/diagnostics``: right after the next command while states flow, else at once;
+- the goal check (a worker process, ``goal_check.GoalCheckWorker``): what to ask it for a new
+  goal, and its answers applied to the goal still in force, the warnings to log said once.
 
 Times are integers of nanoseconds on one monotonic clock, given by the caller.
 """
 from dataclasses import dataclass
-from typing import Optional, Sequence
+from typing import Any, Optional, Sequence
 
 from quat_jt_controller import quaternion as quat
 from quat_jt_controller.control_law import Task
+from quat_jt_controller.goal_check import Posture
 from quat_jt_controller.goal_motion import GoalVelocityEstimator
 from quat_jt_controller.regulator import Goal, Regulator
 
@@ -37,8 +40,11 @@ class Supervisor:
     """The controller's decisions around :class:`Regulator`; one per node."""
 
     def __init__(self, regulator: Regulator, state_timeout_s: float,
-                 publish_rate_divider: int) -> None:
+                 publish_rate_divider: int, checker: Optional[Any] = None) -> None:
+        """``checker``: the goal-check worker (``submit``, ``poll``, ``take_*``), or None."""
         self.regulator = regulator
+        self.checker = checker
+        self.goal_warning = ''  # the goal check's warning for the goal in force ('' = none)
         self.state_timeout_ns = int(state_timeout_s * 1e9)
         self.publish_rate_divider = publish_rate_divider
         self.goal_source = 'none'  # 'none' | 'hold' (initial pose) | 'target_pose'
@@ -146,3 +152,50 @@ class Supervisor:
             return False
         self.regulator.set_goal_joint_velocity(qdot_desired)
         return True
+
+    # -- the goal check --------------------------------------------------------------------
+    def check_goal(self, goal: Goal, nu_desired: Optional[Sequence[float]],
+                   q_measured: Optional[Sequence[float]]) -> None:
+        """
+        Ask the worker about a new goal: A1/A2, q* (when a term uses it), and a stream's qdot*.
+
+        q* is searched from the measured joints, within the band margin when the
+        goal-configuration term or goal tracking needs it, near the preferred posture.
+        """
+        shaping = self.regulator.shaping
+        tracking = shaping.goal_velocity_gain > 0.0 and nu_desired is not None
+        self.goal_warning = ''
+        self.checker.submit(
+            goal, q_measured, goal.q_desired_base, goal.p_desired_base,
+            shaping.joint_limit_margin_rad if shaping.configuration_on or tracking else None,
+            nu_desired if tracking else None,
+            Posture(shaping.preferred_configuration_rad or None, shaping.posture_weight))
+
+    def take_checks(self) -> tuple[Optional[str], list[str]]:
+        """
+        Apply the worker's answers; return (the worker's failure, the warnings to log).
+
+        q* and qdot* go to the regulator for the goal they answer (the regulator ignores a
+        goal no longer in force). A verdict counts only for the goal still in force, and a
+        warning is logged once per change. The failure is given once per death (the worker
+        restarts by itself); a verdict without a goal (the worker exited) is skipped.
+        """
+        checker = self.checker
+        verdicts = checker.poll()
+        failure = checker.take_failure()
+        warnings = []
+        for goal, verdict in verdicts:
+            if goal is None:
+                continue
+            q_star = checker.take_configuration(goal)
+            if q_star is not None:  # the goal-configuration term pulls towards it
+                self.regulator.set_goal_configuration(goal, q_star)
+            qdot_star = checker.take_configuration_velocity(goal)
+            if qdot_star is not None:  # taken while the stream goes on
+                self.on_goal_velocity(qdot_star)
+            if goal is self.regulator.goal and verdict != self.goal_warning:
+                self.goal_warning = verdict
+                if verdict:
+                    warnings.append(f'goal {goal.describe(False)} accepted with a warning: '
+                                    f'{verdict}')
+        return failure, warnings

@@ -120,3 +120,30 @@ def stamp_problem(stamp_ns: int, now_ns: int, max_age_ns: int) -> str:
         return (f'stamped {-age_ns * 1e-9:.3f} s in the future (max_state_age '
                 f'{max_age_ns * 1e-9:g} s): another clock?')
     return ''
+
+
+class StaleState(ValueError):
+    """A joint state rejected by its stamp (unstamped, too old, or in the future)."""
+
+
+class StateCheck:
+    """
+    A joint state's joints and stamp checked, in one call: the controller's tick input.
+
+    Calling it returns (q, qdot) of the controlled joints, or raises ValueError saying why no
+    command may be computed from the state (:class:`StaleState` if it is the stamp).
+    """
+
+    def __init__(self, joint_names: Sequence[str], max_age_s: float) -> None:
+        self._layout = StateLayout(joint_names)
+        self._max_age_ns = int(max_age_s * 1e9)
+
+    def __call__(self, names: Sequence[str], position: Sequence[float],
+                 velocity: Sequence[float], stamp_ns: int,
+                 now_ns: int) -> tuple[list[float], list[float]]:
+        """Return (q, qdot); raise ValueError (StaleState for the stamp) naming the problem."""
+        q, qdot = self._layout.extract(names, position, velocity)
+        problem = stamp_problem(stamp_ns, now_ns, self._max_age_ns)
+        if problem:
+            raise StaleState(problem)
+        return q, qdot

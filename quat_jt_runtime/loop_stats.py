@@ -7,7 +7,9 @@ reset by its 1 Hz diagnostics; :class:`LoopStats` is the simulator's whole-run b
 summarised once at shutdown. All times in seconds from ``time.perf_counter`` unless a name says
 otherwise.
 """
+import json
 from math import nan
+from pathlib import Path
 import time
 from typing import Sequence
 
@@ -169,6 +171,16 @@ class LoopStats:
 
     def _window(self, buf: np.ndarray, count: int) -> np.ndarray:
         return buf[:min(count, self.capacity)]
+
+    def write(self, path: str) -> str:
+        """Write :meth:`summary` as JSON to ``path`` ('' = nowhere); return why not, or ''."""
+        if not path:
+            return ''
+        try:
+            Path(path).write_text(json.dumps(self.summary(), indent=1, sort_keys=True))
+        except OSError as exc:
+            return f'cannot write stats_file {path}: {exc}'
+        return ''
 
     def summary(self) -> dict:
         """Figures over the run and over the last ``capacity`` steps (the window)."""

@@ -35,3 +35,11 @@ class Throttle:
             self._last.clear()
         self._last[key] = now
         return self._held.pop(key, 0)
+
+    def line(self, key: Hashable, text: str,
+             held_note: str = ' (and {} more like it)') -> Optional[str]:
+        """Return ``text`` if ``key`` passes, saying how many it stands for; else None."""
+        held = self(key)
+        if held is None:
+            return None
+        return text + (held_note.format(held) if held else '')

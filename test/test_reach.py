@@ -15,7 +15,7 @@ from quat_jt_controller.goal_check import goal_configuration
 from quat_jt_controller.reference_sim import ClosedLoop, run_sampled
 from wrist_sim.simulator import WristSimulator
 
-pytestmark = pytest.mark.unit
+pytestmark = pytest.mark.e2e
 
 
 @pytest.mark.parametrize('robot, potential, count', [

@@ -16,7 +16,7 @@ import numpy as np
 import pytest
 from xvfb import Xvfb
 
-pytestmark = pytest.mark.unit
+pytestmark = pytest.mark.gui
 
 AXIS_RGB = ((255, 0, 0), (0, 255, 0), (0, 0, 255))
 

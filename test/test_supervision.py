@@ -92,3 +92,55 @@ def test_the_tick_interval_comes_from_the_state_stamps():
     assert sup.tick_interval_s(5_001_000_000) == 0.0  # a repeat: no time passed
     assert sup.tick_interval_s(5_000_500_000) == 0.0  # older: no time passes backwards
     assert sup.tick_interval_s(5_002_500_000) == pytest.approx(2e-3)
+
+
+class FakeChecker:
+    """The goal-check worker's interface, answering what the test tells it to."""
+
+    def __init__(self) -> None:
+        self.submitted = []
+        self.verdicts = []
+        self.failure = None
+        self.q_star = {}
+
+    def submit(self, goal, q_measured, *rest) -> None:
+        self.submitted.append((goal, q_measured, rest))
+
+    def poll(self):
+        verdicts, self.verdicts = self.verdicts, []
+        return verdicts
+
+    def take_failure(self):
+        failure, self.failure = self.failure, None
+        return failure
+
+    def take_configuration(self, goal):
+        return self.q_star.pop(id(goal), None)
+
+    def take_configuration_velocity(self, goal):
+        return None
+
+
+def test_the_goal_check_answers_the_goal_in_force_and_warns_once():
+    gains = cl.Gains.create('tanh', paper.KP, paper.KV, paper.LAMBDA, cl.Task.ORIENTATION, 3)
+    checker = FakeChecker()
+    sup = Supervisor(Regulator(wrist_model(), cl.Task.ORIENTATION, gains), 0.5, 3, checker)
+    # The worker died before any goal: the failure is given, the goal-less verdict skipped.
+    checker.failure = 'the goal-check worker exited'
+    checker.verdicts = [(None, 'the goal-check worker exited')]
+    assert sup.take_checks() == ('the goal-check worker exited', [])
+    old, new = turned(0.2), turned(0.4)
+    for goal in (old, new):
+        sup.check_goal(goal, None, [0.0, 0.5, 0.0])
+        sup.on_goal(goal, 0.0, 0)
+    assert [s[0] for s in checker.submitted] == [old, new]
+    assert checker.submitted[-1][1] == [0.0, 0.5, 0.0]  # searched from the measured joints
+    q_star = (0.1, 0.6, 0.2)
+    checker.q_star = {id(new): q_star}
+    checker.verdicts = [(old, 'near a singularity'), (new, 'near a singularity')]
+    failure, warnings = sup.take_checks()
+    assert failure is None and len(warnings) == 1 and 'near a singularity' in warnings[0]
+    assert sup.goal_warning == 'near a singularity'
+    assert sup.regulator.goal_configuration == pytest.approx(q_star)
+    checker.verdicts = [(new, 'near a singularity')]
+    assert sup.take_checks() == (None, [])  # the same warning again: said once

@@ -259,3 +259,26 @@ def test_the_goal_status_says_when_the_goal_configuration_term_is_off_or_in_a_ba
     _, message, _ = diagnostics.goal_status('hold', None, '', None, None, False, Counters(),
                                             configuration=none)
     assert 'goal-configuration' not in message  # holding: q* is the held pose
+
+
+def test_the_state_check_names_the_problem_and_tells_a_stale_stamp():
+    from quat_jt_runtime.joints import StaleState, StateCheck
+    check = StateCheck(('joint1', 'joint2'), max_age_s=0.5)
+    now_ns = 10_000_000_000
+    q, qdot = check(['joint2', 'joint1'], [2.0, 1.0], [0.2, 0.1], now_ns - 1_000_000, now_ns)
+    assert (q, qdot) == ([1.0, 2.0], [0.1, 0.2])  # in the controlled joints' order
+    with pytest.raises(StaleState, match='ago'):
+        check(['joint1', 'joint2'], [1.0, 2.0], [0.0, 0.0], now_ns - 2_000_000_000, now_ns)
+    with pytest.raises(ValueError, match='missing') as caught:
+        check(['joint1'], [1.0], [0.0], now_ns, now_ns)
+    assert not isinstance(caught.value, StaleState)
+
+
+def test_a_throttled_line_says_how_many_it_stands_for():
+    now = [0.0]
+    throttle = Throttle(1.0, clock=lambda: now[0])
+    assert throttle.line('k', 'bad') == 'bad'
+    assert throttle.line('k', 'bad') is None
+    assert throttle.line('k', 'bad') is None
+    now[0] = 1.5
+    assert throttle.line('k', 'bad', ' ({} more)') == 'bad (2 more)'

@@ -8,20 +8,9 @@ the snapshot, never a parameter.
 """
 from dataclasses import dataclass
 import math
-from typing import Any, Mapping, Sequence
+from typing import Any, Mapping
 
-from wrist_sim.simulator import SimulatorError
-
-
-def _per_joint(name: str, values: Sequence[float], n: int, nonnegative: bool) -> tuple:
-    vals = tuple(float(v) for v in values)
-    if len(vals) != n:
-        raise SimulatorError(f'{name}: expected {n} values (one per joint), got {len(vals)}')
-    if not all(math.isfinite(v) for v in vals):
-        raise SimulatorError(f'{name}: values must be finite, got {list(vals)}')
-    if nonnegative and any(v < 0.0 for v in vals):
-        raise SimulatorError(f'{name}: values must be >= 0, got {list(vals)}')
-    return vals
+from wrist_sim.simulator import per_joint, SimulatorError
 
 
 @dataclass(frozen=True)
@@ -39,12 +28,12 @@ class SimConfig:
     def create(cls, values: Mapping[str, Any], n_joints: int) -> 'SimConfig':
         """Build from parameter values keyed by parameter name; raise SimulatorError."""
         config = cls(
-            initial_positions_rad=_per_joint('initial_positions', values['initial_positions'],
-                                             n_joints, nonnegative=False),
-            viscous_nm_s_per_rad=_per_joint('viscous_friction', values['viscous_friction'],
-                                            n_joints, nonnegative=True),
-            coulomb_nm=_per_joint('coulomb_friction', values['coulomb_friction'], n_joints,
-                                  nonnegative=True),
+            initial_positions_rad=per_joint('initial_positions', values['initial_positions'],
+                                            n_joints, nonnegative=False),
+            viscous_nm_s_per_rad=per_joint('viscous_friction', values['viscous_friction'],
+                                           n_joints, nonnegative=True),
+            coulomb_nm=per_joint('coulomb_friction', values['coulomb_friction'], n_joints,
+                                 nonnegative=True),
             command_timeout_s=float(values['command_timeout']),
             lockstep_timeout_s=float(values['lockstep_timeout']),
             max_real_time_factor=float(values['max_real_time_factor']))

@@ -13,7 +13,8 @@ from dataclasses import dataclass
 from typing import Any, Callable, Mapping, Optional
 
 from quat_jt_runtime.joints import movable_joints
-from quat_jt_runtime.params import CPU_AFFINITY, declare, Kind, LiveParameters, names, Spec
+from quat_jt_runtime.params import ChangeLog, CPU_AFFINITY, declare, Kind, LiveParameters
+from quat_jt_runtime.params import names, Spec
 from quat_jt_runtime.realtime import check_cpus
 from quat_jt_runtime.resources import default_urdf_xml
 from rclpy.node import Node
@@ -136,6 +137,11 @@ def declare_live(node: Node, n_joints: int,
     declare(node, LIVE, {'n': n_joints})
     return LiveParameters(node, LIVE_PARAMETERS,
                           lambda values: SimConfig.create(values, n_joints), on_apply)
+
+
+def change_log(node: Node, live: LiveParameters[SimConfig]) -> ChangeLog:
+    """Log each parameter request once, with the live settings then in force."""
+    return ChangeLog(node, ((LIVE_PARAMETERS, lambda: describe_config(live.current)),))
 
 
 def describe_config(config: SimConfig) -> str:

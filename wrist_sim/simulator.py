@@ -159,21 +159,42 @@ def resolve_meshes(urdf_xml: str, search_dirs: Sequence[PathLike]) -> tuple[str,
     return (ET.tostring(root, encoding='unicode') if changed else urdf_xml), missing
 
 
-def _as_vector(values: Optional[Sequence[float]], n: int, name: str,
-               default: float = 0.0, nonnegative: bool = False) -> np.ndarray:
-    if values is None:
-        return np.full(n, default)
+def missing_meshes_note(missing: Sequence[str]) -> str:
+    """Say which meshes of a URDF were not found, and where they were looked for."""
+    return (f'{len(missing)} mesh file(s) of robot_description not found, simulated without '
+            f'those shapes (the dynamics need only the inertias): {", ".join(missing)}. '
+            'package:// URIs are looked for in the sourced workspaces (AMENT_PREFIX_PATH) and '
+            'in pybullet_data; relative paths in pybullet_data')
+
+
+def at_limit(values: Sequence[float], limits: Sequence[float]) -> bool:
+    """Tell whether any of ``values`` is at or past its limit, either way (plain floats)."""
+    for v, limit in zip(values, limits):
+        if v >= limit or v <= -limit:
+            return True
+    return False
+
+
+def per_joint(name: str, values: Sequence[float], n: int,
+              nonnegative: bool = False) -> tuple[float, ...]:
+    """Return ``n`` finite values (>= 0 if ``nonnegative``), or raise SimulatorError saying why."""
     try:
-        vec = np.array(values, dtype=float).reshape(-1)
+        vals = tuple(float(v) for v in values)
     except (TypeError, ValueError) as exc:
-        raise SimulatorError(f'{name}: not a list of numbers ({exc})') from exc
-    if vec.size != n:
-        raise SimulatorError(f'{name}: expected {n} values, got {vec.size}')
-    if not np.all(np.isfinite(vec)):
-        raise SimulatorError(f'{name}: values must be finite, got {vec.tolist()}')
-    if nonnegative and np.any(vec < 0.0):
-        raise SimulatorError(f'{name}: values must be >= 0, got {vec.tolist()}')
-    return vec
+        raise SimulatorError(f'{name}: not a list of numbers ({exc})') from None
+    if len(vals) != n:
+        raise SimulatorError(f'{name}: expected {n} values (one per joint), got {len(vals)}')
+    if not all(math.isfinite(v) for v in vals):
+        raise SimulatorError(f'{name}: values must be finite, got {list(vals)}')
+    if nonnegative and any(v < 0.0 for v in vals):
+        raise SimulatorError(f'{name}: values must be >= 0, got {list(vals)}')
+    return vals
+
+
+def _as_vector(values: Optional[Sequence[float]], n: int, name: str,
+               nonnegative: bool = False) -> np.ndarray:
+    """Return :func:`per_joint` as an array; None gives zeros."""
+    return np.zeros(n) if values is None else np.array(per_joint(name, values, n, nonnegative))
 
 
 def disconnect(client: Optional[BulletClient]) -> None:

@@ -1,0 +1,111 @@
+"""
+What the controller reports: the feedback topics and ``/diagnostics`` (ROS marshalling).
+
+:class:`Feedback` publishes ``~/current_pose``, ``~/orientation_error`` and, for the pose task,
+``~/position_error``; :class:`Diagnostics` turns the figures of the ROS-free builders
+(``diagnostics.py``) into ``/diagnostics`` and warns of a second commander on the robot.
+"""
+import time
+from typing import Callable, Sequence
+
+from diagnostic_msgs.msg import DiagnosticArray
+from geometry_msgs.msg import PoseStamped, Vector3Stamped
+from quat_jt_controller import diagnostics
+from quat_jt_controller import quaternion as quat
+from quat_jt_controller.control_law import Task
+from quat_jt_controller.regulator import TickOutput
+from quat_jt_controller.supervision import Supervisor
+from quat_jt_runtime.loop_stats import TickStats
+from quat_jt_runtime.messages import diagnostic_array
+from quat_jt_runtime.throttle import cause, Throttle
+from rclpy.node import Node
+
+
+class Feedback:
+    """
+    Publishers of the measured pose and the errors, with their messages built once.
+
+    ``~/current_pose`` (PoseStamped), ``~/orientation_error`` (e, the last three rows of
+    y_tilde) and, for the pose task, ``~/position_error`` (p_d - p), all in ``base_link``.
+    """
+
+    def __init__(self, node: Node, base_link: str, with_position: bool) -> None:
+        self._pose, self._e_o, self._e_p = PoseStamped(), Vector3Stamped(), Vector3Stamped()
+        for msg in (self._pose, self._e_o, self._e_p):
+            msg.header.frame_id = base_link
+        self._pose_pub = node.create_publisher(PoseStamped, '~/current_pose', 10)
+        self._e_o_pub = node.create_publisher(Vector3Stamped, '~/orientation_error', 10)
+        self._e_p_pub = (node.create_publisher(Vector3Stamped, '~/position_error', 10)
+                         if with_position else None)
+
+    def publish(self, stamp, out: TickOutput, q_tip_base: Sequence[float]) -> None:
+        """Publish one sample; ``q_tip_base``: the measured orientation, scalar first."""
+        pose = self._pose
+        pose.header.stamp = stamp
+        pose.pose.position.x, pose.pose.position.y, pose.pose.position.z = out.p_tip_base
+        o = pose.pose.orientation
+        o.x, o.y, o.z, o.w = quat.to_xyzw(q_tip_base)
+        self._pose_pub.publish(pose)
+        self._e_o.header.stamp = stamp
+        self._e_o.vector.x, self._e_o.vector.y, self._e_o.vector.z = out.y_tilde[-3:]
+        self._e_o_pub.publish(self._e_o)
+        if self._e_p_pub is not None:
+            self._e_p.header.stamp = stamp
+            v = self._e_p.vector
+            v.x, v.y, v.z = out.y_tilde[0], out.y_tilde[1], out.y_tilde[2]
+            self._e_p_pub.publish(self._e_p)
+
+
+class Diagnostics:
+    """
+    ``/diagnostics`` of the controller: the loop, the goal and the stall, one array a second.
+
+    The figures come from the node's parts (read when published, never in the tick);
+    ``last_tick`` returns the last tick's output and joint velocities. A second commander on
+    the command topic, or a second node of the same name, is warned of every 10 s while it
+    lasts.
+    """
+
+    def __init__(self, node: Node, hardware_id: str, command_topic: str,
+                 supervisor: Supervisor, stats: TickStats, counters: diagnostics.Counters,
+                 checker, stall, last_tick: Callable[[], tuple]) -> None:
+        self._node = node
+        self._hardware_id = hardware_id
+        self._command_topic = command_topic
+        self._supervisor, self._stats, self._counters = supervisor, stats, counters
+        self._checker, self._stall, self._last_tick = checker, stall, last_tick
+        self._pub = node.create_publisher(DiagnosticArray, '/diagnostics', 10)
+        self._name = node.get_fully_qualified_name().lstrip('/')  # one topic for the graph
+        self._graph_log = Throttle(10.0)
+        self._window_start_ns = time.monotonic_ns()
+
+    def publish(self) -> None:
+        """Publish the loop's figures since the last call, the goal's state and the stall's."""
+        now, sup, checker = time.monotonic_ns(), self._supervisor, self._checker
+        regulator = sup.regulator
+        figures = self._stats.window((now - self._window_start_ns) * 1e-9)
+        self._window_start_ns = now
+        out, qdot = self._last_tick()
+        statuses = (
+            ('control loop', *diagnostics.loop_status(
+                figures, sup.last_state_ns == 0, sup.stopped, self._counters,
+                self._graph_warnings())),
+            ('goal', *diagnostics.goal_status(
+                sup.goal_source, regulator.goal, sup.goal_warning, out, qdot,
+                regulator.task is Task.POSE, self._counters, checker.unavailable_reason,
+                checker.ready, diagnostics.configuration_state(regulator))),
+            ('stall', *self._stall.status()))
+        self._pub.publish(diagnostic_array(self._name, self._hardware_id, statuses,
+                                           self._node.get_clock().now().to_msg()))
+
+    def _graph_warnings(self) -> list[str]:
+        node = self._node
+        me = (node.get_name(), node.get_namespace())
+        warnings = diagnostics.graph_warnings(
+            self._command_topic, node.count_publishers(self._command_topic),
+            node.get_fully_qualified_name(),
+            sum(1 for other in node.get_node_names_and_namespaces() if tuple(other) == me))
+        for warning in warnings:
+            if self._graph_log(cause(warning)) is not None:
+                node.get_logger().warn(warning)
+        return warnings
