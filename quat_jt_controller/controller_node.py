@@ -164,7 +164,7 @@ class QuatJtController(Node):
         if taken.new:
             self.supervisor.check_goal(goal, taken.nu_desired_base, self._last_q)
             line = self._goal_log.line(  # one line per distinct goal, at most 5 a second
-                'goal', f'new goal: {goal.describe(self.config.task is Task.POSE)}',
+                'goal', lambda: f'new goal: {goal.describe(self.config.task is Task.POSE)}',
                 ' ({} more distinct goals since the last line)')
             if line is not None:
                 self.get_logger().info(line)

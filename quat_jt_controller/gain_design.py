@@ -59,7 +59,7 @@ LIMIT_MARGIN_MAX_RAD = 0.25
 LIMIT_MARGIN_FRACTION = 0.1  # of the smallest half range of a limited joint
 GUIDE_RADIUS_RAD = 0.0  # > 0: a dead zone around q* where only the paper's term acts
 GUIDE_RAMP_RAD = 0.25
-FRICTION_VELOCITY_RAD_S = 0.05
+FRICTION_VELOCITY_RAD_S = 0.075  # the xArm6 wrist creeps at ~2 v_eps while it learns
 FRICTION_ERROR_BAND = 0.004  # ||e||; a little below the 0.005 the wrist is asked to reach
 FRICTION_POSITION_BAND_M = 0.0005
 # At rest the regulator may learn this much more than the estimate (x the estimate), in

@@ -69,6 +69,10 @@ STRUCTURE = (
 )
 
 
+def _g(values: Sequence[float]) -> str:
+    return '[' + ', '.join(f'{v:g}' for v in values) + ']'
+
+
 def _per_task(position: Sequence[float], orientation: Sequence[float]) -> Callable:
     return lambda context: list(
         orientation if context['task'] is Task.ORIENTATION else tuple(position) + orientation)
@@ -82,7 +86,7 @@ GAINS = (
     Spec('kp', Kind.DOUBLE_ARRAY, _per_task(DEFAULT_KP_POSITION, paper.KP),
          'Diagonal of K_p, {dim} values ({axes}); N/m for position rows, N m for orientation '
          'rows. Finite, > 0, <= {top}. Live.', constraints='{dim} values in (0, {top}]',
-         default_text=f'`{list(paper.KP)}` (pose: `{list(DEFAULT_KP_POSITION)}` first)'),
+         default_text=f'`{_g(paper.KP)}` (pose: `{_g(DEFAULT_KP_POSITION)}` first)'),
     Spec('kv', Kind.DOUBLE_ARRAY, lambda context: [paper.KV[0]] * context['n'],
          'Diagonal of K_v (joint damping), one per joint ({n}), N m s/rad. Finite, > 0, '
          '<= {top}. Live.', constraints='{n} values in (0, {top}]',
@@ -91,8 +95,7 @@ GAINS = (
          'Diagonal of Lambda in tanh(Lambda y) (Eq. 32/38), {dim} values ({axes}); used by the '
          f'tanh potential. Finite, > 0, <= {MAX_LAMBDA:g}. Live.',
          constraints=f'{{dim}} values in (0, {MAX_LAMBDA:g}]',
-         default_text=f'`{list(paper.LAMBDA)}` (pose: `{list(DEFAULT_LAMBDA_POSITION)}` '
-                      'first)'),
+         default_text=f'`{_g(paper.LAMBDA)}` (pose: `{_g(DEFAULT_LAMBDA_POSITION)}` first)'),
     Spec('gravity_compensation', Kind.BOOL, True,
          'Add g(q) from the URDF model to the torque (Eq. 22). Live.'),
 )
@@ -239,12 +242,6 @@ def gains_context(config: StructuralConfig, effort_limits_nm: Sequence[float]) -
             'top': f'{gain_ceiling(effort_limits_nm):g}'}
 
 
-def default_gains(task: Task, n_joints: int) -> dict[str, Any]:
-    """Return the default live values: the paper's experiment for the orientation task."""
-    context = {'task': task, 'n': n_joints}
-    return {spec.name: spec.default_value(context) for spec in GAINS}
-
-
 def declare_gains(node: Node, config: StructuralConfig, effort_limits_nm: Sequence[float],
                   on_apply: Optional[Callable[[Gains], None]] = None) -> LiveParameters[Gains]:
     """
@@ -290,19 +287,6 @@ def build_gains(values: Mapping[str, Any], config: StructuralConfig,
     return Gains.create(values['potential'], values['kp'], values['kv'], values['lambda'],
                         config.task, len(config.joints), values['gravity_compensation'],
                         effort_limits_nm)
-
-
-def default_shaping(n_joints: int,
-                    preferred_configuration: Optional[Sequence[float]] = None) -> dict[str, Any]:
-    """
-    Return the extensions' default values: all off (the paper's law).
-
-    ``preferred_configuration`` defaults to zeros; the controller passes the middle of its
-    robot's ranges (a ROS parameter needs a typed value, an empty list has none).
-    """
-    context = {'n': n_joints,
-               'preferred_configuration': preferred_configuration or [0.0] * n_joints}
-    return {spec.name: spec.default_value(context) for spec in SHAPING}
 
 
 def declare_shaping(node: Node, config: StructuralConfig,

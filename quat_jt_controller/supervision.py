@@ -41,7 +41,7 @@ class Supervisor:
 
     def __init__(self, regulator: Regulator, state_timeout_s: float,
                  publish_rate_divider: int, checker: Optional[Any] = None) -> None:
-        """``checker``: the goal-check worker (``submit``, ``poll``, ``take_*``), or None."""
+        """``checker``: the goal-check worker (``submit``, ``poll``, ``take_*``), None for none."""
         self.regulator = regulator
         self.checker = checker
         self.goal_warning = ''  # the goal check's warning for the goal in force ('' = none)
@@ -165,6 +165,8 @@ class Supervisor:
         shaping = self.regulator.shaping
         tracking = shaping.goal_velocity_gain > 0.0 and nu_desired is not None
         self.goal_warning = ''
+        if self.checker is None:
+            return
         self.checker.submit(
             goal, q_measured, goal.q_desired_base, goal.p_desired_base,
             shaping.joint_limit_margin_rad if shaping.configuration_on or tracking else None,
@@ -181,6 +183,8 @@ class Supervisor:
         restarts by itself); a verdict without a goal (the worker exited) is skipped.
         """
         checker = self.checker
+        if checker is None:
+            return None, []
         verdicts = checker.poll()
         failure = checker.take_failure()
         warnings = []

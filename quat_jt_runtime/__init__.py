@@ -6,5 +6,6 @@ ROS-free floor (also used by the controller's core and the simulator): ``errors`
 base), ``joints`` (a URDF's movable joints, the joint-state layout), ``resources`` (the
 package's data files), ``realtime`` (CPU affinity, timer slack, deadline waits),
 ``loop_stats``, ``throttle`` and ``shutdown_signals``. ROS floor: ``params`` (the parameter
-machinery) and ``lifecycle`` (start, spin and stop a node the same way).
+schema and machinery), ``lifecycle`` (start, spin and stop a node the same way),
+``prewarm_timer`` (the controller's throwaway tick) and ``messages`` (``/diagnostics``).
 """

@@ -172,16 +172,6 @@ class LoopStats:
     def _window(self, buf: np.ndarray, count: int) -> np.ndarray:
         return buf[:min(count, self.capacity)]
 
-    def write(self, path: str) -> str:
-        """Write :meth:`summary` as JSON to ``path`` ('' = nowhere); return why not, or ''."""
-        if not path:
-            return ''
-        try:
-            Path(path).write_text(json.dumps(self.summary(), indent=1, sort_keys=True))
-        except OSError as exc:
-            return f'cannot write stats_file {path}: {exc}'
-        return ''
-
     def summary(self) -> dict:
         """Figures over the run and over the last ``capacity`` steps (the window)."""
         n = min(self.steps, self.capacity)
@@ -250,3 +240,14 @@ def fresh_command_figures(t_s: np.ndarray, fresh: np.ndarray) -> dict:
         counts, _ = np.histogram(fresh_t, bins=edges)
         out['fresh_rate_hz_min'] = float(counts.min() / FRESH_WINDOW_S)
     return out
+
+
+def write_summary(summary: dict, path: str) -> str:
+    """Write a :meth:`LoopStats.summary` as JSON to ``path`` ('' = nowhere); say why not, or ''."""
+    if not path:
+        return ''
+    try:
+        Path(path).write_text(json.dumps(summary, indent=1, sort_keys=True))
+    except OSError as exc:
+        return f'cannot write stats_file {path}: {exc}'
+    return ''

@@ -229,9 +229,10 @@ def markdown_table(specs: Sequence[Spec], context: Mapping[str, Any]) -> str:
     rows = ['| name | type | default | range | live | description |', '|---|---|---|---|---|---|']
     for spec in specs:
         default = spec.default_text or text(spec.default_value(context))
-        bounds = (f'[{spec.bounds[0]:g}, {spec.bounds[1]:g}]' if spec.bounds is not None
+        bounds = ('[' + ', '.join(str(b) if isinstance(b, int) else f'{b:g}'
+                                  for b in spec.bounds) + ']' if spec.bounds is not None
                   else spec.constraints.format(**context))
-        description = ' '.join(spec.description.format(**context).split()).replace('|', '/')
+        description = ' '.join(spec.description.format(**context).split()).replace('|', '\\|')
         rows.append(f'| `{spec.name}` | {spec.kind.label} | {default} | {bounds} | '
                     f'{"no" if spec.read_only else "yes"} | {description} |')
     return '\n'.join(rows) + '\n'

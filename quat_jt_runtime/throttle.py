@@ -1,7 +1,7 @@
 """Rate limits for log lines that a flood of bad (or many good) inputs would repeat (ROS-free)."""
 import re
 import time
-from typing import Callable, Hashable, Optional
+from typing import Callable, Hashable, Optional, Union
 
 _NUMBERS = re.compile(r'[-+]?(\d+\.?\d*(e[-+]?\d+)?|nan|inf)', re.IGNORECASE)
 
@@ -36,10 +36,15 @@ class Throttle:
         self._last[key] = now
         return self._held.pop(key, 0)
 
-    def line(self, key: Hashable, text: str,
+    def line(self, key: Hashable, text: Union[str, Callable[[], str]],
              held_note: str = ' (and {} more like it)') -> Optional[str]:
-        """Return ``text`` if ``key`` passes, saying how many it stands for; else None."""
+        """
+        Return ``text`` if ``key`` passes, saying how many it stands for; else None.
+
+        ``text`` may be a function, called only when the line passes (no formatting for the
+        lines held back).
+        """
         held = self(key)
         if held is None:
             return None
-        return text + (held_note.format(held) if held else '')
+        return (text() if callable(text) else text) + (held_note.format(held) if held else '')

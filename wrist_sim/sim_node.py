@@ -20,7 +20,7 @@ from typing import Any, Callable, Optional
 
 from quat_jt_runtime import lifecycle
 from quat_jt_runtime import realtime
-from quat_jt_runtime.loop_stats import LoopStats
+from quat_jt_runtime.loop_stats import LoopStats, write_summary
 from quat_jt_runtime.params import history_qos
 from quat_jt_runtime.resources import bundled_urdf_hint
 from rclpy.event_handler import SubscriptionEventCallbacks
@@ -47,8 +47,7 @@ class WristSimNode(Node):
         super().__init__(NODE_NAME, **kwargs)
         p = self.structure = declare_structure(self)
         self.cpu_affinity = p.cpu_affinity  # pinned by lifecycle.run_node
-        self.live = declare_live(self, len(p.joints), on_apply=lambda config: (
-            self.sim.set_friction(config.viscous_nm_s_per_rad, config.coulomb_nm)))
+        self.live = declare_live(self, len(p.joints), on_apply=self._apply_config)
         self._change_log = change_log(self, self.live)
         c = self.live.current
         self.dt_ns = p.dt_ns
@@ -71,12 +70,10 @@ class WristSimNode(Node):
         # Without use_sim_time the node's ROS clock is the system clock: stamp from it directly
         # (time.time_ns) rather than through rclpy's Clock object on every tick.
         self._system_clock = not self.get_parameter('use_sim_time').value
-
         # The command path (touched only from the executor thread, which is also the loop's).
         self.gate = CommandGate(self._effort_limits, self.dt_ns, p.hold_until_first_command)
         self._publish_wall_s = time.perf_counter()
         self._last_stamp_ns = -1
-
         self._js = JointState()
         self._js.name = list(self.sim.joint_names)
         self._clock_msg = Clock()
@@ -96,9 +93,13 @@ class WristSimNode(Node):
             f'effort limits {self.sim.effort_limits_nm.tolist()} N m, '
             + ('lockstep with /clock' if self.publish_clock else 'real time'))
 
+    def _apply_config(self, config: SimConfig) -> None:  # its friction, if it changed
+        friction = [list(config.viscous_nm_s_per_rad), list(config.coulomb_nm)]
+        if friction != [a.tolist() for a in self.sim.friction]:
+            self.sim.set_friction(*friction)
+
     # -- callbacks -----------------------------------------------------------------------
-    def _on_command_matched(self, info: Any) -> None:
-        """Count the controllers connected to the command topic (for the twin warning)."""
+    def _on_command_matched(self, info: Any) -> None:  # for the twin-controller warning
         self._command_publishers = info.current_count
 
     def _on_command(self, msg: Float64MultiArray) -> None:
@@ -228,8 +229,9 @@ class WristSimNode(Node):
     # -- shutdown ------------------------------------------------------------------------
     def destroy_node(self) -> None:
         """Log (and write) the timing statistics, close the simulator, destroy the node."""
-        self.get_logger().info('stats ' + json.dumps(self.stats.summary(), sort_keys=True))
-        problem = self.stats.write(self.structure.stats_file)
+        summary = self.stats.summary()
+        self.get_logger().info('stats ' + json.dumps(summary, sort_keys=True))
+        problem = write_summary(summary, self.structure.stats_file)
         if problem:
             self.get_logger().error(problem)
         self.sim.close()
