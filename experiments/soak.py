@@ -19,7 +19,11 @@ also gives the simulator's largest period, from the stamps of its states (its pu
 times, so this process's own delays do not count). Target (streamed-goals issue): under 10 ms
 with a CLI process every 10 s.
 
-    python -m experiments.soak [--duration 600] [--load 0] [--churn 10]
+``--minimal`` runs the benchmark's minimal state/command pair (``experiments/minimal_pair.py``)
+in place of the nodes, with no goals: the host's floor under the same churn, to compare the
+simulator's largest period with.
+
+    python -m experiments.soak [--duration 600] [--load 0] [--churn 10] [--minimal]
 """
 import argparse
 import collections
@@ -91,7 +95,7 @@ CLI_LIKE = (
 
 
 def soak(duration_s: float, out: Path, load: int = 0, report_s: float = 60.0,
-         goal_period_s: float = 30.0, churn_s: float = 0.0) -> dict:
+         goal_period_s: float = 30.0, churn_s: float = 0.0, minimal: bool = False) -> dict:
     """Run the soak; print a line per report interval; return the figures."""
     out.mkdir(parents=True, exist_ok=True)
     domain_id = random.randint(1, 100)
@@ -102,9 +106,16 @@ def soak(duration_s: float, out: Path, load: int = 0, report_s: float = 60.0,
                                        daemon=True) for _ in range(load)]
     for b in burners:
         b.start()
-    sim, ctrl = local_ros.spawn_wrist_pair(  # the product defaults, as a user runs them
-        env, out, sim_params={'stats_file': str(stats_file)},
-        controller_config=local_ros.PRODUCT_CONTROLLER_CONFIG)
+    if minimal:  # the host's floor: the same topics, no law, no physics
+        ctrl = local_ros.spawn_node('minimal_pair', env, out, name='controller_node',
+                                    args=('--role', 'controller'))
+        sim = local_ros.spawn_node('minimal_pair', env, out, name='wrist_sim_node',
+                                   args=('--role', 'sim', '--duration', str(duration_s + 120.0),
+                                         '--warmup', '0', '--stats', str(stats_file)))
+    else:
+        sim, ctrl = local_ros.spawn_wrist_pair(  # the product defaults, as a user runs them
+            env, out, sim_params={'stats_file': str(stats_file)},
+            controller_config=local_ros.PRODUCT_CONTROLLER_CONFIG)
     probe = ProbeNode('soak_probe', domain_id)
     model = RobotModel(default_urdf_xml(), 'base_link', 'tool0')
     _, R2 = model.forward_kinematics(SECOND_GOAL_Q_RAD)
@@ -141,6 +152,8 @@ def soak(duration_s: float, out: Path, load: int = 0, report_s: float = 60.0,
     rows = []
 
     def error_norm(goal) -> float:
+        if minimal:  # no law: no error to report
+            return math.nan
         m = last_q[0]
         q = [m.position[list(m.name).index(j)] for j in model.joint_names]
         _, R = model.forward_kinematics(q)
@@ -151,7 +164,8 @@ def soak(duration_s: float, out: Path, load: int = 0, report_s: float = 60.0,
     churned = 0
     try:
         deadline = time.monotonic() + 60.0
-        while (counts['commands'] < 100 or goal_pub.get_subscription_count() == 0):
+        while (counts['commands'] < 100
+               or (not minimal and goal_pub.get_subscription_count() == 0)):
             if time.monotonic() > deadline or sim.poll() is not None or ctrl.poll() is not None:
                 raise RuntimeError(f'the nodes did not start; logs in {out}')
             probe.executor.spin_once(timeout_sec=0.05)
@@ -189,7 +203,7 @@ def soak(duration_s: float, out: Path, load: int = 0, report_s: float = 60.0,
                 max_period_us[0] = 0.0
                 max_sim_period_s[0] = 0.0
                 next_report += report_s
-            if now >= next_goal:
+            if now >= next_goal and not minimal:
                 goal = goals[k_goal % 2]
                 msg = PoseStamped()
                 msg.header.frame_id = 'base_link'
@@ -228,10 +242,12 @@ def main(argv: Optional[list] = None) -> int:
     parser.add_argument('--report', type=float, default=60.0, help='seconds per report line')
     parser.add_argument('--churn', type=float, default=0.0,
                         help='start a short-lived ROS process (as a CLI command) every S seconds')
+    parser.add_argument('--minimal', action='store_true',
+                        help="the benchmark's minimal pair in place of the nodes (the floor)")
     parser.add_argument('--out', type=Path, default=Path('results/soak'))
     args = parser.parse_args(argv)
     r = soak(args.duration, args.out, args.load, min(args.report, args.duration),
-             churn_s=args.churn)
+             churn_s=args.churn, minimal=args.minimal)
     s = r['sim_stats']
     print(f'final ||e|| {r["final_error"]:.3e} (towards the last goal); simulator: '
           f'{s.get("watchdog_trips")} watchdog trips, {s.get("missed_deadlines")} late ticks, '
