@@ -27,26 +27,24 @@ def page() -> str:
         'number of joints) and the ceilings filled in. Live parameters are applied whole, as',
         'one validated snapshot: a set that any check refuses changes nothing, and says why.',
         '',
-        '## Controller (`controller_node`, node `quat_jt_controller`)',
-        '',
-        '### Structure (read once at start-up)',
-        '',
-        markdown_table(controller.STRUCTURE + (CPU_AFFINITY,), controller.DOCS_CONTEXT),
-        '### Gains (Eq. 22; one `Gains` snapshot)',
-        '',
-        markdown_table(controller.GAINS, controller.DOCS_CONTEXT),
-        '### Extensions (docs/lyapunov.md; one `Shaping` snapshot)',
-        '',
-        markdown_table(controller.SHAPING, controller.DOCS_CONTEXT),
-        '## Simulator (`wrist_sim_node`, node `wrist_sim`)',
-        '',
-        '### Structure (read once at start-up)',
-        '',
-        markdown_table(simulator.STRUCTURE + (CPU_AFFINITY,), simulator.DOCS_CONTEXT),
-        '### Live (one `SimConfig` snapshot)',
-        '',
-        markdown_table(simulator.LIVE, simulator.DOCS_CONTEXT),
-    ))
+    ) + tuple(line for section in _sections() for line in section))
+
+
+def _sections():
+    """Yield each section's lines: a node's heading, then a heading and a table per group."""
+    nodes = (
+        ('## Controller (`controller_node`, node `quat_jt_controller`)', controller.DOCS_CONTEXT,
+         (('Structure (read once at start-up)', controller.STRUCTURE + (CPU_AFFINITY,)),
+          ('Gains (Eq. 22; one `Gains` snapshot)', controller.GAINS),
+          ('Extensions (docs/lyapunov.md; one `Shaping` snapshot)', controller.SHAPING))),
+        ('## Simulator (`wrist_sim_node`, node `wrist_sim`)', simulator.DOCS_CONTEXT,
+         (('Structure (read once at start-up)', simulator.STRUCTURE + (CPU_AFFINITY,)),
+          ('Live (one `SimConfig` snapshot)', simulator.LIVE))),
+    )
+    for heading, context, groups in nodes:
+        yield heading, ''
+        for title, specs in groups:
+            yield f'### {title}', '', markdown_table(specs, context)
 
 
 def main(argv: Optional[list[str]] = None) -> None:

@@ -25,7 +25,8 @@ from quat_jt_controller.shaping import describe as describe_shaping
 from quat_jt_controller.shaping import from_parameters as shaping_from_parameters
 from quat_jt_controller.shaping import MAX_POSTURE_WEIGHT, Shaping
 from quat_jt_runtime.joints import DEFAULT_MAX_STATE_AGE_S, DEFAULT_STATE_TIMEOUT_S
-from quat_jt_runtime.params import ChangeLog, declare, Kind, LiveParameters, names, Spec
+from quat_jt_runtime.params import ChangeLog, declare, joint_zeros, JOINT_ZEROS_TEXT, Kind
+from quat_jt_runtime.params import LiveParameters, markdown_value, names, Spec
 from quat_jt_runtime.realtime import DEFAULT_PREWARM_LEAD_S
 from quat_jt_runtime.resources import default_urdf_xml
 from rclpy.node import Node
@@ -69,10 +70,6 @@ STRUCTURE = (
 )
 
 
-def _g(values: Sequence[float]) -> str:
-    return '[' + ', '.join(f'{v:g}' for v in values) + ']'
-
-
 def _per_task(position: Sequence[float], orientation: Sequence[float]) -> Callable:
     return lambda context: list(
         orientation if context['task'] is Task.ORIENTATION else tuple(position) + orientation)
@@ -86,7 +83,8 @@ GAINS = (
     Spec('kp', Kind.DOUBLE_ARRAY, _per_task(DEFAULT_KP_POSITION, paper.KP),
          'Diagonal of K_p, {dim} values ({axes}); N/m for position rows, N m for orientation '
          'rows. Finite, > 0, <= {top}. Live.', constraints='{dim} values in (0, {top}]',
-         default_text=f'`{_g(paper.KP)}` (pose: `{_g(DEFAULT_KP_POSITION)}` first)'),
+         default_text=f'{markdown_value(paper.KP)} (pose: {markdown_value(DEFAULT_KP_POSITION)} '
+                      'first)'),
     Spec('kv', Kind.DOUBLE_ARRAY, lambda context: [paper.KV[0]] * context['n'],
          'Diagonal of K_v (joint damping), one per joint ({n}), N m s/rad. Finite, > 0, '
          '<= {top}. Live.', constraints='{n} values in (0, {top}]',
@@ -95,18 +93,14 @@ GAINS = (
          'Diagonal of Lambda in tanh(Lambda y) (Eq. 32/38), {dim} values ({axes}); used by the '
          f'tanh potential. Finite, > 0, <= {MAX_LAMBDA:g}. Live.',
          constraints=f'{{dim}} values in (0, {MAX_LAMBDA:g}]',
-         default_text=f'`{_g(paper.LAMBDA)}` (pose: `{_g(DEFAULT_LAMBDA_POSITION)}` first)'),
+         default_text=f'{markdown_value(paper.LAMBDA)} (pose: '
+                      f'{markdown_value(DEFAULT_LAMBDA_POSITION)} first)'),
     Spec('gravity_compensation', Kind.BOOL, True,
          'Add g(q) from the URDF model to the torque (Eq. 22). Live.'),
 )
 GAIN_PARAMETERS = names(GAINS)
 
 _DEFAULT_SHAPING = Shaping()
-_ZEROS = '`0` per joint'
-
-
-def _zeros(context: Mapping[str, Any]) -> list[float]:
-    return [0.0] * context['n']
 
 
 # The extensions of the regulator (shaping.Shaping), live, applied whole. Defaults are all
@@ -116,19 +110,19 @@ SHAPING = (
     Spec('joint_limit_margin', Kind.DOUBLE, 0.0,
          'Width (rad) of the band inside each joint limit where the joint-limit potential acts '
          '(joints whose range is less than a full turn). 0 = off. Live.', bounds=(0.0, 1.0)),
-    Spec('joint_limit_gain', Kind.DOUBLE_ARRAY, _zeros,
+    Spec('joint_limit_gain', Kind.DOUBLE_ARRAY, joint_zeros,
          'Stiffness (N m/rad) of the joint-limit potential in the band, one per joint ({n}); '
          '0 = no limit term for that joint. Live.', constraints='{n} finite values >= 0',
-         default_text=_ZEROS),
+         default_text=JOINT_ZEROS_TEXT),
     Spec('large_error_gain', Kind.DOUBLE, 0.0,
          'k_L (N m) of the large-error term of the orientation potential, which keeps the '
          'torque from fading towards 180 degrees. 0 = off. Live.', bounds=(0.0, 1000.0)),
-    Spec('friction_compensation', Kind.DOUBLE_ARRAY, _zeros,
+    Spec('friction_compensation', Kind.DOUBLE_ARRAY, joint_zeros,
          'Coulomb friction estimates (N m), one per joint ({n}), compensated without exceeding '
          'them: by velocity while moving, in the direction of the potential torque at rest, '
          'all of it fading out near the goal. Zeros = off. Over-estimates break the stability '
          'argument away from the goal (docs/lyapunov.md). Live.',
-         constraints='{n} finite values >= 0', default_text=_ZEROS),
+         constraints='{n} finite values >= 0', default_text=JOINT_ZEROS_TEXT),
     Spec('friction_velocity', Kind.DOUBLE, _DEFAULT_SHAPING.friction_velocity_rad_s,
          'v_eps (rad/s) of the velocity part, f tanh(qdot / v_eps). Live.',
          bounds=(1e-4, 10.0)),
@@ -138,28 +132,28 @@ SHAPING = (
     Spec('friction_position_band', Kind.DOUBLE, _DEFAULT_SHAPING.friction_position_band_m,
          '||p_d - p|| (m) below which the friction compensation fades out (pose task). Live.',
          bounds=(1e-6, 1.0)),
-    Spec('friction_learning_limit', Kind.DOUBLE_ARRAY, _zeros,
+    Spec('friction_learning_limit', Kind.DOUBLE_ARRAY, joint_zeros,
          'The most (N m) the friction compensation may learn on top of the estimate, one per '
          'joint ({n}): it grows while a joint is stuck away from the goal, stops once the '
          'joint moves, and leaks away near the goal. Zeros = off. Live.',
-         constraints='{n} finite values >= 0', default_text=_ZEROS),
+         constraints='{n} finite values >= 0', default_text=JOINT_ZEROS_TEXT),
     Spec('friction_learning_time', Kind.DOUBLE, _DEFAULT_SHAPING.friction_learning_time_s,
          'Time (s) to learn friction_learning_limit while stuck; the learned part leaks with '
          'this time constant near the goal. Live.', bounds=(0.01, 1000.0)),
-    Spec('configuration_gain', Kind.DOUBLE_ARRAY, _zeros,
+    Spec('configuration_gain', Kind.DOUBLE_ARRAY, joint_zeros,
          'Most torque (N m) the goal-configuration term asks of each joint ({n}); it pulls '
          'towards a goal configuration within the limits found by the goal check. Zeros = '
-         'off. Live.', constraints='{n} finite values >= 0', default_text=_ZEROS),
+         'off. Live.', constraints='{n} finite values >= 0', default_text=JOINT_ZEROS_TEXT),
     Spec('configuration_radius', Kind.DOUBLE, _DEFAULT_SHAPING.configuration_radius_rad,
          'Dead zone (rad, per joint) around the goal configuration where only the '
          "paper's term acts. Live.", bounds=(0.0, 3.2)),
     Spec('configuration_ramp', Kind.DOUBLE, _DEFAULT_SHAPING.configuration_ramp_rad,
          'Width (rad) over which the goal-configuration torque rises to its gain. Live.',
          bounds=(1e-3, 3.2)),
-    Spec('damping_speed', Kind.DOUBLE_ARRAY, _zeros,
+    Spec('damping_speed', Kind.DOUBLE_ARRAY, joint_zeros,
          'v_c (rad/s) of the cubic damping term -k_v qdot (qdot / v_c)^2, one per joint ({n}); '
          '0 = linear damping only. Live.', constraints='{n} finite values >= 0',
-         default_text=_ZEROS),
+         default_text=JOINT_ZEROS_TEXT),
     Spec('goal_velocity_gain', Kind.DOUBLE, 0.0,
          'g_v in [0, 1]: for a stream of stamped goals on ~/target_pose, the joint damping '
          'acts on qdot - g_v qdot*_d, qdot*_d the velocity of the goal configuration (the '

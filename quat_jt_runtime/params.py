@@ -214,21 +214,31 @@ def declare(node: Node, specs: Sequence[Spec],
     return values
 
 
+def joint_zeros(context: Mapping[str, Any]) -> list[float]:
+    """Return a per-joint default of zeros, one per joint (``context['n']``), for a table row."""
+    return [0.0] * context['n']
+
+
+JOINT_ZEROS_TEXT = '`0` per joint'  # the docs' default of a ``joint_zeros`` row
+
+
+def markdown_value(value: Any) -> str:
+    """Return a parameter value as the docs' tables show it, in backticks (floats as ``:g``)."""
+    if isinstance(value, str):
+        return f"`'{value}'`" if value else "`''`"
+    if isinstance(value, bool):
+        return f'`{str(value).lower()}`'
+    if isinstance(value, (list, tuple)):
+        return '`[' + ', '.join(f'{v:g}' if isinstance(v, float) else str(v)
+                                for v in value) + ']`'
+    return f'`{value:g}`' if isinstance(value, float) else f'`{value}`'
+
+
 def markdown_table(specs: Sequence[Spec], context: Mapping[str, Any]) -> str:
     """Return the table of ``specs`` as Markdown (the docs' parameter tables)."""
-    def text(value: Any) -> str:
-        if isinstance(value, str):
-            return f"`'{value}'`" if value else "`''`"
-        if isinstance(value, bool):
-            return f'`{str(value).lower()}`'
-        if isinstance(value, (list, tuple)):
-            return '`[' + ', '.join(f'{v:g}' if isinstance(v, float) else str(v)
-                                    for v in value) + ']`'
-        return f'`{value:g}`' if isinstance(value, float) else f'`{value}`'
-
     rows = ['| name | type | default | range | live | description |', '|---|---|---|---|---|---|']
     for spec in specs:
-        default = spec.default_text or text(spec.default_value(context))
+        default = spec.default_text or markdown_value(spec.default_value(context))
         bounds = ('[' + ', '.join(str(b) if isinstance(b, int) else f'{b:g}'
                                   for b in spec.bounds) + ']' if spec.bounds is not None
                   else spec.constraints.format(**context))

@@ -10,20 +10,16 @@ the immutable :class:`~wrist_sim.config.SimConfig` (validated by ``SimConfig.cre
 ``joints`` and the per-joint rows default from the URDF, so ``robot_description`` is read first.
 """
 from dataclasses import dataclass
-from typing import Any, Callable, Mapping, Optional
+from typing import Callable, Optional
 
 from quat_jt_runtime.joints import movable_joints
-from quat_jt_runtime.params import ChangeLog, CPU_AFFINITY, declare, Kind, LiveParameters
-from quat_jt_runtime.params import names, Spec
+from quat_jt_runtime.params import ChangeLog, CPU_AFFINITY, declare, joint_zeros
+from quat_jt_runtime.params import JOINT_ZEROS_TEXT, Kind, LiveParameters, names, Spec
 from quat_jt_runtime.realtime import check_cpus
 from quat_jt_runtime.resources import default_urdf_xml
 from rclpy.node import Node
 from wrist_sim.config import SimConfig
 from wrist_sim.simulator import SimulatorError
-
-
-def _zeros(context: Mapping[str, Any]) -> list[float]:
-    return [0.0] * context['n']
 
 
 ROBOT_DESCRIPTION = Spec('robot_description', Kind.STRING, '',
@@ -58,15 +54,15 @@ STRUCTURE = (
 )
 # Context: n (the number of joints).
 LIVE = (
-    Spec('initial_positions', Kind.DOUBLE_ARRAY, _zeros,
+    Spec('initial_positions', Kind.DOUBLE_ARRAY, joint_zeros,
          'joint positions (rad or m) at start and on ~/reset', constraints='{n} finite values',
-         default_text='`0` per joint'),
-    Spec('viscous_friction', Kind.DOUBLE_ARRAY, _zeros,
+         default_text=JOINT_ZEROS_TEXT),
+    Spec('viscous_friction', Kind.DOUBLE_ARRAY, joint_zeros,
          'viscous friction per joint, N m s/rad (>= 0)', constraints='{n} finite values >= 0',
-         default_text='`0` per joint'),
-    Spec('coulomb_friction', Kind.DOUBLE_ARRAY, _zeros,
+         default_text=JOINT_ZEROS_TEXT),
+    Spec('coulomb_friction', Kind.DOUBLE_ARRAY, joint_zeros,
          'Coulomb friction / stiction level per joint, N m (>= 0)',
-         constraints='{n} finite values >= 0', default_text='`0` per joint'),
+         constraints='{n} finite values >= 0', default_text=JOINT_ZEROS_TEXT),
     Spec('command_timeout', Kind.DOUBLE, 0.5,
          'seconds (simulation time) without a valid command before the torque goes to zero; '
          '0 disables the watchdog', bounds=(0.0, 60.0)),
