@@ -5,9 +5,16 @@ For ``--rounds`` rounds, starts the two nodes (``wrist_sim_node`` and ``controll
 product configs) or the ``composed`` process on a private loopback graph, waits a random time
 of up to ``--within`` seconds (so start-up, the first states and steady running are all hit),
 then sends SIGINT to each process group, as a terminal's Ctrl-C does; in half of the rounds a
-second SIGINT follows within 0.3 s, as ``ros2 launch`` sends one when another process exits
-(``on_exit=Shutdown``). It counts the processes that exit with status 0, and those whose log has
-a traceback. Target (streamed-goals issue): 0 and no traceback, every time.
+second SIGINT follows within 0.3 s, as ``ros2 launch --noninteractive`` sends its own after the
+terminal's. It counts the processes that exit with status 0, and those whose log has a
+traceback. Target (streamed-goals issue): 0 and no traceback, every time.
+
+It also times each exit from the first SIGINT, and counts what ``ros2 launch`` (not on PyPI,
+so not run here) would log as an ERROR for the same process by its rules (launch's
+``ExecuteLocal``): an exit status other than 0 ("process has died"), or a process still running
+``LAUNCH_SIGTERM_TIMEOUT_S`` after the SIGINT (launch then sends SIGTERM, "failed to terminate").
+Under launch the nodes share its process group, so the terminal's Ctrl-C reaches each at once,
+as here; launch's own ``on_exit=Shutdown`` adds nothing once a shutdown is under way.
 
     python -m experiments.ctrl_c [--rounds 20] [--within 3]
 """
@@ -21,6 +28,8 @@ from typing import Optional
 
 from experiments import local_ros
 from quat_jt_runtime.resources import share_path
+
+LAUNCH_SIGTERM_TIMEOUT_S = 5.0  # ros2 launch's sigterm_timeout default: SIGTERM and an ERROR
 
 
 def one_round(mode: str, within_s: float, work_dir: Path, rng: random.Random) -> list[dict]:
@@ -38,18 +47,32 @@ def one_round(mode: str, within_s: float, work_dir: Path, rng: random.Random) ->
     delay_s = rng.uniform(0.0, within_s)
     time.sleep(delay_s)  # the point of the test: a Ctrl-C at any moment
     second = rng.random() < 0.5
+    t_sigint = time.monotonic()
     for proc in procs.values():
         local_ros.interrupt_group(proc)
+    exit_s: dict[str, float] = {}
+
+    def note_exits() -> None:
+        for name, proc in procs.items():
+            if name not in exit_s and proc.poll() is not None:
+                exit_s[name] = time.monotonic() - t_sigint
     if second:
-        time.sleep(rng.uniform(0.0, 0.3))
+        second_at = time.monotonic() + rng.uniform(0.0, 0.3)
+        while time.monotonic() < second_at:
+            note_exits()
+            time.sleep(0.005)
         for proc in procs.values():
             local_ros.interrupt_group(proc)
+    while len(exit_s) < len(procs) and time.monotonic() < t_sigint + 30.0:
+        note_exits()
+        time.sleep(0.005)
     records = []
     for name, proc in procs.items():
-        code = local_ros.stop_node(proc, timeout=30.0)  # already interrupted: waits, or kills
+        code = local_ros.stop_node(proc, timeout=1.0)  # interrupted 30 s ago: waits, or kills
         log = (work_dir / f'{name}.log').read_text(errors='replace')
         records.append({'process': name, 'delay_s': delay_s, 'second_sigint': second,
                         'exit_code': code, 'traceback': 'Traceback' in log,
+                        'exit_s': exit_s.get(name, float('inf')),
                         'log': str(work_dir / f'{name}.log')})
     return records
 
@@ -72,16 +95,23 @@ def main(argv: Optional[list] = None) -> int:
             work_dir.mkdir(parents=True, exist_ok=True)
             for r in one_round(mode, args.within, work_dir, rng):
                 ok = r['exit_code'] == 0 and not r['traceback']
-                c = counts.setdefault(r['process'], [0, 0])
+                launch_error = r['exit_code'] != 0 or r['exit_s'] > LAUNCH_SIGTERM_TIMEOUT_S
+                c = counts.setdefault(r['process'], [0, 0, 0, 0.0])
                 c[0] += ok
                 c[1] += 1
-                if not ok:
+                c[2] += launch_error
+                c[3] = max(c[3], r['exit_s'])
+                if not ok or launch_error:
                     bad.append(r)
-    for process, (ok, total) in counts.items():
-        print(f'{process}: exit 0 without a traceback {ok} of {total}')
+    for process, (ok, total, launch_errors, slowest_s) in counts.items():
+        print(f'{process}: exit 0 without a traceback {ok} of {total}; slowest exit '
+              f'{slowest_s:.2f} s after the SIGINT; ERROR lines ros2 launch would log by its '
+              f'rules (exit status, SIGTERM after {LAUNCH_SIGTERM_TIMEOUT_S:g} s): '
+              f'{launch_errors}')
     for r in bad:
-        print(f'  {r["process"]}: exit {r["exit_code"]}, traceback {r["traceback"]}, Ctrl-C at '
-              f'{r["delay_s"]:.2f} s, second SIGINT {r["second_sigint"]}: {r["log"]}')
+        print(f'  {r["process"]}: exit {r["exit_code"]} after {r["exit_s"]:.2f} s, traceback '
+              f'{r["traceback"]}, Ctrl-C at {r["delay_s"]:.2f} s, second SIGINT '
+              f'{r["second_sigint"]}: {r["log"]}')
     print(f'logs in {out}')
     return 0 if not bad else 1
 

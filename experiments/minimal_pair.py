@@ -5,7 +5,9 @@ Two processes, like ``wrist_sim_node`` and ``controller_node`` but with nothing 
 ``--role sim`` publishes a 3-joint ``JointState`` on each 1 kHz tick, with the simulator's own
 deadline loop pieces (``realtime``: the answer deadline, the timer slack, the wait for the tick),
 and counts how many ticks get an answer in time; ``--role controller`` answers each state at once
-with a ``Float64MultiArray``. ``--cpu N`` pins the process, as ``cpu_affinity`` pins a node.
+with a ``Float64MultiArray``. ``--cpu N`` pins the process, as ``cpu_affinity`` pins a node, and
+``--priority P`` (the nodes' default ``thread_priority`` unless given) runs its threads in
+SCHED_FIFO as a node's.
 The sim's figures use the simulator's own ``LoopStats``, so they compare one to one with
 ``wrist_sim_node``'s: whatever the real nodes add beyond this pair is theirs, the rest is the
 machine.
@@ -97,12 +99,18 @@ def main(argv=None) -> None:
     parser.add_argument('--stats', type=Path, default=Path('minimal_pair_stats.json'))
     parser.add_argument('--cpu', type=int, action='append', default=[],
                         help='pin the process to this CPU (repeat for several)')
+    parser.add_argument('--priority', type=int, default=realtime.DEFAULT_THREAD_PRIORITY,
+                        help="SCHED_FIFO priority of its threads, as a node's thread_priority "
+                        '(0: normal scheduling)')
     args, ros_args = parser.parse_known_args(argv)
     rclpy.init(args=ros_args)
     node = rclpy.create_node(f'minimal_{args.role}')
     executor = EventsExecutor()
     executor.add_node(node)
     realtime.pin_process(args.cpu)
+    refused = realtime.set_thread_priority(args.priority)
+    if refused:
+        node.get_logger().warning(f'--priority {args.priority}: {refused}')
     try:
         if args.role == 'sim':
             run_sim(node, executor, args.duration, args.warmup, args.stats)

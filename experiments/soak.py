@@ -23,7 +23,12 @@ with a CLI process every 10 s.
 in place of the nodes, with no goals: the host's floor under the same churn, to compare the
 simulator's largest period with.
 
+``--thread-priority P`` gives both nodes (or the minimal pair) that ``thread_priority``; by
+default they run at theirs (50, SCHED_FIFO); 0 runs them with normal scheduling, as before
+that parameter existed.
+
     python -m experiments.soak [--duration 600] [--load 0] [--churn 10] [--minimal]
+                               [--thread-priority P]
 """
 import argparse
 import collections
@@ -95,7 +100,8 @@ CLI_LIKE = (
 
 
 def soak(duration_s: float, out: Path, load: int = 0, report_s: float = 60.0,
-         goal_period_s: float = 30.0, churn_s: float = 0.0, minimal: bool = False) -> dict:
+         goal_period_s: float = 30.0, churn_s: float = 0.0, minimal: bool = False,
+         thread_priority: Optional[int] = None) -> dict:
     """Run the soak; print a line per report interval; return the figures."""
     out.mkdir(parents=True, exist_ok=True)
     domain_id = random.randint(1, 100)
@@ -106,16 +112,18 @@ def soak(duration_s: float, out: Path, load: int = 0, report_s: float = 60.0,
                                        daemon=True) for _ in range(load)]
     for b in burners:
         b.start()
+    priority = {} if thread_priority is None else {'thread_priority': thread_priority}
     if minimal:  # the host's floor: the same topics, no law, no physics
+        flags = tuple(f'--priority={p}' for p in priority.values())
         ctrl = local_ros.spawn_node('minimal_pair', env, out, name='controller_node',
-                                    args=('--role', 'controller'))
+                                    args=('--role', 'controller') + flags)
         sim = local_ros.spawn_node('minimal_pair', env, out, name='wrist_sim_node',
                                    args=('--role', 'sim', '--duration', str(duration_s + 120.0),
-                                         '--warmup', '0', '--stats', str(stats_file)))
+                                         '--warmup', '0', '--stats', str(stats_file)) + flags)
     else:
         sim, ctrl = local_ros.spawn_wrist_pair(  # the product defaults, as a user runs them
-            env, out, sim_params={'stats_file': str(stats_file)},
-            controller_config=local_ros.PRODUCT_CONTROLLER_CONFIG)
+            env, out, sim_params={'stats_file': str(stats_file), **priority},
+            controller_params=priority, controller_config=local_ros.PRODUCT_CONTROLLER_CONFIG)
     probe = ProbeNode('soak_probe', domain_id)
     model = RobotModel(default_urdf_xml(), 'base_link', 'tool0')
     _, R2 = model.forward_kinematics(SECOND_GOAL_Q_RAD)
@@ -244,10 +252,13 @@ def main(argv: Optional[list] = None) -> int:
                         help='start a short-lived ROS process (as a CLI command) every S seconds')
     parser.add_argument('--minimal', action='store_true',
                         help="the benchmark's minimal pair in place of the nodes (the floor)")
+    parser.add_argument('--thread-priority', type=int, default=None,
+                        help="both nodes' thread_priority (default: theirs; 0: normal "
+                        'scheduling)')
     parser.add_argument('--out', type=Path, default=Path('results/soak'))
     args = parser.parse_args(argv)
     r = soak(args.duration, args.out, args.load, min(args.report, args.duration),
-             churn_s=args.churn, minimal=args.minimal)
+             churn_s=args.churn, minimal=args.minimal, thread_priority=args.thread_priority)
     s = r['sim_stats']
     print(f'final ||e|| {r["final_error"]:.3e} (towards the last goal); simulator: '
           f'{s.get("watchdog_trips")} watchdog trips, {s.get("missed_deadlines")} late ticks, '

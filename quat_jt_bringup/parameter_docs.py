@@ -11,7 +11,7 @@ from pathlib import Path
 from typing import Optional
 
 from quat_jt_controller import parameters as controller
-from quat_jt_runtime.params import CPU_AFFINITY, markdown_table
+from quat_jt_runtime.params import markdown_table, REALTIME
 from wrist_sim import parameters as simulator
 
 
@@ -34,11 +34,11 @@ def _sections():
     """Yield each section's lines: a node's heading, then a heading and a table per group."""
     nodes = (
         ('## Controller (`controller_node`, node `quat_jt_controller`)', controller.DOCS_CONTEXT,
-         (('Structure (read once at start-up)', controller.STRUCTURE + (CPU_AFFINITY,)),
+         (('Structure (read once at start-up)', controller.STRUCTURE + REALTIME),
           ('Gains (Eq. 22; one `Gains` snapshot)', controller.GAINS),
           ('Extensions (docs/lyapunov.md; one `Shaping` snapshot)', controller.SHAPING))),
         ('## Simulator (`wrist_sim_node`, node `wrist_sim`)', simulator.DOCS_CONTEXT,
-         (('Structure (read once at start-up)', simulator.STRUCTURE + (CPU_AFFINITY,)),
+         (('Structure (read once at start-up)', simulator.STRUCTURE + REALTIME),
           ('Live (one `SimConfig` snapshot)', simulator.LIVE))),
     )
     for heading, context, groups in nodes:

@@ -22,7 +22,7 @@ from quat_jt_controller.supervision import Supervisor
 from quat_jt_runtime import lifecycle
 from quat_jt_runtime.joints import StaleState, StateCheck
 from quat_jt_runtime.loop_stats import TickStats
-from quat_jt_runtime.params import declare_cpu_affinity, history_qos
+from quat_jt_runtime.params import declare_realtime, history_qos
 from quat_jt_runtime.prewarm_timer import describe_prewarm, prewarm_off_reason, PrewarmTimer
 from quat_jt_runtime.resources import bundled_urdf_hint
 from quat_jt_runtime.throttle import cause, Throttle
@@ -42,7 +42,7 @@ class QuatJtController(Node):
         """Build the node; ``prewarm=False``: never a throwaway tick (the composed mode)."""
         super().__init__(NODE_NAME, **kwargs)
         cfg = self.config = parameters.declare_structural(self)
-        self.cpu_affinity = declare_cpu_affinity(self)  # pinned by lifecycle.run_node
+        settings = declare_realtime(self)  # applied by lifecycle.run_node
         try:
             model = RobotModel(cfg.robot_description, cfg.base_link, cfg.tip_link, cfg.joints)
         except ModelError as exc:
@@ -57,6 +57,8 @@ class QuatJtController(Node):
         self._change_log = parameters.change_log(self, reg)
         self._check_state = StateCheck(cfg.joints, cfg.max_state_age_s)
         self._use_sim_time = bool(self.get_parameter('use_sim_time').value)
+        # On simulated time there are no deadlines to keep: normal scheduling.
+        self.realtime = settings._replace(thread_priority=0) if self._use_sim_time else settings
         self._goal_checker = GoalCheckWorker(ModelSpec(
             cfg.robot_description, cfg.base_link, cfg.tip_link, cfg.joints, cfg.task))
         self.supervisor = Supervisor(reg, cfg.state_timeout_s, cfg.publish_rate_divider,

@@ -32,16 +32,29 @@ def spin(executor, context: rclpy.Context, keep_running: Callable[[], bool],
         executor.spin_once(timeout_sec=period_s)
 
 
-def pin(nodes: list) -> None:
+def apply_realtime(nodes: list) -> None:
     """
-    Pin the process to the CPUs its nodes ask for (``cpu_affinity``), once all are built.
+    Apply the nodes' real-time settings (``realtime``: ``params.Realtime``), once all are built.
 
-    Composed nodes share the process: it is pinned to the union of their CPUs.
+    The process is pinned to the CPUs they ask for (``cpu_affinity``) and its threads run at
+    their ``thread_priority``. Composed nodes share the process: the union of their CPUs, the
+    highest of their priorities. A priority that is refused is a warning, not an error: the
+    node runs with normal scheduling.
     """
-    cpus = sorted({c for node in nodes for c in getattr(node, 'cpu_affinity', ())})
+    settings = [node.realtime for node in nodes if getattr(node, 'realtime', None) is not None]
+    logger = nodes[0].get_logger()
+    cpus = sorted({c for s in settings for c in s.cpus})
     if cpus:
         pinned = realtime.pin_process(cpus)
-        nodes[0].get_logger().info(f'process pinned to CPUs {list(pinned)} (cpu_affinity)')
+        logger.info(f'process pinned to CPUs {list(pinned)} (cpu_affinity)')
+    priority = max((s.thread_priority for s in settings), default=0)
+    if priority:
+        refused = realtime.set_thread_priority(priority)
+        if refused:
+            logger.warning(f'thread_priority {priority}: {refused}; running with normal '
+                           'scheduling (thread_priority: 0 says so without this warning)')
+        else:
+            logger.info(f'every thread at SCHED_FIFO priority {priority} (thread_priority)')
 
 
 def run_node(make_node: Callable[[], object], name: str, startup_errors: tuple,
@@ -51,9 +64,9 @@ def run_node(make_node: Callable[[], object], name: str, startup_errors: tuple,
     Run a node of this package: its ``main()``, the Jazzy way.
 
     Build the node, or a tuple of nodes sharing the process (``startup_errors`` exit with
-    status 1 and a FATAL line saying why), add it to one EventsExecutor, pin the process to the
-    nodes' ``cpu_affinity`` (if set), freeze what is built so far from the garbage collector,
-    then ``run(node, executor, keep_running)``. On the way
+    status 1 and a FATAL line saying why), add it to one EventsExecutor, apply the nodes'
+    real-time settings (:func:`apply_realtime`), freeze what is built so far from the garbage
+    collector, then ``run(node, executor, keep_running)``. On the way
     out (Ctrl-C, SIGTERM, an external shutdown) the nodes are destroyed, last built first,
     before the context is shut down.
     """
@@ -73,7 +86,7 @@ def run_node(make_node: Callable[[], object], name: str, startup_errors: tuple,
         executor = EventsExecutor(context=nodes[0].context)
         for each in nodes:
             executor.add_node(each)
-        pin(nodes)
+        apply_realtime(nodes)
         # What is built so far lives as long as the node: keep the cyclic garbage collector
         # from rescanning it during the 1 kHz loop.
         gc.collect()

@@ -10,9 +10,10 @@ post-set callback swaps the snapshot in; the 1 kHz tick reads the snapshot, neve
 """
 from dataclasses import dataclass
 import enum
-from typing import Any, Callable, Collection, Generic, Mapping, Optional, Sequence, TypeVar
+from typing import (Any, Callable, Collection, Generic, Mapping, NamedTuple, Optional,
+                    Sequence, TypeVar)
 
-from quat_jt_runtime.realtime import check_cpus
+from quat_jt_runtime.realtime import check_cpus, DEFAULT_THREAD_PRIORITY
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
 from rcl_interfaces.msg import ParameterType, SetParametersResult
 from rclpy.clock import Clock, ClockType
@@ -253,14 +254,30 @@ CPU_AFFINITY = Spec(
     'CPUs to pin this process to (all its threads), e.g. [1]; [] (the default) = not pinned. '
     'A 1 kHz node on a CPU of its own keeps its caches warm between ticks (docs/ros.md, '
     'Real-time settings).', read_only=True, constraints='CPUs this process may run on')
+THREAD_PRIORITY = Spec(
+    'thread_priority', Kind.INT, DEFAULT_THREAD_PRIORITY,
+    'SCHED_FIFO priority of every thread of this process (1-99) while it runs in real time; '
+    '0 = normal scheduling. No ordinary process then delays the loop (docs/ros.md, Real-time '
+    'settings). Needs CAP_SYS_NICE or an rtprio limit: if refused, a warning and normal '
+    'scheduling. Not applied on simulated time (lockstep) or with the PyBullet window.',
+    read_only=True, bounds=(0, 99))
+REALTIME = (CPU_AFFINITY, THREAD_PRIORITY)  # every node of this package has these rows
 
 
-def declare_cpu_affinity(node: Node) -> tuple[int, ...]:
+class Realtime(NamedTuple):
+    """A node's real-time settings (read-only), applied by ``lifecycle.run_node``."""
+
+    cpus: tuple[int, ...]  # empty: not pinned
+    thread_priority: int  # 0: normal scheduling
+
+
+def declare_realtime(node: Node) -> Realtime:
     """
-    Declare the read-only ``cpu_affinity`` (every node of this package has it) and return it.
+    Declare the read-only ``cpu_affinity`` and ``thread_priority``; return them.
 
-    Empty (the default) leaves the process where the OS puts it. ``lifecycle.run_node`` pins
-    the process once its nodes are built (``realtime.pin_process``). Raises ValueError if a CPU
-    is not available to the process.
+    ``lifecycle.run_node`` applies them once the process's nodes are built
+    (``realtime.pin_process``, ``realtime.set_thread_priority``). Raises ValueError if a CPU is
+    not available to the process.
     """
-    return check_cpus(declare(node, (CPU_AFFINITY,))['cpu_affinity'])
+    values = declare(node, REALTIME)
+    return Realtime(check_cpus(values['cpu_affinity']), int(values['thread_priority']))

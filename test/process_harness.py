@@ -1,4 +1,6 @@
-"""What the multi-process test harnesses share: node logs, waits on conditions, teardown."""
+"""What the multi-process tests share: node logs, waits on conditions, teardown, /proc."""
+import os
+from pathlib import Path
 import time
 from typing import Callable
 
@@ -61,3 +63,25 @@ def call_service(executor, client, request, timeout_s: float = 5.0, attempts: in
             return future.result()
         client.remove_pending_request(future)
     raise AssertionError(f'no reply from service {client.service_name!r} after {attempts} calls')
+
+
+def children_of(pid: int) -> list[int]:
+    """Return the processes whose parent is ``pid`` (from /proc)."""
+    out = []
+    for entry in os.listdir('/proc'):
+        if entry.isdigit():
+            try:
+                stat = Path(f'/proc/{entry}/stat').read_text()
+            except OSError:
+                continue
+            if int(stat.rsplit(')', 1)[1].split()[1]) == pid:
+                out.append(int(entry))
+    return out
+
+
+def alive(pid: int) -> bool:
+    try:
+        state = Path(f'/proc/{pid}/stat').read_text().rsplit(')', 1)[1].split()[0]
+    except OSError:
+        return False
+    return state != 'Z'

@@ -170,10 +170,10 @@ def test_parameters_are_declared_with_descriptors(make_node):
 def test_the_node_declares_exactly_its_table(make_node):
     """Every parameter the node has is a row of its table, with the row's type and range."""
     from quat_jt_controller import parameters as table
-    from quat_jt_runtime.params import CPU_AFFINITY
+    from quat_jt_runtime.params import REALTIME
     node = make_node()
     rows = {spec.name: spec for spec in table.STRUCTURE + table.GAINS + table.SHAPING
-            + (CPU_AFFINITY,)}
+            + REALTIME}
     declared = set(node._parameters) - {'use_sim_time', 'start_type_description_service'}
     assert declared == set(rows)
     for name, spec in rows.items():

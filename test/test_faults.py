@@ -15,9 +15,10 @@ import subprocess
 import time
 from typing import Callable
 
+from cpus import thread_policies
 from experiments import local_ros
 from geometry_msgs.msg import PoseStamped
-from process_harness import call_service, ProcessHarnessMixin
+from process_harness import alive, call_service, children_of, ProcessHarnessMixin
 import pytest
 from quat_jt_controller import paper
 from quat_jt_controller import quaternion as quat
@@ -137,28 +138,6 @@ def pair(tmp_path):
 def wait_log(pair: 'Pair', name: str, pattern: str, timeout: float = 10.0) -> None:
     pair.spin_until(lambda: re.search(pattern, pair.log(name)), timeout,
                     f'{pattern!r} in {name}.log')
-
-
-def children_of(pid: int) -> list[int]:
-    """Return the processes whose parent is ``pid`` (from /proc)."""
-    out = []
-    for entry in os.listdir('/proc'):
-        if entry.isdigit():
-            try:
-                stat = Path(f'/proc/{entry}/stat').read_text()
-            except OSError:
-                continue
-            if int(stat.rsplit(')', 1)[1].split()[1]) == pid:
-                out.append(int(entry))
-    return out
-
-
-def alive(pid: int) -> bool:
-    try:
-        state = Path(f'/proc/{pid}/stat').read_text().rsplit(')', 1)[1].split()[0]
-    except OSError:
-        return False
-    return state != 'Z'
 
 
 def test_sigint_with_states_flowing_exits_cleanly_every_time(pair):
@@ -419,3 +398,6 @@ def test_a_namespaced_lockstep_pair_keeps_its_clock_in_its_namespace(pair):
     pair.spin_until(lambda: clocks['/left/clock'] > 100 and len(commands) > 1000, 60.0,
                     'lockstep in /left')
     assert clocks['/clock'] == 0, clocks
+    # No deadlines in lockstep: thread_priority (50 by default) is not applied there.
+    for executable, proc in pair.procs.items():
+        assert set(thread_policies(proc.pid).values()) == {('other', 0)}, executable

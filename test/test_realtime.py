@@ -4,13 +4,14 @@ Real-time pieces of the loop, without ROS (``realtime.py``).
 CPU pinning and timer slack, the simulator's answer deadline (shared with the minimal pair),
 and the nodes' run check. The nodes' ``cpu_affinity`` parameter: ``test_realtime_nodes.py``.
 """
+import json
 import os
 import subprocess
 import sys
 import threading
 import time
 
-from cpus import linux_only, thread_cpus, two_cpus
+from cpus import linux_only, thread_cpus, thread_policies, two_cpus
 import pytest
 from quat_jt_runtime import realtime
 from quat_jt_runtime.realtime import answer_deadline, await_answer, DRAIN_EVENTS
@@ -63,6 +64,51 @@ def test_pin_process_with_nothing_asked_changes_nothing():
     assert realtime.pin_process([]) == ()
     if before is not None:
         assert os.sched_getaffinity(0) == before
+
+
+@linux_only
+def test_thread_priority_reaches_every_thread_but_not_child_processes():
+    """SCHED_FIFO for the threads there and to come; a worker process starts with normal ones."""
+    script = (
+        'import json, subprocess, sys, threading\n'
+        'from quat_jt_runtime import realtime\n'
+        'stop = threading.Event()\n'
+        'before = threading.Thread(target=stop.wait, daemon=True); before.start()\n'
+        'refused = realtime.set_thread_priority(7)\n'
+        'after = threading.Thread(target=stop.wait, daemon=True); after.start()\n'
+        'with realtime.children_at_normal_scheduling():\n'
+        '    child = subprocess.run([sys.executable, "-c", "import json; from quat_jt_runtime '
+        'import realtime; print(json.dumps(realtime.thread_policy()))"], capture_output=True, '
+        'text=True).stdout\n'
+        'late = threading.Thread(target=stop.wait, daemon=True); late.start()\n'
+        'print(json.dumps([refused, json.loads(child)]), flush=True)\n'
+        'input()\n'
+        'stop.set()\n')
+    proc = subprocess.Popen([sys.executable, '-c', script], stdin=subprocess.PIPE,
+                            stdout=subprocess.PIPE, text=True)
+    try:
+        refused, child = json.loads(proc.stdout.readline())
+        policies = thread_policies(proc.pid)
+        assert len(policies) >= 4, policies  # main, before, after, late
+        if refused:  # no right to it here: nothing changed, and the reason says how to allow it
+            assert 'rtprio' in refused and set(policies.values()) == {('other', 0)}, refused
+        else:
+            assert set(policies.values()) == {('fifo', 7)}, policies
+        assert child == ['other', 0]  # the goal-check worker, say: never at the loop's priority
+    finally:
+        proc.communicate('\n', timeout=10)
+
+
+def test_thread_priority_zero_changes_nothing_and_a_refusal_says_why(monkeypatch):
+    before = realtime.thread_policy()
+    assert realtime.set_thread_priority(0) == '' and realtime.thread_policy() == before
+
+    def refuse(*_args) -> None:
+        raise PermissionError(1, 'Operation not permitted')
+    monkeypatch.setattr(os, 'sched_setscheduler', refuse)
+    reason = realtime.set_thread_priority(50)
+    assert 'CAP_SYS_NICE' in reason and 'at least 50' in reason, reason
+    assert realtime.thread_policy() == before
 
 
 @linux_only

@@ -1,20 +1,22 @@
 """
-The ``cpu_affinity`` parameter of both nodes, and the tools' own node on loopback only.
+The ``cpu_affinity`` and ``thread_priority`` parameters of both nodes; the tools' own node.
 
-Each node pins every thread of its process; the parameter is read-only; a CPU the process may
-not use is a clear start-up error.
+Each node pins every thread of its process, and runs them at its priority in real time; the
+parameters are read-only; a CPU the process may not use is a clear start-up error. The tools'
+own node discovers on loopback only.
 """
 import os
 from pathlib import Path
 import random
 import subprocess
 
-from cpus import linux_only, thread_cpus, two_cpus
+from cpus import fifo_allowed, linux_only, thread_cpus, thread_policies, two_cpus
 from experiments import local_ros
-from process_harness import ProcessHarnessMixin
+from process_harness import children_of, ProcessHarnessMixin
 import pytest
 from quat_jt_runtime import lifecycle
 from quat_jt_runtime import realtime
+from quat_jt_runtime.params import Realtime
 import rclpy
 from rclpy.experimental import EventsExecutor
 from rclpy.parameter import Parameter
@@ -111,21 +113,69 @@ def test_the_tools_own_node_discovers_on_loopback_only(monkeypatch, tmp_path):
 
 
 @pytest.mark.node
-def test_composed_nodes_pin_their_process_once_to_all_their_cpus(monkeypatch):
-    """``lifecycle.pin``: the union of the nodes' cpu_affinity, one pin, one log line."""
-    pinned, logged = [], []
+def test_composed_nodes_share_one_pinning_and_the_highest_priority(monkeypatch):
+    """``lifecycle.apply_realtime``: the union of the CPUs, the highest priority, once each."""
+    pinned, raised, logged = [], [], []
 
     class FakeNode:
-        """A node as ``pin`` sees it: its cpu_affinity and a logger."""
+        """A node as ``apply_realtime`` sees it: its real-time settings and a logger."""
 
-        def __init__(self, cpus) -> None:
-            self.cpu_affinity = cpus
+        def __init__(self, cpus, priority) -> None:
+            self.realtime = Realtime(cpus, priority)
 
         def get_logger(self):
-            return type('Logger', (), {'info': lambda _self, text: logged.append(text)})()
+            return type('Logger', (), {
+                'info': lambda _self, text: logged.append(text),
+                'warning': lambda _self, text: logged.append('WARN ' + text)})()
 
     monkeypatch.setattr(realtime, 'pin_process', lambda cpus: pinned.append(cpus) or cpus)
-    lifecycle.pin([FakeNode((1,)), FakeNode((0, 1))])
-    assert pinned == [[0, 1]] and logged == ['process pinned to CPUs [0, 1] (cpu_affinity)']
-    lifecycle.pin([FakeNode(()), FakeNode(())])  # nothing asked: nothing pinned
-    assert len(pinned) == 1
+    monkeypatch.setattr(realtime, 'set_thread_priority', lambda p: raised.append(p) or '')
+    lifecycle.apply_realtime([FakeNode((1,), 0), FakeNode((0, 1), 50)])
+    assert pinned == [[0, 1]] and raised == [50]
+    assert logged == ['process pinned to CPUs [0, 1] (cpu_affinity)',
+                      'every thread at SCHED_FIFO priority 50 (thread_priority)']
+    lifecycle.apply_realtime([FakeNode((), 0), FakeNode((), 0)])  # nothing asked: nothing done
+    assert len(pinned) == 1 and len(raised) == 1 and len(logged) == 2
+    monkeypatch.setattr(realtime, 'set_thread_priority', lambda p: 'not permitted (...)')
+    lifecycle.apply_realtime([FakeNode((), 30)])  # refused: a warning, and the node runs on
+    assert logged[-1].startswith('WARN thread_priority 30: not permitted (...); running with '
+                                 'normal scheduling'), logged
+
+
+@pytest.mark.dds
+@linux_only
+def test_both_nodes_run_every_thread_at_their_priority_but_the_worker(tmp_path):
+    """By default (50) in real time; read-only; the goal-check worker at normal scheduling."""
+    ns = f'/priotest{random.randint(0, 9999)}'
+    allowed = fifo_allowed(realtime.DEFAULT_THREAD_PRIORITY)
+    h = _Harness(tmp_path)
+    try:
+        for executable in ('wrist_sim_node', 'controller_node'):
+            h.procs[executable] = local_ros.spawn_node(executable, h.env, tmp_path,
+                                                       ros_args=('-r', f'__ns:={ns}'))
+        clients = {'wrist_sim_node': AsyncParameterClient(h.node, f'{ns}/wrist_sim'),
+                   'controller_node': AsyncParameterClient(h.node,
+                                                           f'{ns}/quat_jt_controller')}
+        h.spin_until(lambda: all(c.services_are_ready() for c in clients.values()), 30.0,
+                     'both nodes')
+        for executable, client in clients.items():
+            # A reply means the node spins, which it does only once its settings are applied.
+            got = client.get_parameters(['thread_priority'])
+            h.spin_until(got.done, 10.0, 'get thread_priority')
+            assert got.result().values[0].integer_value == realtime.DEFAULT_THREAD_PRIORITY
+            policies = set(thread_policies(h.procs[executable].pid).values())
+            log = (tmp_path / f'{executable}.log').read_text()
+            if allowed:
+                assert policies == {('fifo', realtime.DEFAULT_THREAD_PRIORITY)}, policies
+                assert 'every thread at SCHED_FIFO priority 50 (thread_priority)' in log, log
+            else:
+                assert policies == {('other', 0)} and 'thread_priority 50: not permitted' in log
+            res = client.set_parameters([Parameter('thread_priority', value=10)])
+            h.spin_until(res.done, 10.0, 'set thread_priority')
+            assert not res.result().results[0].successful  # read-only
+        ctrl = h.procs['controller_node'].pid
+        h.spin_until(lambda: children_of(ctrl), 30.0, 'the goal-check worker')
+        for worker in children_of(ctrl):
+            assert set(thread_policies(worker).values()) == {('other', 0)}, worker
+    finally:
+        h.close()

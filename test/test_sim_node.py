@@ -60,11 +60,11 @@ def test_parameters_default_from_the_urdf(context):
 
 @pytest.mark.node
 def test_the_node_declares_exactly_its_table(context):
-    from quat_jt_runtime.params import CPU_AFFINITY
+    from quat_jt_runtime.params import REALTIME
     from wrist_sim import parameters as table
     node = _make_node(context)
     try:
-        rows = {spec.name: spec for spec in table.STRUCTURE + table.LIVE + (CPU_AFFINITY,)}
+        rows = {spec.name: spec for spec in table.STRUCTURE + table.LIVE + REALTIME}
         declared = set(node._parameters) - {'use_sim_time', 'start_type_description_service'}
         assert declared == set(rows)
         for name, spec in rows.items():

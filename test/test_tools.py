@@ -167,3 +167,17 @@ def test_goal_stream_reports_the_loop_and_the_tracking_error(tmp_path):
             figures['control'].get(key, 0.0)), (key, figures)
     assert 0.0 <= stream['median_error'] <= stream['max_error'] < 0.5
     assert '| 100 |' in out.stdout and 'tracking at 100 goals/s' in out.stdout
+
+
+def test_ctrl_c_counts_exits_and_what_ros2_launch_would_log(tmp_path):
+    """One round per mode: every process exits 0 without a traceback, its exit time given."""
+    out = subprocess.run([sys.executable, '-m', 'experiments.ctrl_c', '--rounds', '1',
+                          '--within', '1', '--out', str(tmp_path)],
+                         capture_output=True, text=True, timeout=300)
+    lines = {line.split(':', 1)[0]: line for line in out.stdout.splitlines()}
+    for process in ('controller_node', 'wrist_sim_node', 'composed'):
+        line = lines.get(process, '')
+        assert 'exit 0 without a traceback 1 of 1' in line, out.stdout + out.stderr
+        slowest_s = float(line.split('slowest exit ', 1)[1].split(' s', 1)[0])
+        assert 0.0 < slowest_s < 30.0, line  # timed from the SIGINT (the tool waits 30 s)
+        assert 'ERROR lines ros2 launch would log by its rules' in line, line

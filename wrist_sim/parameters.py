@@ -13,8 +13,8 @@ from dataclasses import dataclass
 from typing import Callable, Optional
 
 from quat_jt_runtime.joints import movable_joints
-from quat_jt_runtime.params import ChangeLog, CPU_AFFINITY, declare, joint_zeros
-from quat_jt_runtime.params import JOINT_ZEROS_TEXT, Kind, LiveParameters, names, Spec
+from quat_jt_runtime.params import ChangeLog, declare, joint_zeros, JOINT_ZEROS_TEXT, Kind
+from quat_jt_runtime.params import LiveParameters, names, REALTIME, Realtime, Spec
 from quat_jt_runtime.realtime import check_cpus
 from quat_jt_runtime.resources import default_urdf_xml
 from rclpy.node import Node
@@ -92,7 +92,7 @@ class SimStructure:
     enforce_velocity_limits: bool
     stats_file: str
     stats_window_steps: int
-    cpu_affinity: tuple[int, ...]
+    realtime: Realtime  # cpu_affinity, thread_priority (off in lockstep and with the window)
 
     @property
     def dt_ns(self) -> int:
@@ -110,7 +110,7 @@ def declare_structure(node: Node) -> SimStructure:
         raise SimulatorError(f'robot_description: {exc}') from None
     if not movable:
         raise SimulatorError('the URDF has no movable joints')
-    values = declare(node, STRUCTURE[1:] + (CPU_AFFINITY,), {'movable': movable})
+    values = declare(node, STRUCTURE[1:] + REALTIME, {'movable': movable})
     try:
         cpus = check_cpus(values['cpu_affinity'])  # pinned by lifecycle.run_node
     except ValueError as exc:
@@ -123,7 +123,8 @@ def declare_structure(node: Node) -> SimStructure:
         hold_until_first_command=bool(values['hold_until_first_command']),
         enforce_velocity_limits=bool(values['enforce_velocity_limits']),
         stats_file=values['stats_file'], stats_window_steps=int(values['stats_window_steps']),
-        cpu_affinity=cpus)
+        realtime=Realtime(cpus, 0 if values['publish_clock'] or values['use_gui']
+                          else int(values['thread_priority'])))
 
 
 def declare_live(node: Node, n_joints: int,

@@ -46,7 +46,7 @@ class WristSimNode(Node):
     def __init__(self, **kwargs: Any) -> None:
         super().__init__(NODE_NAME, **kwargs)
         p = self.structure = declare_structure(self)
-        self.cpu_affinity = p.cpu_affinity  # pinned by lifecycle.run_node
+        self.realtime = p.realtime  # applied by lifecycle.run_node
         self.live = declare_live(self, len(p.joints), on_apply=self._apply_config)
         self._change_log = change_log(self, self.live)
         c = self.live.current
