@@ -35,7 +35,7 @@ Panda: the same two-process figures, pinned, for the 7-DOF Panda with its produc
 ``launch/panda_demo.launch.py`` and holding it, in the same run (``--no-panda`` skips it).
 
     python -m experiments.benchmark [--duration 30] [--composed-duration 60]
-        [--prewarm-lead S] [--out results/bench]
+        [--prewarm-lead S] [--thread-priority P] [--out results/bench]
 
 ``--prewarm-pairs N`` runs only the comparison behind the controller's ``prewarm_lead``: N pairs
 of two-process runs, the throwaway tick off then on, each ``--duration`` s, not pinned and then
@@ -122,18 +122,22 @@ def _cpu_times() -> list[int]:
 
 
 def baseline_benchmark(duration_s: float, warmup_s: float, out: Path,
-                       cpus: tuple[tuple[int, ...], tuple[int, ...]] = ((), ())) -> dict:
+                       cpus: tuple[tuple[int, ...], tuple[int, ...]] = ((), ()),
+                       thread_priority: Optional[int] = None) -> dict:
     """
     Run the minimal pair; return its loop statistics (LoopStats.summary of its sim).
 
-    ``cpus``: the CPUs of its sim and its controller, as for :func:`loop_benchmark`.
+    ``cpus``: the CPUs of its sim and its controller, as for :func:`loop_benchmark`;
+    ``thread_priority``: its ``--priority`` (None: the nodes' default, as the nodes).
     """
     out = out / ('baseline_pinned' if any(cpus) else 'baseline')
     out.mkdir(parents=True, exist_ok=True)
     env = local_ros.isolated_env(out, random.randint(1, 100))
     stats_file = out / 'minimal_pair_stats.json'
     stats_file.unlink(missing_ok=True)
-    sim_cpus, ctrl_cpus = (tuple(a for c in each for a in ('--cpu', str(c))) for each in cpus)
+    priority = () if thread_priority is None else (f'--priority={thread_priority}',)
+    sim_cpus, ctrl_cpus = (tuple(a for c in each for a in ('--cpu', str(c))) + priority
+                           for each in cpus)
     ctrl = local_ros.spawn_node('minimal_pair', env, out, name='minimal_controller',
                                 args=('--role', 'controller', *ctrl_cpus))
     sim = local_ros.spawn_node('minimal_pair', env, out, name='minimal_sim',
@@ -160,13 +164,15 @@ PANDA_GOAL = ('panda_link0', (0.3514, 0.2278, 0.6777), (-0.9678, 0.2055, -0.1104
 
 def loop_benchmark(duration_s: float, warmup_s: float, out: Path, composed: bool = False,
                    cpus: tuple[tuple[int, ...], tuple[int, ...]] = ((), ()),
-                   controller_params: Optional[dict] = None, robot: str = 'wrist') -> dict:
+                   controller_params: Optional[dict] = None, robot: str = 'wrist',
+                   thread_priority: Optional[int] = None) -> dict:
     """
     Measure the real-time loop of the two nodes: two processes, or composed in one.
 
     ``cpus``: the simulator's and the controller's ``cpu_affinity`` (composed: the process is
     pinned to both); empty = not pinned. ``controller_params`` override the paper's config.
     ``robot='panda'``: the Panda with ``config/panda_*.yaml`` (two processes), to PANDA_GOAL.
+    ``thread_priority``: both nodes' (None: their default).
     """
     from diagnostic_msgs.msg import DiagnosticArray
     from experiments.probe import ProbeNode
@@ -199,6 +205,8 @@ def loop_benchmark(duration_s: float, warmup_s: float, out: Path, composed: bool
     for params, cpu_affinity in zip((sim_params, controller_params), cpus):
         if cpu_affinity:
             params['cpu_affinity'] = list(cpu_affinity)
+        if thread_priority is not None:
+            params['thread_priority'] = thread_priority
     sim, ctrl = local_ros.spawn_wrist_pair(env, out, sim_params=sim_params,
                                            controller_params=controller_params,
                                            composed=composed, **configs)
@@ -256,8 +264,10 @@ def loop_benchmark(duration_s: float, warmup_s: float, out: Path, composed: bool
         raise RuntimeError(f'no controller diagnostics received; logs in {out}')
     full = [w for w in windows if int(w['ticks_in_window']) > 0]
     passes = [int(w.get('prewarm_passes_total', 0)) for w in full]
+    logs = ''.join(path.read_text(errors='replace') for path in out.glob('*.log'))
     return {
         'duration_s': wall,
+        'sched_fifo': 'every thread at SCHED_FIFO' in logs,  # thread_priority applied
         'sim': sim_stats,
         'controller_windows': full,
         'cpu_percent': ({'composed': cpu[sim.pid]} if composed else
@@ -316,7 +326,7 @@ def pinned_layout() -> tuple[tuple[int, ...], tuple[int, ...]]:
 
 def report(loops: dict, baselines: dict, core: dict, lockstep: dict,
            layout: tuple[tuple[int, ...], tuple[int, ...]],
-           prewarm_text: str = 'its default') -> str:
+           prewarm_text: str = 'its default', priority_text: str = 'its default') -> str:
     """
     Return the figures as a markdown table: each mode beside the minimal pair run the same way.
 
@@ -387,7 +397,10 @@ def report(loops: dict, baselines: dict, core: dict, lockstep: dict,
     lines += ['| ' + ' | '.join(row) + ' |' for row in rows]
     lines += ['', f'Pinned: simulator on CPU {list(layout[0])}, controller on CPU '
               f'{list(layout[1])} (``cpu_affinity``); the minimal pair likewise. The '
-              f"controller's prewarm_lead: {prewarm_text}.", '',
+              f"controller's prewarm_lead: {prewarm_text}. The nodes' thread_priority: "
+              f'{priority_text}; SCHED_FIFO in '
+              f'{sum(1 for r in loops.values() if r.get("sched_fifo"))} of {len(loops)} runs '
+              '(the lockstep runs: never).', '',
               '| figure | two processes | composed | target |', '|---|---|---|---|',
               f'| paper experiment in lockstep (x real time) | {lock("two processes")} | '
               f'{lock("composed")} | {TARGETS["lockstep (x real time)"]} |']
@@ -458,6 +471,9 @@ def main(argv: Optional[list] = None) -> int:
     parser.add_argument('--prewarm-lead', type=float, default=None,
                         help="the controller's prewarm_lead (s) in the two-process runs; "
                              'default: its own default (0 = off)')
+    parser.add_argument('--thread-priority', type=int, default=None,
+                        help="both nodes' and the minimal pair's thread_priority in the "
+                        "real-time runs (default: the nodes' default; 0: normal scheduling)")
     parser.add_argument('--warmup', type=float, default=3.0)
     parser.add_argument('--out', type=Path, default=Path('results/bench'))
     parser.add_argument('--page', type=Path,
@@ -493,17 +509,22 @@ def main(argv: Optional[list] = None) -> int:
             print('fewer than 2 CPUs: no pinned run')
             continue
         print(f'baseline ({mode}): a minimal rclpy pair for {args.duration} s')
-        baselines[mode] = baseline_benchmark(args.duration, args.warmup, args.out, cpus)
+        baselines[mode] = baseline_benchmark(args.duration, args.warmup, args.out, cpus,
+                                             args.thread_priority)
         loops[mode] = loop_benchmark(args.duration, args.warmup, args.out, cpus=cpus,
-                                     controller_params=prewarm)
+                                     controller_params=prewarm,
+                                     thread_priority=args.thread_priority)
     loops[COMPOSED] = loop_benchmark(args.composed_duration, args.warmup, args.out,
-                                     composed=True)
+                                     composed=True, thread_priority=args.thread_priority)
     if not args.no_panda:
         loops[PANDA] = loop_benchmark(args.duration, args.warmup, args.out, cpus=layout,
-                                      controller_params=dict(prewarm), robot='panda')
+                                      controller_params=dict(prewarm), robot='panda',
+                                      thread_priority=args.thread_priority)
     lockstep = lockstep_benchmark(args.out, args.lockstep_duration)
     text = report(loops, baselines, core, lockstep, layout,
-                  'its default' if args.prewarm_lead is None else f'{args.prewarm_lead:g} s')
+                  'its default' if args.prewarm_lead is None else f'{args.prewarm_lead:g} s',
+                  f'its default ({realtime.DEFAULT_THREAD_PRIORITY})'
+                  if args.thread_priority is None else str(args.thread_priority))
     (args.out / 'bench.json').write_text(json.dumps(
         {'loops': loops, 'core': core, 'baselines': baselines, 'lockstep': lockstep,
          'pinned_layout': layout}, indent=1))

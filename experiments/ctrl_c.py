@@ -68,7 +68,7 @@ def one_round(mode: str, within_s: float, work_dir: Path, rng: random.Random) ->
         time.sleep(0.005)
     records = []
     for name, proc in procs.items():
-        code = local_ros.stop_node(proc, timeout=1.0)  # interrupted 30 s ago: waits, or kills
+        code = local_ros.stop_node(proc, timeout=1.0)  # exited, or 30 s past the SIGINT: killed
         log = (work_dir / f'{name}.log').read_text(errors='replace')
         records.append({'process': name, 'delay_s': delay_s, 'second_sigint': second,
                         'exit_code': code, 'traceback': 'Traceback' in log,

@@ -114,7 +114,7 @@ def soak(duration_s: float, out: Path, load: int = 0, report_s: float = 60.0,
         b.start()
     priority = {} if thread_priority is None else {'thread_priority': thread_priority}
     if minimal:  # the host's floor: the same topics, no law, no physics
-        flags = tuple(f'--priority={p}' for p in priority.values())
+        flags = () if thread_priority is None else (f'--priority={thread_priority}',)
         ctrl = local_ros.spawn_node('minimal_pair', env, out, name='controller_node',
                                     args=('--role', 'controller') + flags)
         sim = local_ros.spawn_node('minimal_pair', env, out, name='wrist_sim_node',

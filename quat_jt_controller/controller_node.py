@@ -42,7 +42,9 @@ class QuatJtController(Node):
         """Build the node; ``prewarm=False``: never a throwaway tick (the composed mode)."""
         super().__init__(NODE_NAME, **kwargs)
         cfg = self.config = parameters.declare_structural(self)
-        settings = declare_realtime(self)  # applied by lifecycle.run_node
+        self._use_sim_time = bool(self.get_parameter('use_sim_time').value)
+        # applied by lifecycle.run_node; on simulated time there are no deadlines to keep
+        self.realtime = declare_realtime(self, 'simulated time' if self._use_sim_time else '')
         try:
             model = RobotModel(cfg.robot_description, cfg.base_link, cfg.tip_link, cfg.joints)
         except ModelError as exc:
@@ -56,9 +58,6 @@ class QuatJtController(Node):
         reg.set_shaping(self.shaping.current)
         self._change_log = parameters.change_log(self, reg)
         self._check_state = StateCheck(cfg.joints, cfg.max_state_age_s)
-        self._use_sim_time = bool(self.get_parameter('use_sim_time').value)
-        # On simulated time there are no deadlines to keep: normal scheduling.
-        self.realtime = settings._replace(thread_priority=0) if self._use_sim_time else settings
         self._goal_checker = GoalCheckWorker(ModelSpec(
             cfg.robot_description, cfg.base_link, cfg.tip_link, cfg.joints, cfg.task))
         self.supervisor = Supervisor(reg, cfg.state_timeout_s, cfg.publish_rate_divider,

@@ -31,7 +31,7 @@ import numpy as np
 from quat_jt_controller import quaternion as quat
 from quat_jt_controller.control_law import Task
 from quat_jt_controller.model import RobotModel
-from quat_jt_runtime.realtime import children_at_normal_scheduling
+from quat_jt_runtime.realtime import start_at_normal_scheduling
 
 SINGULAR_SIGMA_MIN = 0.05  # sigma_min(J) below this at the goal: reported singular (A2)
 RESIDUAL_TOLERANCE = 1e-4  # IK residual (m and rad) below this: the goal is reached (A1)
@@ -441,11 +441,10 @@ class GoalCheckWorker:
         # begins with normal scheduling: it must never compete with the loop.
         mask = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
         try:
-            with children_at_normal_scheduling():
-                self._proc = subprocess.Popen(
-                    [sys.executable, '-m', 'quat_jt_controller.goal_check'],
-                    stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=None, text=True,
-                    bufsize=1, start_new_session=True)
+            self._proc = start_at_normal_scheduling(lambda: subprocess.Popen(
+                [sys.executable, '-m', 'quat_jt_controller.goal_check'],
+                stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=None, text=True,
+                bufsize=1, start_new_session=True))
         finally:
             signal.pthread_sigmask(signal.SIG_SETMASK, mask)
         spec = self._spec

@@ -37,9 +37,9 @@ def apply_realtime(nodes: list) -> None:
     Apply the nodes' real-time settings (``realtime``: ``params.Realtime``), once all are built.
 
     The process is pinned to the CPUs they ask for (``cpu_affinity``) and its threads run at
-    their ``thread_priority``. Composed nodes share the process: the union of their CPUs, the
-    highest of their priorities. A priority that is refused is a warning, not an error: the
-    node runs with normal scheduling.
+    the highest of their ``thread_priority``, unless a node's mode needs normal scheduling
+    (its ``off_reason``: then no thread is raised, composed nodes included). A priority that is
+    refused is a warning, not an error: the node runs with normal scheduling.
     """
     settings = [node.realtime for node in nodes if getattr(node, 'realtime', None) is not None]
     logger = nodes[0].get_logger()
@@ -48,7 +48,10 @@ def apply_realtime(nodes: list) -> None:
         pinned = realtime.pin_process(cpus)
         logger.info(f'process pinned to CPUs {list(pinned)} (cpu_affinity)')
     priority = max((s.thread_priority for s in settings), default=0)
-    if priority:
+    off = sorted({s.off_reason for s in settings if s.off_reason})
+    if priority and off:
+        logger.info(f'thread_priority {priority}: off ({", ".join(off)}): normal scheduling')
+    elif priority:
         refused = realtime.set_thread_priority(priority)
         if refused:
             logger.warning(f'thread_priority {priority}: {refused}; running with normal '

@@ -269,15 +269,22 @@ class Realtime(NamedTuple):
 
     cpus: tuple[int, ...]  # empty: not pinned
     thread_priority: int  # 0: normal scheduling
+    off_reason: str = ''  # why this node's mode needs normal scheduling ('' if it does not)
 
 
-def declare_realtime(node: Node) -> Realtime:
+def realtime_from(values: Mapping[str, Any], off_reason: str = '') -> Realtime:
+    """Return the Realtime of declared ``values``; raise ValueError for an unavailable CPU."""
+    return Realtime(check_cpus(values['cpu_affinity']), int(values['thread_priority']),
+                    off_reason)
+
+
+def declare_realtime(node: Node, off_reason: str = '') -> Realtime:
     """
     Declare the read-only ``cpu_affinity`` and ``thread_priority``; return them.
 
+    ``off_reason`` says why the node's mode needs normal scheduling (simulated time, say).
     ``lifecycle.run_node`` applies them once the process's nodes are built
     (``realtime.pin_process``, ``realtime.set_thread_priority``). Raises ValueError if a CPU is
     not available to the process.
     """
-    values = declare(node, REALTIME)
-    return Realtime(check_cpus(values['cpu_affinity']), int(values['thread_priority']))
+    return realtime_from(declare(node, REALTIME), off_reason)

@@ -14,10 +14,10 @@ real-time deployment of a 1 kHz loop sets (ros2_control's controller_manager has
 * **Thread priority.** Every thread of a node's process (the DDS threads too) runs in
   ``SCHED_FIFO`` at the node's ``thread_priority`` (50 by default, as ros2_control's
   controller_manager), so no ordinary process can preempt the loop or a DDS thread that holds
-  a lock the loop needs. On the test machine, with a short-lived ROS process started every 3 s
-  beside the nodes, the simulator's largest period fell from 11-17 ms to 2-4 ms
-  (docs/benchmark.md, 'Soak'). A child process started within
-  :func:`children_at_normal_scheduling` (the goal-check worker) starts with normal scheduling,
+  a lock the loop needs. On the test machine, with a short-lived ROS process started every 10 s
+  beside the nodes, the simulator's largest period per minute fell from 8.2-13.4 ms to
+  2.0-3.7 ms (docs/benchmark.md, 'A CLI process every 10 s'). A child process started through
+  :func:`start_at_normal_scheduling` (the goal-check worker) starts with normal scheduling,
   so it never competes with the loop.
 * **Timer slack.** Linux lets a sleeping thread wake up to 50 us late (the default slack) so
   that wake-ups can be merged. The simulator's real-time loop sleeps until just before each
@@ -32,13 +32,14 @@ real-time deployment of a 1 kHz loop sets (ros2_control's controller_manager has
   40 us; pinned, the missed ticks fell by about half; for about 5 points more CPU.
 * :class:`RunCheck`: the nodes' "keep running?" check, cheap enough to ask after every event.
 """
-import contextlib
 import ctypes
 import os
 import sys
+import threading
 import time
-from typing import Any, Callable, Iterable, Iterator, Optional
+from typing import Any, Callable, Iterable, Optional, TypeVar
 
+T = TypeVar('T')
 PR_SET_TIMERSLACK = 29  # <linux/prctl.h>
 PR_GET_TIMERSLACK = 30
 # The real-time loop sleeps (timer slack 1 ns) until this long before a tick, then busy-waits
@@ -129,7 +130,7 @@ def set_thread_priority(priority: int) -> str:
     Run every thread of this process in ``SCHED_FIFO`` at ``priority``; return '' or why not.
 
     0 changes nothing. Threads started later inherit it, and so do child processes, unless
-    started within :func:`children_at_normal_scheduling`. Refused without the right to
+    started through :func:`start_at_normal_scheduling`. Refused without the right to
     (``CAP_SYS_NICE``, or an ``rtprio`` limit of at least ``priority``): then nothing changes
     and the reason says how to allow it.
     """
@@ -143,41 +144,47 @@ def set_thread_priority(priority: int) -> str:
         os.sched_setscheduler(0, os.SCHED_FIFO, param)  # this thread first: a refusal, no harm
     except PermissionError:
         return ('not permitted (it needs CAP_SYS_NICE, or an rtprio limit of at least '
-                f'{priority}: `ulimit -r`, /etc/security/limits.conf)')
+                f'{priority}: `ulimit -r`, /etc/security/limits.conf; in a container with '
+                'real-time group scheduling, a cpu.rt_runtime_us above 0 too)')
     except OSError as exc:
         return f'SCHED_FIFO refused: {exc.strerror or exc}'
-    _every_thread(lambda tid: os.sched_setscheduler(tid, os.SCHED_FIFO, param))
+    try:
+        _every_thread(lambda tid: os.sched_setscheduler(tid, os.SCHED_FIFO, param))
+    except OSError as exc:  # this thread has it, another refused: say so
+        return f'SCHED_FIFO refused for a thread of this process: {exc.strerror or exc}'
     return ''
 
 
-@contextlib.contextmanager
-def children_at_normal_scheduling() -> Iterator[None]:
+def start_at_normal_scheduling(start: Callable[[], T]) -> T:
     """
-    Within this block, a process this thread starts begins with normal scheduling.
+    Return ``start()``, run so that a process it starts begins with normal scheduling.
 
-    A real-time thread (``SCHED_FIFO``, :func:`set_thread_priority`) is flagged
-    ``SCHED_RESET_ON_FORK`` for the block only (threads it started meanwhile would lose the
-    priority too), so its child starts as ``SCHED_OTHER``, nice 0. Elsewhere it does nothing.
+    From a real-time thread (``SCHED_FIFO``, :func:`set_thread_priority`), ``start`` runs in a
+    short-lived thread of its own flagged ``SCHED_RESET_ON_FORK``: its child starts as
+    ``SCHED_OTHER``, nice 0. That thread ends with the flag, since only a privileged thread may
+    clear it (an ``rtprio`` limit suffices to set it), and a thread the flagged one started
+    would lose the priority too. The helper starts with the caller's signal mask. An exception
+    of ``start`` is raised here. From any other thread, ``start()`` is called as is.
     """
     flag = getattr(os, 'SCHED_RESET_ON_FORK', 0)
     policy = os.sched_getscheduler(0) if flag else None
     if policy is None or policy & ~flag not in (os.SCHED_FIFO, os.SCHED_RR):
-        yield
-        return
-    param = os.sched_getparam(0)
-    os.sched_setscheduler(0, policy | flag, param)
-    try:
-        yield
-    finally:
-        os.sched_setscheduler(0, policy, param)
+        return start()
+    outcome: list = []
 
-
-def thread_policy(tid: int = 0) -> tuple[str, int]:
-    """Return a thread's scheduling policy name ('fifo', 'other', ...) and priority."""
-    policy = os.sched_getscheduler(tid) & ~getattr(os, 'SCHED_RESET_ON_FORK', 0)
-    names = {os.SCHED_OTHER: 'other', os.SCHED_FIFO: 'fifo', os.SCHED_RR: 'rr',
-             getattr(os, 'SCHED_BATCH', -1): 'batch', getattr(os, 'SCHED_IDLE', -2): 'idle'}
-    return names.get(policy, str(policy)), os.sched_getparam(tid).sched_priority
+    def run() -> None:
+        try:
+            os.sched_setscheduler(0, policy | flag, os.sched_getparam(0))
+            outcome.append((True, start()))
+        except BaseException as exc:  # noqa: B902 - re-raised in the caller's thread
+            outcome.append((False, exc))
+    helper = threading.Thread(target=run, name='start_at_normal_scheduling')
+    helper.start()
+    helper.join()
+    ok, value = outcome[0]
+    if not ok:
+        raise value
+    return value
 
 
 def _prctl(option: int, value: int = 0) -> int:

@@ -1,5 +1,7 @@
-"""What the CPU tests share: skips, and the CPUs each thread of a process may run on."""
+"""What the CPU tests share: skips, and the CPUs and scheduling of each thread of a process."""
+import os
 from pathlib import Path
+import subprocess
 import sys
 
 import pytest
@@ -24,12 +26,20 @@ def thread_cpus(pid: int) -> dict[int, str]:
     return out
 
 
+def thread_policy(tid: int = 0) -> tuple[str, int]:
+    """Return a thread's scheduling policy ('fifo', 'other', ...) and priority (Linux)."""
+    policy = os.sched_getscheduler(tid) & ~getattr(os, 'SCHED_RESET_ON_FORK', 0)
+    names = {os.SCHED_OTHER: 'other', os.SCHED_FIFO: 'fifo', os.SCHED_RR: 'rr',
+             getattr(os, 'SCHED_BATCH', -1): 'batch', getattr(os, 'SCHED_IDLE', -2): 'idle'}
+    return names.get(policy, str(policy)), os.sched_getparam(tid).sched_priority
+
+
 def thread_policies(pid: int) -> dict[int, tuple[str, int]]:
     """Return ``{thread id: (policy, priority)}`` of every thread of ``pid``."""
     out = {}
     for task in Path(f'/proc/{pid}/task').iterdir():
         try:
-            out[int(task.name)] = realtime.thread_policy(int(task.name))
+            out[int(task.name)] = thread_policy(int(task.name))
         except ProcessLookupError:  # the thread ended meanwhile
             continue
     return out
@@ -37,7 +47,6 @@ def thread_policies(pid: int) -> dict[int, tuple[str, int]]:
 
 def fifo_allowed(priority: int = 1) -> bool:
     """Tell whether a process started here may run in SCHED_FIFO (root, or an rtprio limit)."""
-    import subprocess
     script = ('from quat_jt_runtime import realtime\n'
               f'print(repr(realtime.set_thread_priority({priority})))')
     out = subprocess.run([sys.executable, '-c', script], capture_output=True, text=True,

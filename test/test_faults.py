@@ -334,6 +334,8 @@ def test_the_goal_check_worker_ignores_ctrl_c_and_comes_back_when_it_dies(pair):
     pair.spin_until(lambda: [w for w in children_of(ctrl.pid) if w != first and alive(w)],
                     30.0, 'the restarted worker')
     [second] = [w for w in children_of(ctrl.pid) if w != first and alive(w)]
+    # Started from the node's real-time thread, it still runs with normal scheduling.
+    assert set(thread_policies(second).values()) == {('other', 0)}, second
     os.kill(second, signal.SIGINT)
     pair.send_paper_goal()
     pair.spin_until(lambda: pair.error_norm() < 1e-2, 30.0, 'the paper goal')

@@ -36,25 +36,30 @@ class _Harness(ProcessHarnessMixin):
         self.executor.add_node(self.node)
         self.procs: dict[str, subprocess.Popen] = {}
 
+    def start_both(self, params: dict) -> dict[str, AsyncParameterClient]:
+        """Start both nodes in a namespace of their own; return their parameter clients."""
+        ns = f'/rttest{random.randint(0, 9999)}'
+        for executable in ('wrist_sim_node', 'controller_node'):
+            self.procs[executable] = local_ros.spawn_node(
+                executable, self.env, self.work_dir, params=params,
+                ros_args=('-r', f'__ns:={ns}'))
+        clients = {'wrist_sim_node': AsyncParameterClient(self.node, f'{ns}/wrist_sim'),
+                   'controller_node': AsyncParameterClient(self.node,
+                                                           f'{ns}/quat_jt_controller')}
+        self.spin_until(lambda: all(c.services_are_ready() for c in clients.values()), 30.0,
+                        'both nodes')
+        return clients
+
 
 @pytest.mark.dds
 @linux_only
 @two_cpus
 def test_cpu_affinity_pins_each_node_and_is_read_only(tmp_path):
     """Both nodes pin their whole process; the parameter cannot be changed live."""
-    ns = f'/pintest{random.randint(0, 9999)}'
     cpu = max(realtime.allowed_cpus())
     h = _Harness(tmp_path)
     try:
-        for executable in ('wrist_sim_node', 'controller_node'):
-            h.procs[executable] = local_ros.spawn_node(
-                executable, h.env, tmp_path, params={'cpu_affinity': [cpu]},
-                ros_args=('-r', f'__ns:={ns}'))
-        clients = {'wrist_sim_node': AsyncParameterClient(h.node, f'{ns}/wrist_sim'),
-                   'controller_node': AsyncParameterClient(h.node,
-                                                           f'{ns}/quat_jt_controller')}
-        h.spin_until(lambda: all(c.services_are_ready() for c in clients.values()), 30.0,
-                     'both nodes')
+        clients = h.start_both({'cpu_affinity': [cpu]})
         for executable, client in clients.items():
             # A reply means the node spins, which it does only once its process is pinned.
             got = client.get_parameters(['cpu_affinity'])
@@ -114,14 +119,14 @@ def test_the_tools_own_node_discovers_on_loopback_only(monkeypatch, tmp_path):
 
 @pytest.mark.node
 def test_composed_nodes_share_one_pinning_and_the_highest_priority(monkeypatch):
-    """``lifecycle.apply_realtime``: the union of the CPUs, the highest priority, once each."""
+    """``lifecycle.apply_realtime``: the union of the CPUs, the highest priority, or none."""
     pinned, raised, logged = [], [], []
 
     class FakeNode:
         """A node as ``apply_realtime`` sees it: its real-time settings and a logger."""
 
-        def __init__(self, cpus, priority) -> None:
-            self.realtime = Realtime(cpus, priority)
+        def __init__(self, cpus, priority, off_reason='') -> None:
+            self.realtime = Realtime(cpus, priority, off_reason)
 
         def get_logger(self):
             return type('Logger', (), {
@@ -140,24 +145,20 @@ def test_composed_nodes_share_one_pinning_and_the_highest_priority(monkeypatch):
     lifecycle.apply_realtime([FakeNode((), 30)])  # refused: a warning, and the node runs on
     assert logged[-1].startswith('WARN thread_priority 30: not permitted (...); running with '
                                  'normal scheduling'), logged
+    # Composed with a simulator in lockstep (or with its window): no thread is raised.
+    raised.clear()
+    lifecycle.apply_realtime([FakeNode((), 0, 'lockstep'), FakeNode((), 50)])
+    assert raised == [] and logged[-1] == 'thread_priority 50: off (lockstep): normal scheduling'
 
 
 @pytest.mark.dds
 @linux_only
 def test_both_nodes_run_every_thread_at_their_priority_but_the_worker(tmp_path):
     """By default (50) in real time; read-only; the goal-check worker at normal scheduling."""
-    ns = f'/priotest{random.randint(0, 9999)}'
     allowed = fifo_allowed(realtime.DEFAULT_THREAD_PRIORITY)
     h = _Harness(tmp_path)
     try:
-        for executable in ('wrist_sim_node', 'controller_node'):
-            h.procs[executable] = local_ros.spawn_node(executable, h.env, tmp_path,
-                                                       ros_args=('-r', f'__ns:={ns}'))
-        clients = {'wrist_sim_node': AsyncParameterClient(h.node, f'{ns}/wrist_sim'),
-                   'controller_node': AsyncParameterClient(h.node,
-                                                           f'{ns}/quat_jt_controller')}
-        h.spin_until(lambda: all(c.services_are_ready() for c in clients.values()), 30.0,
-                     'both nodes')
+        clients = h.start_both({})
         for executable, client in clients.items():
             # A reply means the node spins, which it does only once its settings are applied.
             got = client.get_parameters(['thread_priority'])

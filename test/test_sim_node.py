@@ -77,6 +77,21 @@ def test_the_node_declares_exactly_its_table(context):
 
 
 @pytest.mark.node
+@pytest.mark.parametrize('overrides, off_reason', [
+    ({}, ''), ({'publish_clock': True}, 'lockstep'), ({'use_gui': True}, 'the PyBullet window')])
+def test_thread_priority_is_off_in_lockstep_and_with_the_window(context, overrides, off_reason):
+    """Read from the table alone (no simulator, no window): the mode decides, not the value."""
+    from wrist_sim.parameters import declare_structure
+    node = rclpy.create_node('structure_test', context=context, parameter_overrides=[
+        Parameter(k, value=v) for k, v in overrides.items()])
+    try:
+        settings = declare_structure(node).realtime
+        assert settings.thread_priority == 50 and settings.off_reason == off_reason
+    finally:
+        node.destroy_node()
+
+
+@pytest.mark.node
 def test_friction_parameters_are_validated_and_applied(context):
     node = _make_node(context, coulomb_friction=[0.5, 0.5, 0.5])
     try:

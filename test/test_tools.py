@@ -174,10 +174,13 @@ def test_ctrl_c_counts_exits_and_what_ros2_launch_would_log(tmp_path):
     out = subprocess.run([sys.executable, '-m', 'experiments.ctrl_c', '--rounds', '1',
                           '--within', '1', '--out', str(tmp_path)],
                          capture_output=True, text=True, timeout=300)
+    assert out.returncode == 0, out.stdout + out.stderr
     lines = {line.split(':', 1)[0]: line for line in out.stdout.splitlines()}
     for process in ('controller_node', 'wrist_sim_node', 'composed'):
         line = lines.get(process, '')
         assert 'exit 0 without a traceback 1 of 1' in line, out.stdout + out.stderr
         slowest_s = float(line.split('slowest exit ', 1)[1].split(' s', 1)[0])
-        assert 0.0 < slowest_s < 30.0, line  # timed from the SIGINT (the tool waits 30 s)
-        assert 'ERROR lines ros2 launch would log by its rules' in line, line
+        assert slowest_s > 0.0, line  # timed from the SIGINT
+        # launch's rules: a status other than 0, or SIGTERM 5 s after the SIGINT, is an ERROR
+        assert line.endswith('ERROR lines ros2 launch would log by its rules (exit status, '
+                             'SIGTERM after 5 s): 0'), line

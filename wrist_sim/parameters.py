@@ -14,8 +14,8 @@ from typing import Callable, Optional
 
 from quat_jt_runtime.joints import movable_joints
 from quat_jt_runtime.params import ChangeLog, declare, joint_zeros, JOINT_ZEROS_TEXT, Kind
-from quat_jt_runtime.params import LiveParameters, names, REALTIME, Realtime, Spec
-from quat_jt_runtime.realtime import check_cpus
+from quat_jt_runtime.params import LiveParameters, names, REALTIME, Realtime, realtime_from
+from quat_jt_runtime.params import Spec
 from quat_jt_runtime.resources import default_urdf_xml
 from rclpy.node import Node
 from wrist_sim.config import SimConfig
@@ -111,8 +111,12 @@ def declare_structure(node: Node) -> SimStructure:
     if not movable:
         raise SimulatorError('the URDF has no movable joints')
     values = declare(node, STRUCTURE[1:] + REALTIME, {'movable': movable})
+    # Applied by lifecycle.run_node; no deadlines in lockstep, and the window renders in a
+    # thread of its own: normal scheduling there.
+    off = 'lockstep' if values['publish_clock'] else 'the PyBullet window' if values[
+        'use_gui'] else ''
     try:
-        cpus = check_cpus(values['cpu_affinity'])  # pinned by lifecycle.run_node
+        settings = realtime_from(values, off)
     except ValueError as exc:
         raise SimulatorError(str(exc)) from None
     return SimStructure(
@@ -123,8 +127,7 @@ def declare_structure(node: Node) -> SimStructure:
         hold_until_first_command=bool(values['hold_until_first_command']),
         enforce_velocity_limits=bool(values['enforce_velocity_limits']),
         stats_file=values['stats_file'], stats_window_steps=int(values['stats_window_steps']),
-        realtime=Realtime(cpus, 0 if values['publish_clock'] or values['use_gui']
-                          else int(values['thread_priority'])))
+        realtime=settings)
 
 
 def declare_live(node: Node, n_joints: int,
