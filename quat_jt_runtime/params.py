@@ -257,8 +257,8 @@ CPU_AFFINITY = Spec(
 THREAD_PRIORITY = Spec(
     'thread_priority', Kind.INT, DEFAULT_THREAD_PRIORITY,
     'SCHED_FIFO priority of every thread of this process (1-99) while it runs in real time; '
-    '0 = normal scheduling. No ordinary process then delays the loop (docs/ros.md, Real-time '
-    'settings). Needs CAP_SYS_NICE or an rtprio limit: if refused, a warning and normal '
+    '0 = normal scheduling. Ordinary processes then do not preempt the loop (docs/ros.md, '
+    'Real-time settings). Needs CAP_SYS_NICE or an rtprio limit: if refused, a warning and normal '
     'scheduling. Not applied on simulated time (lockstep) or with the PyBullet window.',
     read_only=True, bounds=(0, 99))
 REALTIME = (CPU_AFFINITY, THREAD_PRIORITY)  # every node of this package has these rows

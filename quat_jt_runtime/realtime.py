@@ -16,7 +16,7 @@ real-time deployment of a 1 kHz loop sets (ros2_control's controller_manager has
   controller_manager), so no ordinary process can preempt the loop or a DDS thread that holds
   a lock the loop needs. On the test machine, with a short-lived ROS process started every 10 s
   beside the nodes, the simulator's largest period per minute fell from 8.2-13.4 ms to
-  2.0-3.7 ms (docs/benchmark.md, 'A CLI process every 10 s'). A child process started through
+  2.0-3.9 ms (docs/benchmark.md, 'A CLI process every 10 s'). A child process started through
   :func:`start_at_normal_scheduling` (the goal-check worker) starts with normal scheduling,
   so it never competes with the loop.
 * **Timer slack.** Linux lets a sleeping thread wake up to 50 us late (the default slack) so
