@@ -19,6 +19,10 @@ also gives the simulator's largest period, from the stamps of its states (its pu
 times, so this process's own delays do not count). Target (streamed-goals issue): under 10 ms
 with a CLI process every 10 s.
 
+``--echo`` makes each of those processes a ``ros2 topic echo --once`` instead: it joins the
+next topic the nodes publish, in turn (``experiments/listener_churn.py``), takes one message
+and leaves; the readers a writer has never seen are what once stalled the loop.
+
 ``--minimal`` runs the benchmark's minimal state/command pair (``experiments/minimal_pair.py``)
 in place of the nodes, with no goals: the host's floor under the same churn, to compare the
 simulator's largest period with.
@@ -27,7 +31,7 @@ simulator's largest period with.
 default they run at theirs (50, SCHED_FIFO); 0 runs them with normal scheduling, as before
 that parameter existed.
 
-    python -m experiments.soak [--duration 600] [--load 0] [--churn 10] [--minimal]
+    python -m experiments.soak [--duration 600] [--load 0] [--churn 10 [--echo]] [--minimal]
                                [--thread-priority P]
 """
 import argparse
@@ -44,6 +48,7 @@ import time
 from typing import Optional
 
 from diagnostic_msgs.msg import DiagnosticArray
+from experiments import listener_churn
 from experiments import local_ros
 from experiments.probe import ProbeNode
 from geometry_msgs.msg import PoseStamped
@@ -101,7 +106,7 @@ CLI_LIKE = (
 
 def soak(duration_s: float, out: Path, load: int = 0, report_s: float = 60.0,
          goal_period_s: float = 30.0, churn_s: float = 0.0, minimal: bool = False,
-         thread_priority: Optional[int] = None) -> dict:
+         thread_priority: Optional[int] = None, echo: bool = False) -> dict:
     """Run the soak; print a line per report interval; return the figures."""
     out.mkdir(parents=True, exist_ok=True)
     domain_id = random.randint(1, 100)
@@ -221,7 +226,13 @@ def soak(duration_s: float, out: Path, load: int = 0, report_s: float = 60.0,
                 k_goal += 1
                 next_goal += goal_period_s
             if now >= next_churn and (cli is None or cli.poll() is not None):
-                cli = subprocess.Popen([sys.executable, '-c', CLI_LIKE], env=env,
+                topics = (list(listener_churn.TOPICS) if not minimal else
+                          ['/joint_states', '/effort_controller/commands'])
+                topic = topics[churned % len(topics)]
+                argv = ([sys.executable, '-c', listener_churn.LISTENER, topic,
+                         *listener_churn.TOPICS[topic]] if echo
+                        else [sys.executable, '-c', CLI_LIKE])
+                cli = subprocess.Popen(argv, env=env,
                                        stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
                 churned += 1
                 next_churn += churn_s
@@ -250,6 +261,9 @@ def main(argv: Optional[list] = None) -> int:
     parser.add_argument('--report', type=float, default=60.0, help='seconds per report line')
     parser.add_argument('--churn', type=float, default=0.0,
                         help='start a short-lived ROS process (as a CLI command) every S seconds')
+    parser.add_argument('--echo', action='store_true',
+                        help="each churn process echoes one message of the nodes' topics, "
+                        'in turn')
     parser.add_argument('--minimal', action='store_true',
                         help="the benchmark's minimal pair in place of the nodes (the floor)")
     parser.add_argument('--thread-priority', type=int, default=None,
@@ -258,7 +272,8 @@ def main(argv: Optional[list] = None) -> int:
     parser.add_argument('--out', type=Path, default=Path('results/soak'))
     args = parser.parse_args(argv)
     r = soak(args.duration, args.out, args.load, min(args.report, args.duration),
-             churn_s=args.churn, minimal=args.minimal, thread_priority=args.thread_priority)
+             churn_s=args.churn, minimal=args.minimal, thread_priority=args.thread_priority,
+             echo=args.echo)
     s = r['sim_stats']
     print(f'final ||e|| {r["final_error"]:.3e} (towards the last goal); simulator: '
           f'{s.get("watchdog_trips")} watchdog trips, {s.get("missed_deadlines")} late ticks, '

@@ -9,19 +9,29 @@ during shutdown changes nothing); the node's loop checks it between callbacks, t
 destroyed and the context shut down, in that order, and the process exits with status 0.
 """
 import gc
+import os
 from typing import Callable, Optional
 
+from quat_jt_runtime import dds_transport
 from quat_jt_runtime import realtime
 from quat_jt_runtime import shutdown_signals
+from quat_jt_runtime.resources import share_path
 import rclpy
 from rclpy.signals import SignalHandlerOptions
 
 
-def init(args: Optional[list[str]] = None) -> shutdown_signals.StopFlag:
-    """``rclpy.init`` without rclpy's signal handlers; the process's StopFlag in their place."""
+def init(args: Optional[list[str]] = None) -> tuple[shutdown_signals.StopFlag, str]:
+    """
+    ``rclpy.init`` without rclpy's signal handlers; the process's StopFlag in their place.
+
+    The DDS transport is chosen first (:func:`dds_transport.choose`: UDP, not shared memory);
+    returns the StopFlag and the line that says which transport.
+    """
     keep_running = shutdown_signals.install()  # already there if started by an entry point
+    transport = dds_transport.choose(os.environ, share_path)
+    os.environ.update(transport.changes)  # read by rmw_fastrtps when rclpy.init creates it
     rclpy.init(args=args, signal_handler_options=SignalHandlerOptions.NO)
-    return keep_running
+    return keep_running, transport.note
 
 
 def spin(executor, context: rclpy.Context, keep_running: Callable[[], bool],
@@ -77,7 +87,7 @@ def run_node(make_node: Callable[[], object], name: str, startup_errors: tuple,
     from rclpy.executors import ExternalShutdownException
     from rclpy.experimental import EventsExecutor
 
-    keep_running = init(args)
+    keep_running, transport_note = init(args)
     nodes: list = []
     try:
         try:
@@ -86,6 +96,7 @@ def run_node(make_node: Callable[[], object], name: str, startup_errors: tuple,
             rclpy.logging.get_logger(name).fatal(f'cannot start: {exc}')
             raise SystemExit(1) from None
         nodes = list(node) if isinstance(node, tuple) else [node]
+        nodes[0].get_logger().info(transport_note)
         executor = EventsExecutor(context=nodes[0].context)
         for each in nodes:
             executor.add_node(each)
