@@ -1,5 +1,5 @@
 """
-Listeners joining the nodes' topics: does anyone's ``ros2 topic echo`` delay the 1 kHz loop?
+Listeners joining the nodes' topics: whether a ``ros2 topic echo`` delays the 1 kHz loop.
 
 For each topic the nodes publish, a fresh wrist pair (``config/wrist_sim.yaml`` and the product
 ``config/wrist_controller.yaml``, real time, as a user runs them) is started on a private
@@ -80,8 +80,10 @@ def run_topic(topic: str, listeners: int, out: Path, params: Optional[dict] = No
 
     ``params`` go to both nodes (``thread_priority``, say).
     """
+    # the simulator's figures over the whole run (its window is the last 30 s by default)
+    sim_params = {'stats_window_steps': 2_000_000, **(params or {})}
     pair = local_ros.spawn_recorded_pair(
-        out, sim_params=params, controller_config=local_ros.PRODUCT_CONTROLLER_CONFIG,
+        out, sim_params=sim_params, controller_config=local_ros.PRODUCT_CONTROLLER_CONFIG,
         controller_params=params)
     probe = ProbeNode('listener_churn_probe', pair.domain_id)
     period_max_us: list[float] = []
