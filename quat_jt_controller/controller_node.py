@@ -61,7 +61,7 @@ class QuatJtController(Node):
         self._goal_checker = GoalCheckWorker(ModelSpec(
             cfg.robot_description, cfg.base_link, cfg.tip_link, cfg.joints, cfg.task))
         self.supervisor = Supervisor(reg, cfg.state_timeout_s, cfg.publish_rate_divider,
-                                     self._goal_checker)
+                                     self._goal_checker, started_ns=time.monotonic_ns())
         self.stall = StallDetector(reg)
         self._reject_log = Throttle(THROTTLE_S)  # per cause (the reason without numbers)
         self._goal_log = Throttle(GOAL_LOG_PERIOD_S)
@@ -76,7 +76,8 @@ class QuatJtController(Node):
         self._diagnostics = Diagnostics(
             self, cfg.tip_link, self._cmd_pub.topic_name, self.supervisor, self.stats,
             self.counters, self._goal_checker, self.stall, lambda: (self._last, self._last_qdot))
-        self.create_subscription(JointState, 'joint_states', self._on_joint_state, 10)
+        self._state_sub = self.create_subscription(
+            JointState, 'joint_states', self._on_joint_state, 10)
         self.create_subscription(PoseStamped, '~/target_pose', self._on_target_pose, 10)
         self.create_timer(min(0.05, cfg.state_timeout_s / 4.0), self._on_watchdog)
         self.create_timer(0.05, self._on_goal_checks)
@@ -85,7 +86,8 @@ class QuatJtController(Node):
             and self._diagnostics.publish()))
         off = prewarm_off_reason(cfg.prewarm_lead_s, not prewarm, self._use_sim_time)
         self._prewarm = None if off else PrewarmTimer(self, cfg.prewarm_lead_s, self._prewarm_tick)
-        for line in parameters.describe_start(cfg, reg) + [describe_prewarm(
+        for line in parameters.describe_start(cfg, reg, self._state_sub.topic_name) + [
+                describe_prewarm(
                 cfg.prewarm_lead_s, off)]:
             self.get_logger().info(line)
 
@@ -109,8 +111,9 @@ class QuatJtController(Node):
         sup, now_mono_ns = self.supervisor, time.monotonic_ns()
         held = sup.before_tick(q, now_mono_ns)
         if held is not None:
-            self.get_logger().info(f'first joint state: holding the measured pose, '
-                                   f'{held.describe()}')
+            self.get_logger().info(
+                f'first joint state, {(now_mono_ns - sup.started_ns) * 1e-9:.2f} s after start: '
+                f'holding the measured pose, {held.describe()}')
         out = self.regulator.update(q, qdot, sup.tick_interval_s(stamp_ns))
         self._cmd_msg.data = out.tau_nm
         t1 = time.perf_counter_ns()
@@ -141,8 +144,19 @@ class QuatJtController(Node):
         self.counters.prewarm_passes += 1
 
     def _on_watchdog(self) -> None:
-        """Zero the command once when valid joint states stop for longer than state_timeout."""
-        silent_s = self.supervisor.on_silence(time.monotonic_ns())
+        """
+        Zero the command once when valid joint states stop for longer than state_timeout.
+
+        Before the first valid state, warn (slowly throttled) with the publishers on the topic:
+        the graph is read here, on the timer, and only while no state has come.
+        """
+        now_ns = time.monotonic_ns()
+        waited_s = self.supervisor.no_state_yet(now_ns)
+        if waited_s is not None:
+            topic = self._state_sub.topic_name
+            self.get_logger().warn(diagnostics.no_state_warning(
+                topic, waited_s, self.count_publishers(topic), self.counters.rejected_states))
+        silent_s = self.supervisor.on_silence(now_ns)
         if silent_s is not None:
             self._cmd_msg.data = [0.0] * self.regulator.n
             self._cmd_pub.publish(self._cmd_msg)

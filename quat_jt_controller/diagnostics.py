@@ -45,6 +45,26 @@ def graph_warnings(command_topic: str, command_publishers: int, node_name: str,
     return warnings
 
 
+def no_state_warning(state_topic: str, waited_s: float, publishers: int, rejected: int) -> str:
+    """
+    Say that no valid joint state has come since start: on which topic, from how many publishers.
+
+    ``publishers``: the graph's count on the resolved ``state_topic``; ``rejected``: the states
+    received and refused so far (each refusal is logged with its reason).
+    """
+    plural = '' if publishers == 1 else 's'
+    if rejected:
+        seen = f'{rejected} received and rejected (see the warnings logged)'
+    elif publishers:
+        seen = 'none received yet (a QoS mismatch, or a publisher that is not publishing?)'
+    else:
+        seen = ('is the robot driver or simulator running, and publishing on this topic? '
+                'remap with -r joint_states:=<its topic>')
+    return (f'no valid joint state on {state_topic} {waited_s:.1f} s after start '
+            f'({publishers} publisher{plural}; {seen}): no command is published until one '
+            'arrives')
+
+
 def loop_status(figures: dict, waiting: bool, stopped: bool, counters: Counters,
                 graph_warnings: Sequence[str] = ()) -> Status:
     """Report the control loop: rate, timing, saturation, timeouts (TickStats.window figures)."""

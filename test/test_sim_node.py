@@ -163,6 +163,40 @@ def test_bad_startup_parameters_are_refused(context):
         _make_node(context, joints=['joint1', 'nope'])
 
 
+@pytest.mark.node
+def test_no_command_since_start_is_a_warning_naming_the_topic(context, monkeypatch):
+    """No controller: the start-up line says the joints are held; then a WARN, 0 publishers."""
+    from rcl_interfaces.msg import Log
+    from wrist_sim import sim_node
+    monkeypatch.setattr(sim_node, 'NO_COMMAND_WARN_S', 0.5)  # the table's 5 s, shortened
+    listener = rclpy.create_node('rosout_listener', context=context)
+    logs: list[tuple[int, str]] = []
+    listener.create_subscription(Log, '/rosout', lambda m: logs.append((m.level, m.msg)) if (
+        m.name == sim_node.NODE_NAME) else None, 100)
+    node = sim_node.WristSimNode(context=context, cli_args=[
+        '--ros-args', '-r', 'effort_controller/commands:=/nowhere/commands'],
+        parameter_overrides=[Parameter('initial_positions', value=[0.0, 0.6, 0.0])])
+    executor = EventsExecutor(context=context)
+    try:
+        executor.add_node(listener)
+        executor.add_node(node)
+        deadline = time.monotonic() + 15.0
+        node.run(executor, lambda: time.monotonic() < deadline and not any(
+            level == Log.WARN for level, _ in logs))
+        start = next(text for _, text in logs if 'simulating joints' in text)
+        assert 'joints held at rest until the first command on /nowhere/commands' in start
+        warning = next((text for level, text in logs if level == Log.WARN), None)
+        assert warning is not None, logs
+        assert warning.startswith('no command on /nowhere/commands '), warning
+        assert '(0 publishers matched; is a controller running' in warning, warning
+        assert node.sim.q_rad.tolist() == [0.0, 0.6, 0.0]  # held against gravity
+    finally:
+        executor.remove_node(node)
+        executor.remove_node(listener)
+        node.destroy_node()
+        listener.destroy_node()
+
+
 # -- over DDS: the node in its own process ---------------------------------------------------
 
 class Probe:

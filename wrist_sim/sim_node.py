@@ -38,6 +38,10 @@ from wrist_sim.simulator import at_limit, missing_meshes_note, SimulatorError, W
 
 NODE_NAME = 'wrist_sim'
 THROTTLE_S = 1.0
+# No command since start: a warning after this long, then one every NO_COMMAND_REPEAT_S. Later
+# than the controller's (a simulator waiting for its controller to start is normal at first).
+NO_COMMAND_WARN_S = 5.0
+NO_COMMAND_REPEAT_S = 10.0
 
 
 class WristSimNode(Node):
@@ -88,10 +92,17 @@ class WristSimNode(Node):
             Float64MultiArray, 'effort_controller/commands', self._on_command, 10,
             event_callbacks=SubscriptionEventCallbacks(matched=self._on_command_matched))
         self.reset_srv = self.create_service(Trigger, '~/reset', self._on_reset)
+        self._hold = p.hold_until_first_command
+        self._no_command_warn_s = float('inf')  # set when the loop starts (run)
         self.get_logger().info(
             f'simulating joints {list(self.sim.joint_names)} at {p.rate_hz} Hz, '
             f'effort limits {self.sim.effort_limits_nm.tolist()} N m, '
-            + ('lockstep with /clock' if self.publish_clock else 'real time'))
+            + ('lockstep with /clock' if self.publish_clock else 'real time')
+            + f'; {self._before_first_command()} until the first command on '
+            f'{self.cmd_sub.topic_name}')
+
+    def _before_first_command(self) -> str:
+        return 'joints held at rest' if self._hold else 'zero torque'
 
     def _apply_config(self, config: SimConfig) -> None:  # its friction, if it changed
         friction = [list(config.viscous_nm_s_per_rad), list(config.coulomb_nm)]
@@ -177,8 +188,22 @@ class WristSimNode(Node):
         return self.live.current
 
     def every_second(self, line: str) -> None:
-        """Log the loop's figures (debug); warn of a second controller on the command topic."""
+        """
+        Log the loop's figures (debug); warn of a second controller on the command topic.
+
+        Warn, slowly throttled, while no command has come since start, with the publishers
+        matched on the command topic (counted from matched events, not the graph).
+        """
         self.get_logger().debug(line)
+        now_s = time.perf_counter()
+        if not self.gate.commanded and now_s >= self._no_command_warn_s:
+            self._no_command_warn_s = now_s + NO_COMMAND_REPEAT_S
+            n = self._command_publishers
+            self.get_logger().warning(
+                f'no command on {self.cmd_sub.topic_name} {now_s - self.stats.start_s:.1f} s '
+                f'after start ({n} publisher{"" if n == 1 else "s"} matched; is a controller '
+                f'running and publishing there?): {self._before_first_command()} until one '
+                'arrives')
         if self._command_publishers > 1:
             self.get_logger().warning(
                 f'{self._command_publishers} publishers on {self.cmd_sub.topic_name}: more than '
@@ -221,6 +246,7 @@ class WristSimNode(Node):
         ok = realtime.RunCheck(keep_running, self.context.ok)
         self.publish_state()  # the initial state, so a controller can answer it
         self.stats.start_s = time.perf_counter()
+        self._no_command_warn_s = self.stats.start_s + NO_COMMAND_WARN_S
         if self.publish_clock:
             pacing.run_lockstep(self, executor, self.dt_ns * 1e-9, ok)
         else:
