@@ -156,6 +156,23 @@ def test_the_panda_loads_from_its_config_with_its_meshes_missing(context, capfd)
 
 
 @pytest.mark.node
+def test_the_xarm6_says_once_which_links_pybullet_gives_no_inertia(context, capfd):
+    """Its link2 and link3 tensors are not physical: one WARN, none of PyBullet's six lines."""
+    from quat_jt_runtime.resources import share_path
+    from robots import XARM6_URDF
+    from wrist_sim.sim_node import WristSimNode
+    node = WristSimNode(context=context, cli_args=[
+        '--ros-args', '--params-file', str(share_path('config/xarm6_sim.yaml'))],
+        parameter_overrides=[Parameter('robot_description', value=XARM6_URDF.read_text())])
+    try:
+        out, err = capfd.readouterr()
+        assert err.count('PyBullet simulates link2, link3 without rotational inertia') == 1
+        assert 'Bad inertia' not in out + err
+    finally:
+        node.destroy_node()
+
+
+@pytest.mark.node
 def test_bad_startup_parameters_are_refused(context):
     with pytest.raises(SimulatorError):
         _make_node(context, viscous_friction=[0.1, 0.2])

@@ -35,6 +35,7 @@ from wrist_sim.command_gate import CommandGate, RESUMED, TRIPPED
 from wrist_sim.config import SimConfig
 from wrist_sim.parameters import change_log, declare_live, declare_structure
 from wrist_sim.simulator import at_limit, missing_meshes_note, SimulatorError, WristSimulator
+from wrist_sim.simulator import zero_inertia_note
 
 NODE_NAME = 'wrist_sim'
 THROTTLE_S = 1.0
@@ -65,6 +66,8 @@ class WristSimNode(Node):
             raise SimulatorError(f'{exc}{bundled_urdf_hint(p.given_urdf)}') from None
         if self.sim.missing_meshes:
             self.get_logger().warning(missing_meshes_note(self.sim.missing_meshes))
+        if self.sim.zero_inertia_links:
+            self.get_logger().warning(zero_inertia_note(self.sim.zero_inertia_links))
         self._effort_limits = self.sim.effort_limits_nm.tolist()
         self._velocity_limits = self.sim.velocity_limits_rad_s.tolist()
         self._at_velocity_limit = [0.999 * v for v in self._velocity_limits]
