@@ -173,6 +173,19 @@ def test_the_xarm6_says_once_which_links_pybullet_gives_no_inertia(context, capf
 
 
 @pytest.mark.node
+def test_a_start_up_error_gives_the_urdf_advice_only_when_it_is_about_the_robot(
+        context, monkeypatch):
+    monkeypatch.delenv('DISPLAY', raising=False)
+    with pytest.raises(SimulatorError) as no_window:
+        _make_node(context, use_gui=True)
+    assert 'DISPLAY is not set' in str(no_window.value)
+    assert 'robot_description' not in str(no_window.value)
+    with pytest.raises(SimulatorError, match="'nope'.*robot_description is empty, so the "
+                                             'bundled spherical wrist'):
+        _make_node(context, joints=['joint1', 'nope'])
+
+
+@pytest.mark.node
 def test_bad_startup_parameters_are_refused(context):
     with pytest.raises(SimulatorError):
         _make_node(context, viscous_friction=[0.1, 0.2])

@@ -34,8 +34,8 @@ from wrist_sim import pacing
 from wrist_sim.command_gate import CommandGate, RESUMED, TRIPPED
 from wrist_sim.config import SimConfig
 from wrist_sim.parameters import change_log, declare_live, declare_structure
-from wrist_sim.simulator import at_limit, missing_meshes_note, SimulatorError, WristSimulator
-from wrist_sim.simulator import zero_inertia_note
+from wrist_sim.simulator import at_limit, missing_meshes_note, NoDisplayError, SimulatorError
+from wrist_sim.simulator import WristSimulator, zero_inertia_note
 
 NODE_NAME = 'wrist_sim'
 THROTTLE_S = 1.0
@@ -62,6 +62,8 @@ class WristSimNode(Node):
                 viscous_nm_s_per_rad=c.viscous_nm_s_per_rad, coulomb_nm=c.coulomb_nm,
                 initial_positions_rad=c.initial_positions_rad,
                 enforce_velocity_limits=p.enforce_velocity_limits)
+        except NoDisplayError:  # nothing to do with the robot: no advice on its URDF
+            raise
         except SimulatorError as exc:
             raise SimulatorError(f'{exc}{bundled_urdf_hint(p.given_urdf)}') from None
         if self.sim.missing_meshes:

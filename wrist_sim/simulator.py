@@ -70,6 +70,10 @@ class SimulatorError(QuatJtError):
     """The URDF, the joints or the values asked of the simulator are not usable."""
 
 
+class NoDisplayError(SimulatorError):
+    """The PyBullet window was asked for where none can open: not a matter of the robot."""
+
+
 @dataclass(frozen=True)
 class SimState:
     """A snapshot of the joints, in the simulator's joint order (copies, safe to keep)."""
@@ -269,7 +273,7 @@ class WristSimulator:
 
         if use_gui and not os.environ.get('DISPLAY'):
             # PyBullet would exit the whole process ('cannot connect to X server'): say why.
-            raise SimulatorError(
+            raise NoDisplayError(
                 'use_gui is true but DISPLAY is not set, so the PyBullet window cannot open: '
                 'run without use_gui (headless), on a desktop session, or under a virtual '
                 "display, e.g. 'xvfb-run -a ros2 launch ...'")
