@@ -28,8 +28,9 @@ from quat_jt_controller.regulator import Goal, Regulator
 
 # /diagnostics wait for the next tick while states come at least this often (else: at once)
 DIAGNOSTICS_WAIT_NS = 20_000_000
-# No valid state since start: the first warning after this long, then one every REPEAT
-NO_STATE_WARN_NS = 1_500_000_000
+# No valid state since start: the first warning after this long (within 2 s, on the watchdog
+# timer), then one every NO_STATE_REPEAT_NS
+NO_STATE_WARN_NS = 1_800_000_000
 NO_STATE_REPEAT_NS = 10_000_000_000
 
 

@@ -68,14 +68,16 @@ def test_no_state_since_start_warns_soon_then_slowly_and_never_after_a_state():
 
 
 def test_the_no_state_warning_says_what_is_known():
-    none = diagnostics.no_state_warning('/arm/joint_states', 1.5, 0, 0)
-    assert none.startswith('no valid joint state on /arm/joint_states 1.5 s after start '
-                           '(0 publishers; ')
+    none = diagnostics.no_state_warning('/arm/joint_states', 1.8, 0, 0)
+    assert none.startswith('no valid joint state on /arm/joint_states 1.8 s after start, '
+                           '0 publishers on it: is the robot driver or simulator running')
     assert 'remap with -r joint_states:=' in none
-    silent = diagnostics.no_state_warning('/joint_states', 11.5, 1, 0)
-    assert '(1 publisher; none received yet' in silent
-    refused = diagnostics.no_state_warning('/joint_states', 1.5, 2, 40)
-    assert '(2 publishers; 40 received and rejected' in refused
+    connecting = diagnostics.no_state_warning('/joint_states', 1.8, 1, 0)
+    assert '1 publisher on it: none received yet (still connecting?)' in connecting
+    silent = diagnostics.no_state_warning('/joint_states', 11.8, 1, 0)
+    assert '1 publisher on it: none received (a QoS mismatch' in silent
+    refused = diagnostics.no_state_warning('/joint_states', 1.8, 2, 40)
+    assert '2 publishers on it: 40 received and rejected' in refused
 
 
 def test_feedback_every_nth_tick_and_diagnostics_after_the_next_command():
