@@ -26,6 +26,7 @@ from quat_jt_runtime.params import declare_realtime, history_qos
 from quat_jt_runtime.prewarm_timer import describe_prewarm, prewarm_off_reason, PrewarmTimer
 from quat_jt_runtime.resources import bundled_urdf_hint
 from quat_jt_runtime.throttle import cause, Throttle
+from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
@@ -33,6 +34,7 @@ from std_msgs.msg import Float64MultiArray
 NODE_NAME = 'quat_jt_controller'
 THROTTLE_S = 1.0  # rejected goals and states: at most one log line per second and cause
 GOAL_LOG_PERIOD_S = 0.2  # accepted distinct goals: one line each, at most 5 a second
+NO_STATE_CHECK_S = 0.3  # until the first state: is a no-state warning due (Supervisor)?
 
 
 class QuatJtController(Node):
@@ -80,6 +82,8 @@ class QuatJtController(Node):
             JointState, 'joint_states', self._on_joint_state, 10)
         self.create_subscription(PoseStamped, '~/target_pose', self._on_target_pose, 10)
         self.create_timer(min(0.05, cfg.state_timeout_s / 4.0), self._on_watchdog)
+        self._no_state_timer = self.create_timer(
+            NO_STATE_CHECK_S, self._on_no_state_yet, clock=Clock(clock_type=ClockType.STEADY_TIME))
         self.create_timer(0.05, self._on_goal_checks)
         self.create_timer(1.0, lambda: (  # /diagnostics after the next command, or now
             self.supervisor.on_diagnostics_timer(time.monotonic_ns())
@@ -143,20 +147,25 @@ class QuatJtController(Node):
         self.regulator.update(self._last_q, self._last_qdot)
         self.counters.prewarm_passes += 1
 
-    def _on_watchdog(self) -> None:
+    def _on_no_state_yet(self) -> None:
         """
-        Zero the command once when valid joint states stop for longer than state_timeout.
+        Before the first valid state, warn (slowly throttled) with the publishers on the topic.
 
-        Before the first valid state, warn (slowly throttled) with the publishers on the topic:
-        the graph is read here, on the timer, and only while no state has come.
+        On a steady-clock timer (simulated time does not run without a simulator), which the
+        first state cancels: the graph is read here, only while no state has come.
         """
-        now_ns = time.monotonic_ns()
-        waited_s = self.supervisor.no_state_yet(now_ns)
+        if self.supervisor.last_state_ns:
+            self._no_state_timer.cancel()
+            return
+        waited_s = self.supervisor.no_state_yet(time.monotonic_ns())
         if waited_s is not None:
             topic = self._state_sub.topic_name
             self.get_logger().warn(diagnostics.no_state_warning(
                 topic, waited_s, self.count_publishers(topic), self.counters.rejected_states))
-        silent_s = self.supervisor.on_silence(now_ns)
+
+    def _on_watchdog(self) -> None:
+        """Zero the command once when valid joint states stop for longer than state_timeout."""
+        silent_s = self.supervisor.on_silence(time.monotonic_ns())
         if silent_s is not None:
             self._cmd_msg.data = [0.0] * self.regulator.n
             self._cmd_pub.publish(self._cmd_msg)

@@ -320,14 +320,20 @@ def test_tick_reads_no_parameters_and_holds_the_first_pose(make_probe, monkeypat
     assert second != first
 
 
-def test_no_joint_states_after_start_is_a_warning_naming_the_topic(context):
-    """Remapped to a topic nobody publishes: a WARN with its resolved name and 0 publishers."""
+@pytest.mark.parametrize('sim_time', [False, True])
+def test_no_joint_states_after_start_is_a_warning_naming_the_topic(context, sim_time):
+    """
+    Remapped to a topic nobody publishes: a WARN with its resolved name and 0 publishers.
+
+    On simulated time too, with no /clock (no simulator) to run it.
+    """
     listener = rclpy.create_node('rosout_listener', context=context)
     logs: list[tuple[int, str]] = []
     listener.create_subscription(Log, '/rosout', lambda m: logs.append((m.level, m.msg)) if (
         m.name == NODE_NAME) else None, 100)
     cli = ['--ros-args', '-r', 'joint_states:=/nowhere/joint_states']
-    node = QuatJtController(context=context, cli_args=cli, parameter_overrides=[])
+    node = QuatJtController(context=context, cli_args=cli, parameter_overrides=[
+        Parameter('use_sim_time', value=sim_time)])
     executor = SingleThreadedExecutor(context=context)
     try:
         executor.add_node(node)
