@@ -26,6 +26,7 @@ from quat_jt_runtime.params import declare_realtime, history_qos
 from quat_jt_runtime.prewarm_timer import describe_prewarm, prewarm_off_reason, PrewarmTimer
 from quat_jt_runtime.resources import bundled_urdf_hint
 from quat_jt_runtime.throttle import cause, Throttle
+from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
@@ -33,6 +34,7 @@ from std_msgs.msg import Float64MultiArray
 NODE_NAME = 'quat_jt_controller'
 THROTTLE_S = 1.0  # rejected goals and states: at most one log line per second and cause
 GOAL_LOG_PERIOD_S = 0.2  # accepted distinct goals: one line each, at most 5 a second
+NO_STATE_CHECK_S = 0.3  # until the first state: is a no-state warning due (Supervisor)?
 
 
 class QuatJtController(Node):
@@ -61,7 +63,7 @@ class QuatJtController(Node):
         self._goal_checker = GoalCheckWorker(ModelSpec(
             cfg.robot_description, cfg.base_link, cfg.tip_link, cfg.joints, cfg.task))
         self.supervisor = Supervisor(reg, cfg.state_timeout_s, cfg.publish_rate_divider,
-                                     self._goal_checker)
+                                     self._goal_checker, started_ns=time.monotonic_ns())
         self.stall = StallDetector(reg)
         self._reject_log = Throttle(THROTTLE_S)  # per cause (the reason without numbers)
         self._goal_log = Throttle(GOAL_LOG_PERIOD_S)
@@ -76,16 +78,20 @@ class QuatJtController(Node):
         self._diagnostics = Diagnostics(
             self, cfg.tip_link, self._cmd_pub.topic_name, self.supervisor, self.stats,
             self.counters, self._goal_checker, self.stall, lambda: (self._last, self._last_qdot))
-        self.create_subscription(JointState, 'joint_states', self._on_joint_state, 10)
+        self._state_sub = self.create_subscription(
+            JointState, 'joint_states', self._on_joint_state, 10)
         self.create_subscription(PoseStamped, '~/target_pose', self._on_target_pose, 10)
         self.create_timer(min(0.05, cfg.state_timeout_s / 4.0), self._on_watchdog)
+        self._no_state_timer = self.create_timer(
+            NO_STATE_CHECK_S, self._on_no_state_yet, clock=Clock(clock_type=ClockType.STEADY_TIME))
         self.create_timer(0.05, self._on_goal_checks)
         self.create_timer(1.0, lambda: (  # /diagnostics after the next command, or now
             self.supervisor.on_diagnostics_timer(time.monotonic_ns())
             and self._diagnostics.publish()))
         off = prewarm_off_reason(cfg.prewarm_lead_s, not prewarm, self._use_sim_time)
         self._prewarm = None if off else PrewarmTimer(self, cfg.prewarm_lead_s, self._prewarm_tick)
-        for line in parameters.describe_start(cfg, reg) + [describe_prewarm(
+        for line in parameters.describe_start(cfg, reg, self._state_sub.topic_name) + [
+                describe_prewarm(
                 cfg.prewarm_lead_s, off)]:
             self.get_logger().info(line)
 
@@ -109,8 +115,9 @@ class QuatJtController(Node):
         sup, now_mono_ns = self.supervisor, time.monotonic_ns()
         held = sup.before_tick(q, now_mono_ns)
         if held is not None:
-            self.get_logger().info(f'first joint state: holding the measured pose, '
-                                   f'{held.describe()}')
+            self.get_logger().info(
+                f'first joint state, {(now_mono_ns - sup.started_ns) * 1e-9:.2f} s after start: '
+                f'holding the measured pose, {held.describe()}')
         out = self.regulator.update(q, qdot, sup.tick_interval_s(stamp_ns))
         self._cmd_msg.data = out.tau_nm
         t1 = time.perf_counter_ns()
@@ -139,6 +146,22 @@ class QuatJtController(Node):
         """Run the last state's law again, its output dropped (the caches stay warm)."""
         self.regulator.update(self._last_q, self._last_qdot)
         self.counters.prewarm_passes += 1
+
+    def _on_no_state_yet(self) -> None:
+        """
+        Before the first valid state, warn (slowly throttled) with the publishers on the topic.
+
+        On a steady-clock timer (simulated time does not run without a simulator), which the
+        first state cancels: the graph is read here, only while no state has come.
+        """
+        if self.supervisor.last_state_ns:
+            self._no_state_timer.cancel()
+            return
+        waited_s = self.supervisor.no_state_yet(time.monotonic_ns())
+        if waited_s is not None:
+            topic = self._state_sub.topic_name
+            self.get_logger().warn(diagnostics.no_state_warning(
+                topic, waited_s, self.count_publishers(topic), self.counters.rejected_states))
 
     def _on_watchdog(self) -> None:
         """Zero the command once when valid joint states stop for longer than state_timeout."""

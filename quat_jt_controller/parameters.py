@@ -251,15 +251,16 @@ def declare_gains(node: Node, config: StructuralConfig, effort_limits_nm: Sequen
         on_apply)
 
 
-def describe_start(config: StructuralConfig, regulator: Regulator) -> list[str]:
+def describe_start(config: StructuralConfig, regulator: Regulator,
+                   state_topic: str = 'joint_states') -> list[str]:
     """Describe the controller at start-up: its extensions, then its task, robot and gains."""
     gains = regulator.gains
     return [f'extensions: {describe_shaping(regulator.shaping)}',
             f'{config.task.value} task, joints {list(config.joints)}, {config.base_link} -> '
             f'{config.tip_link}, potential {gains.potential.value}, kp {list(gains.kp)}, kv '
             f'{list(gains.kv)}, lambda {list(gains.lam)}, effort limits '
-            f'{list(regulator.effort_limits_nm)} N m; holding the first measured pose until a '
-            'goal arrives on ~/target_pose']
+            f'{list(regulator.effort_limits_nm)} N m; waiting for joint states on {state_topic}, '
+            'then holding the first pose measured until a goal arrives on ~/target_pose']
 
 
 def change_log(node: Node, regulator: Regulator) -> ChangeLog:

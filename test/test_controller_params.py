@@ -22,6 +22,7 @@ from quat_jt_controller.goal_motion import MAX_GAP_S
 from quat_jt_controller.model import ModelError
 from quat_jt_controller.parameters import GAIN_PARAMETERS, SHAPING_PARAMETERS
 from quat_jt_controller.shaping import Shaping, ShapingError
+from quat_jt_controller.supervision import NO_STATE_WARN_NS
 from rcl_interfaces.msg import Log, ParameterType
 import rclpy
 from rclpy.executors import SingleThreadedExecutor
@@ -317,6 +318,52 @@ def test_tick_reads_no_parameters_and_holds_the_first_pose(make_probe, monkeypat
     assert all(abs(a - b) < 1e-12 for a, b in zip(first, g)), (first, g)
     second = probe.command_for(state((0.5, 0.2, 0.1)))  # pulled back towards the held pose
     assert second != first
+
+
+@pytest.mark.parametrize('sim_time', [False, True])
+def test_no_joint_states_after_start_is_a_warning_naming_the_topic(context, sim_time):
+    """
+    Remapped to a topic nobody publishes: a WARN with its resolved name and 0 publishers.
+
+    On simulated time too, with no /clock (no simulator) to run it.
+    """
+    listener = rclpy.create_node('rosout_listener', context=context)
+    logs: list[tuple[int, str]] = []
+    listener.create_subscription(Log, '/rosout', lambda m: logs.append((m.level, m.msg)) if (
+        m.name == NODE_NAME) else None, 100)
+    cli = ['--ros-args', '-r', 'joint_states:=/nowhere/joint_states']
+    node = QuatJtController(context=context, cli_args=cli, parameter_overrides=[
+        Parameter('use_sim_time', value=sim_time)])
+    executor = SingleThreadedExecutor(context=context)
+    try:
+        executor.add_node(node)
+        executor.add_node(listener)
+        deadline = time.monotonic() + 10.0
+        while not any(level == Log.WARN for level, _ in logs):
+            assert time.monotonic() < deadline, 'no warning without joint states'
+            executor.spin_once(timeout_sec=0.05)
+        start = next(text for _, text in logs if 'task, joints' in text)
+        assert 'waiting for joint states on /nowhere/joint_states, then holding' in start, start
+        line = next(text for level, text in logs if level == Log.WARN)
+        assert 'no valid joint state on /nowhere/joint_states' in line, line
+        assert ', 0 publishers on it:' in line and 'remap with -r joint_states:=' in line, line
+        waited_s = float(line.split(' s after start')[0].rsplit(' ', 1)[1])
+        assert waited_s >= NO_STATE_WARN_NS * 1e-9, line  # due 1.8 s after start, not before
+        assert node.supervisor.regulator.goal is None  # nothing held, nothing commanded
+    finally:
+        executor.remove_node(listener)
+        executor.remove_node(node)
+        listener.destroy_node()
+        node.destroy_node()
+
+
+def test_a_silent_publisher_is_counted_until_the_first_state(make_probe):
+    """The probe publishes nothing on joint_states yet: 1 publisher, none received."""
+    probe = make_probe()
+    line = probe.wait_log('no valid joint state on /joint_states')
+    assert ', 1 publisher on it: none received' in line, line
+    probe.command_for(state((0.1, 0.2, 0.3)))
+    assert 's after start: holding the measured pose' in probe.wait_log('first joint state')
 
 
 def test_shuffled_and_extra_names_give_the_same_command(make_probe):

@@ -236,5 +236,54 @@ def test_a_bad_simulator_argument_writes_neither_file(tmp_path):
                              *PANDA_ARGS, '--out', str(out), '--sim-out', str(sim_out),
                              '--sim-coulomb', '0.1'], capture_output=True, text=True,
                             timeout=120)
-    assert result.returncode != 0 and '--sim-coulomb: expected 7' in result.stderr
+    assert result.returncode == 2 and result.stderr == (
+        f'design_gains: error: --sim-coulomb: 1 value for the 7 joints {list(PANDA_JOINTS)} '
+        '(see design_gains --help)\n')
     assert not out.exists() and not sim_out.exists()
+
+
+def run_main(argv, capsys) -> tuple[int, list[str]]:
+    """Run the command's main() in this process; return its status and stderr lines."""
+    try:
+        status = gd.main(argv)
+    except SystemExit as exc:
+        status = exc.code
+    return status, capsys.readouterr().err.splitlines()
+
+
+@pytest.mark.parametrize('argv, status, words', [
+    (['--urdf', 'no/such.urdf'], 2, '--urdf no/such.urdf: No such file or directory'),
+    (['--urdf', '.'], 2, '--urdf .: Is a directory'),
+    (['--urdf', 'setup.py'], 2, '--urdf setup.py: not XML'),
+    (['--urdf', 'package.xml'], 2, 'not a URDF (its root element is <package>'),
+    (['--joints', 'joint1', 'jointX', 'joint3'], 2, "joints ['jointX'] are not movable"),
+    (['--tip-link', 'nowhere'], 2, "link 'nowhere' is not in the URDF"),
+    (['--effort-limits', '50', '30'], 2, "--effort-limits: 2 values for the 3 joints ['joint1'"),
+    (['--friction', '1'], 2, '--friction: 1 value for the 3 joints'),
+    (['--preferred-configuration', '0', '9', '0'], 2, "puts ['joint2'] outside the joint"),
+    (['--rate', 'fast'], 2, "argument --rate: 'fast' is not a finite number"),
+    (['--rate', '0'], 2, 'argument --rate: 0 is not a finite number in (0, inf)'),
+    (['--effort-limits', 'nan', '1', '1'], 2, 'argument --effort-limits: nan is not a finite'),
+    (['--delays', '-1'], 2, 'argument --delays: -1 is not an integer in [0, inf)'),
+    (['--cruise-fraction', '1.5'], 2, 'argument --cruise-fraction: 1.5 is not a finite number '
+     'in (0, 1]'),
+    (['--task', 'position'], 2, "argument --task: invalid choice: 'position'"),
+    (['--effort-limits', '0.1', '0.1', '0.1'], 1, 'no design: no torque left for the '
+     "potential on joints ['joint2']"),
+    (['--out', 'no/such/folder/x.yaml'], 1, 'cannot write no/such/folder/x.yaml: No such file'),
+])
+def test_a_bad_input_is_one_line_naming_it(argv, status, words, capsys, monkeypatch):
+    """Usage errors: status 2, as argparse's own; a robot the rules cannot serve: 1."""
+    monkeypatch.chdir(REPO)
+    code, lines = run_main(argv, capsys)
+    assert code == status and len(lines) == 1, (code, lines)
+    assert lines[0].startswith('design_gains: error: ') and words in lines[0], lines
+
+
+def test_the_command_line_gives_one_line_and_status_2_for_a_missing_urdf(tmp_path):
+    result = subprocess.run([sys.executable, '-m', 'quat_jt_controller.gain_design', '--urdf',
+                             str(tmp_path / 'robot.urdf')], capture_output=True, text=True,
+                            timeout=120)
+    assert result.returncode == 2 and result.stdout == ''
+    assert result.stderr == (f'design_gains: error: --urdf {tmp_path / "robot.urdf"}: No such '
+                             'file or directory (see design_gains --help)\n')

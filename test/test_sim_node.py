@@ -156,11 +156,75 @@ def test_the_panda_loads_from_its_config_with_its_meshes_missing(context, capfd)
 
 
 @pytest.mark.node
+def test_the_xarm6_says_once_which_links_pybullet_gives_no_inertia(context, capfd):
+    """Its link2 and link3 tensors are not physical: one WARN, none of PyBullet's six lines."""
+    from quat_jt_runtime.resources import share_path
+    from robots import XARM6_URDF
+    from wrist_sim.sim_node import WristSimNode
+    node = WristSimNode(context=context, cli_args=[
+        '--ros-args', '--params-file', str(share_path('config/xarm6_sim.yaml'))],
+        parameter_overrides=[Parameter('robot_description', value=XARM6_URDF.read_text())])
+    try:
+        out, err = capfd.readouterr()
+        assert err.count('PyBullet simulates link2, link3 without rotational inertia') == 1
+        assert 'Bad inertia' not in out + err
+    finally:
+        node.destroy_node()
+
+
+@pytest.mark.node
+def test_a_start_up_error_gives_the_urdf_advice_only_when_it_is_about_the_robot(
+        context, monkeypatch):
+    monkeypatch.delenv('DISPLAY', raising=False)
+    with pytest.raises(SimulatorError) as no_window:
+        _make_node(context, use_gui=True)
+    assert 'DISPLAY is not set' in str(no_window.value)
+    assert 'robot_description' not in str(no_window.value)
+    with pytest.raises(SimulatorError, match="'nope'.*robot_description is empty, so the "
+                                             'bundled spherical wrist'):
+        _make_node(context, joints=['joint1', 'nope'])
+
+
+@pytest.mark.node
 def test_bad_startup_parameters_are_refused(context):
     with pytest.raises(SimulatorError):
         _make_node(context, viscous_friction=[0.1, 0.2])
     with pytest.raises(SimulatorError):
         _make_node(context, joints=['joint1', 'nope'])
+
+
+@pytest.mark.node
+def test_no_command_since_start_is_a_warning_naming_the_topic(context, monkeypatch):
+    """No controller: the start-up line says the joints are held; then a WARN, 0 publishers."""
+    from rcl_interfaces.msg import Log
+    from wrist_sim import sim_node
+    monkeypatch.setattr(sim_node, 'NO_COMMAND_WARN_S', 0.5)  # the table's 5 s, shortened
+    listener = rclpy.create_node('rosout_listener', context=context)
+    logs: list[tuple[int, str]] = []
+    listener.create_subscription(Log, '/rosout', lambda m: logs.append((m.level, m.msg)) if (
+        m.name == sim_node.NODE_NAME) else None, 100)
+    node = sim_node.WristSimNode(context=context, cli_args=[
+        '--ros-args', '-r', 'effort_controller/commands:=/nowhere/commands'],
+        parameter_overrides=[Parameter('initial_positions', value=[0.0, 0.6, 0.0])])
+    executor = EventsExecutor(context=context)
+    try:
+        executor.add_node(listener)
+        executor.add_node(node)
+        deadline = time.monotonic() + 15.0
+        node.run(executor, lambda: time.monotonic() < deadline and not any(
+            level == Log.WARN for level, _ in logs))
+        start = next(text for _, text in logs if 'simulating joints' in text)
+        assert 'joints held at rest until the first command on /nowhere/commands' in start
+        warning = next((text for level, text in logs if level == Log.WARN), None)
+        assert warning is not None, logs
+        assert warning.startswith('no command on /nowhere/commands '), warning
+        assert '(0 publishers matched; is a controller running' in warning, warning
+        assert node.sim.q_rad.tolist() == [0.0, 0.6, 0.0]  # held against gravity
+    finally:
+        executor.remove_node(node)
+        executor.remove_node(listener)
+        node.destroy_node()
+        listener.destroy_node()
 
 
 # -- over DDS: the node in its own process ---------------------------------------------------

@@ -13,7 +13,10 @@ disabled, so a joint moves under the commanded torque, gravity and the friction 
 One exception: PyBullet rejects a physically impossible inertia tensor (principal moments that
 break the triangle inequality, as xArm6's link2 and link3 in pybullet_data have) and simulates
 that link without rotational inertia, while Pinocchio keeps the tensor; masses and centres of
-mass, hence gravity, still agree. The bundled wrist's inertias are valid.
+mass, hence gravity, still agree. The bundled wrist's inertias are valid. PyBullet's own
+warnings about it (printed several times per link) are taken out of the output, and those
+links are listed in :attr:`WristSimulator.zero_inertia_links`, to be said once
+(:func:`zero_inertia_note`); whatever else the loader prints is passed on.
 
 Friction, per joint:
 
@@ -41,18 +44,23 @@ import math
 import os
 from pathlib import Path
 import re
+import sys
 import tempfile
 from typing import Optional, Sequence, Union
 import xml.etree.ElementTree as ET
 
 import numpy as np
-from wrist_sim.quiet import c_output_silenced, pybullet  # imported without its banner
+from wrist_sim.quiet import c_output_captured, c_output_silenced
+from wrist_sim.quiet import pybullet  # noqa: I100 - imported without its banner
 import pybullet_data  # noqa: I100 - after pybullet, which wrist_sim.quiet imports silenced
 from pybullet_utils.bullet_client import BulletClient
 from quat_jt_runtime.errors import QuatJtError
 from quat_jt_runtime.joints import movable_joints, select_joints
 
 GRAVITY_MPS2 = 9.81
+# PyBullet's loader, on a link whose inertia tensor it replaces with zero (URDF2Bullet)
+_ZERO_INERTIA = re.compile(r'(?:b3Warning\[[^\]\n]*\]:[ \t]*\n)?Bad inertia tensor properties, '
+                           r'setting inertia to zero for link: *(\S*)[ \t]*\n?')
 _PACKAGE_URI = re.compile(r'package://([^/"\'\s]+)/([^"\'\s<>]*)')
 
 PathLike = Union[str, os.PathLike]
@@ -60,6 +68,10 @@ PathLike = Union[str, os.PathLike]
 
 class SimulatorError(QuatJtError):
     """The URDF, the joints or the values asked of the simulator are not usable."""
+
+
+class NoDisplayError(SimulatorError):
+    """The PyBullet window was asked for where none can open: not a matter of the robot."""
 
 
 @dataclass(frozen=True)
@@ -167,6 +179,20 @@ def missing_meshes_note(missing: Sequence[str]) -> str:
             'in pybullet_data; relative paths in pybullet_data')
 
 
+def zero_inertia_note(links: Sequence[str]) -> str:
+    """Say which links PyBullet simulates without rotational inertia, and why."""
+    return (f'PyBullet simulates {", ".join(links)} without rotational inertia (point masses at '
+            'their centres of mass): the inertia tensors robot_description gives them are not '
+            "physical (a principal moment exceeds the sum of the other two). The controller's "
+            'model keeps them as given; masses and centres of mass, hence gravity, agree')
+
+
+def take_zero_inertia_warnings(text: str) -> tuple[tuple[str, ...], str]:
+    """Return the links PyBullet's loader gave zero inertia (once each), and the rest of text."""
+    links = tuple(dict.fromkeys(m.group(1) for m in _ZERO_INERTIA.finditer(text)))
+    return links, _ZERO_INERTIA.sub('', text)
+
+
 def at_limit(values: Sequence[float], limits: Sequence[float]) -> bool:
     """Tell whether any of ``values`` is at or past its limit, either way (plain floats)."""
     for v, limit in zip(values, limits):
@@ -247,7 +273,7 @@ class WristSimulator:
 
         if use_gui and not os.environ.get('DISPLAY'):
             # PyBullet would exit the whole process ('cannot connect to X server'): say why.
-            raise SimulatorError(
+            raise NoDisplayError(
                 'use_gui is true but DISPLAY is not set, so the PyBullet window cannot open: '
                 'run without use_gui (headless), on a desktop session, or under a virtual '
                 "display, e.g. 'xvfb-run -a ros2 launch ...'")
@@ -289,11 +315,18 @@ class WristSimulator:
         try:
             with os.fdopen(fd, 'w') as f:
                 f.write(xml)
+            printed: list[str] = []
             try:
-                self._body = c.loadURDF(path, useFixedBase=True,
-                                        flags=pybullet.URDF_USE_INERTIA_FROM_FILE)
+                with c_output_captured() as printed:  # its warnings: said once, below
+                    self._body = c.loadURDF(path, useFixedBase=True,
+                                            flags=pybullet.URDF_USE_INERTIA_FROM_FILE)
             except pybullet.error as exc:
                 raise SimulatorError(f'PyBullet cannot load the URDF: {exc}') from exc
+            finally:
+                self.zero_inertia_links, rest = take_zero_inertia_warnings(''.join(printed))
+                if rest:
+                    sys.stdout.write(rest)
+                    sys.stdout.flush()
         finally:
             os.unlink(path)
 
