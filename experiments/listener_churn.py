@@ -1,5 +1,5 @@
 """
-Listeners joining the nodes' topics: does anyone's ``ros2 topic echo`` delay the 1 kHz loop?
+Listeners joining the nodes' topics: whether a ``ros2 topic echo`` delays the 1 kHz loop.
 
 For each topic the nodes publish, a fresh wrist pair (``config/wrist_sim.yaml`` and the product
 ``config/wrist_controller.yaml``, real time, as a user runs them) is started on a private
