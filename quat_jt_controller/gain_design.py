@@ -69,6 +69,12 @@ FRICTION_LEARNING_TIME_S = 1.0
 SAMPLES = 24  # representative regular configurations for M(q), J(q)
 SURVEY = 400  # random configurations for the largest g(q) and lever ||J_p[:, j]||
 REGULAR_SIGMA_MIN = 0.1
+# The representative configurations are looked for among at most this many random ones. If
+# fewer than SAMPLES reach REGULAR_SIGMA_MIN (a small arm: sigma_min mixes metres and
+# radians), the best ones are taken, down to REGULAR_RELATIVE x the largest sigma_min found.
+REGULAR_TRIES = 2000
+REGULAR_RELATIVE = 0.5
+SINGULAR_EVERYWHERE = 1e-6  # the largest sigma_min below this: the task is out of reach
 SHRINK = 0.8  # gains are scaled by this until the sampled loop is stable
 DELAY_MARGIN = 1  # the loop must also be stable with this many ticks more than asked for
 GAIN_MARGIN = 1.5  # ... and with the gains (stiffness and damping) this many times larger
@@ -221,7 +227,9 @@ def survey(model: RobotModel, task: cl.Task, seed: int = 0) -> dict:
     ``gravity_max`` and ``lever_max`` (the largest ||J_p[:, j]||, m) over SURVEY
     configurations within the limits; ``configurations``: SAMPLES regular ones (sigma_min of
     the task Jacobian >= REGULAR_SIGMA_MIN) within 90% of the ranges, with their task
-    Jacobians and M(q); ``inertia_min`` the smallest inertia a joint sees over all of them,
+    Jacobians and M(q), among at most REGULAR_TRIES random ones; if fewer are found, the
+    best ones down to REGULAR_RELATIVE x the largest sigma_min (``regular_sigma_min`` the
+    threshold used); ``inertia_min`` the smallest inertia a joint sees over all of them,
     ``1 / (M^-1)_jj`` (the others free to move; up to several times below M_jj on a coupled
     arm).
     """
@@ -234,18 +242,34 @@ def survey(model: RobotModel, task: cl.Task, seed: int = 0) -> dict:
         g_max = np.maximum(g_max, np.abs(model.gravity(q.tolist())))
         lever = np.maximum(lever, np.linalg.norm(np.array(J)[:3], axis=0))
         inertia_min = np.minimum(inertia_min, seen_inertia(model.mass_matrix(q.tolist())))
-    configs = []
-    while len(configs) < SAMPLES:
+    regular, others = [], []
+    for _ in range(REGULAR_TRIES):
         q = _sample(model, rng, 0.9)
         _, _, J = model.kinematics(q.tolist())
         rows = np.array(J)[3:] if task is cl.Task.ORIENTATION else np.array(J)
-        if _sigma_min(rows) < REGULAR_SIGMA_MIN:
-            continue
+        sigma = _sigma_min(rows)
+        (regular if sigma >= REGULAR_SIGMA_MIN else others).append((sigma, q, rows))
+        if len(regular) == SAMPLES:
+            break
+    threshold = REGULAR_SIGMA_MIN
+    if len(regular) < SAMPLES:
+        best = max(sigma for sigma, _, _ in regular + others)
+        if best < SINGULAR_EVERYWHERE:
+            raise ValueError(
+                f'the {task.value} task Jacobian is singular at each of {REGULAR_TRIES} random '
+                f'configurations of joints {list(model.joint_names)} (largest sigma_min '
+                f'{best:.3g}): these joints cannot move {model.tip_link!r} in every direction '
+                f'of the {task.value} task; choose another task, tip link or joints')
+        threshold = REGULAR_RELATIVE * best
+        others.sort(key=lambda c: -c[0])
+        regular += [c for c in others if c[0] >= threshold][:SAMPLES - len(regular)]
+    configs = []
+    for _, q, rows in regular:
         M = model.mass_matrix(q.tolist())
         inertia_min = np.minimum(inertia_min, seen_inertia(M))
         configs.append((q, rows, M))
     return {'gravity_max': g_max, 'lever_max': lever, 'inertia_min': inertia_min,
-            'configurations': configs}
+            'configurations': configs, 'regular_sigma_min': threshold}
 
 
 def seen_inertia(M: np.ndarray) -> np.ndarray:
@@ -557,6 +581,7 @@ def design(model: RobotModel, task: cl.Task, rate_hz: float = 1000.0,
         'damping_ratio': ratios, 'terminal_speed_rad_s': np.array(terminal),
         'velocity_limits_rad_s': velocity, 'friction_learning': friction_learning,
         'cruise_fraction': cruise_fraction,
+        'regular_sigma_min': data['regular_sigma_min'],
         'warnings': friction_warnings(model, friction, learning),
     }
     return Design(task, model.joint_names, model.base_link, model.tip_link, rate_hz, kp_r,
@@ -600,6 +625,15 @@ def _saturation(lam: Sequence[float], pose: bool) -> str:
     if pose:
         text += f' / {x96 / lam[0]:.2g} m'
     return text
+
+
+def _regular_note(f: dict) -> str:
+    """Say which sigma_min the representative configurations have, if not the usual one."""
+    threshold = f.get('regular_sigma_min', REGULAR_SIGMA_MIN)
+    if threshold >= REGULAR_SIGMA_MIN:
+        return ''
+    return (f' (sigma_min(J) >= {threshold:.3g}: none of {REGULAR_TRIES} random ones reached '
+            f'{REGULAR_SIGMA_MIN:g})')
 
 
 def _float(value: float) -> str:
@@ -651,7 +685,8 @@ def to_yaml(d: Design, potential: str = 'tanh', command: str = '',
         f'  sampled loop at {d.rate_hz:g} Hz with {"/".join(str(x) for x in f["delays"])} '
         f'tick(s) of delay and {max(f["delays"]) + DELAY_MARGIN}, and at {GAIN_MARGIN:g} x the '
         f'gains, per joint on the inertia it sees (1 / (M^-1)_jj, smallest '
-        f'{_fmt(f["inertia_min"])} kg m^2), linearised at {SAMPLES} regular configurations: '
+        f'{_fmt(f["inertia_min"])} kg m^2), linearised at {SAMPLES} regular configurations'
+        f'{_regular_note(f)}: '
         'worst spectral '
         f'radius {rho["tanh"]:.6f} (tanh), {rho["quadratic"]:.6f} (quadratic) < 1; median '
         f'damping ratios tanh {_fmt(zeta["tanh"])}, quadratic {_fmt(zeta["quadratic"])};',

@@ -20,6 +20,28 @@ def movable_joints(urdf_xml: str) -> list[str]:
     return [j.get('name') for j in root.iter('joint') if j.get('type') in MOVABLE_TYPES]
 
 
+def fixed_joints(urdf_xml: str, names: Sequence[str]) -> str:
+    """
+    Return the URDF with the joints ``names`` made fixed: each locked at zero.
+
+    A joint at zero places its child link at the joint's origin, which is what a fixed joint
+    with the same origin does. Raises ValueError if the text is not XML or a name is not a
+    joint of it.
+    """
+    try:
+        root = ElementTree.fromstring(urdf_xml)
+    except ElementTree.ParseError as exc:
+        raise ValueError(f'the URDF is not valid XML: {exc}') from exc
+    wanted = set(names)
+    for joint in root.iter('joint'):
+        if joint.get('name') in wanted and joint.get('type') in MOVABLE_TYPES:
+            joint.set('type', 'fixed')
+            wanted.discard(joint.get('name'))
+    if wanted:
+        raise ValueError(f'joints {sorted(wanted)} are not movable joints of the URDF')
+    return ElementTree.tostring(root, encoding='unicode')
+
+
 def select_joints(requested: Optional[Sequence[str]], movable: Sequence[str],
                   error: type = ValueError) -> list[str]:
     """
