@@ -41,7 +41,9 @@ import numpy as np
 from quat_jt_controller import control_law as cl
 from quat_jt_controller.model import RobotModel
 from quat_jt_controller.shaping import FULL_TURN_RAD, Shaping
-from quat_jt_runtime.joints import DEFAULT_MAX_STATE_AGE_S, DEFAULT_STATE_TIMEOUT_S
+from quat_jt_runtime.errors import QuatJtError
+from quat_jt_runtime.joints import check_state_rate, DEFAULT_MAX_STATE_AGE_S
+from quat_jt_runtime.joints import DEFAULT_STATE_TIMEOUT_S, STATE_RATE_RANGE_HZ
 
 TORQUE_SHARE = 0.8  # of what gravity and friction compensation leave; the rest: damping
 GUIDE_OVER_TASK = 1.2  # the goal-configuration term must overcome the task term at a stop
@@ -425,6 +427,7 @@ def design(model: RobotModel, task: cl.Task, rate_hz: float = 1000.0,
     """
     task = cl.Task(task)
     n = model.n
+    rate_hz = check_state_rate(rate_hz, 'rate_hz')
     dt_s = 1.0 / rate_hz
     effort = np.array(model.effort_limits if effort_limits_nm is None else effort_limits_nm,
                       dtype=float)
@@ -753,6 +756,8 @@ def to_yaml(d: Design, potential: str = 'tanh', command: str = '',
         '-> zero torque (once)',
         f'    max_state_age: {DEFAULT_MAX_STATE_AGE_S}           # s; older, future or unstamped '
         'states are rejected; 0 = off',
+        f'    state_rate: {_float(d.rate_hz)}           # Hz, the joint_states rate designed for '
+        '(--rate)',
         f'    publish_rate_divider: {max(1, int(round(d.rate_hz / 100.0)))}     # feedback '
         'topics at 100 Hz',
     ]
@@ -777,7 +782,10 @@ def main(argv: Optional[list] = None) -> int:
                              'Eqs. 24/32)')
     parser.add_argument('--effort-limits', type=float, nargs='+',
                         help='N m per joint (default: the URDF effort limits)')
-    parser.add_argument('--rate', type=float, default=1000.0, help='control rate, Hz')
+    parser.add_argument('--rate', type=float, default=1000.0,
+                        help='the control rate (of joint_states and commands), Hz, in '
+                        f'[{STATE_RATE_RANGE_HZ[0]:g}, {STATE_RATE_RANGE_HZ[1]:g}]; the '
+                        'sampled loop is checked at it (default 1000)')
     parser.add_argument('--friction', type=float, nargs='+',
                         help='Coulomb friction estimates, N m per joint (default: none)')
     parser.add_argument('--friction-learning', type=float, default=FRICTION_LEARNING,
@@ -808,12 +816,17 @@ def main(argv: Optional[list] = None) -> int:
     sim.add_argument('--sim-viscous', type=float, nargs='+',
                      help='the simulated viscous friction, N m s/rad per joint (default: none)')
     args = parser.parse_args(argv)
-    urdf = args.urdf.read_text() if args.urdf else default_urdf_xml()
-    model = RobotModel(urdf, args.base_link, args.tip_link, args.joints)
-    result = design(model, cl.Task(args.task), args.rate, args.effort_limits, args.friction,
-                    tuple(args.delays), friction_learning=args.friction_learning,
-                    cruise_fraction=args.cruise_fraction,
-                    preferred_configuration_rad=args.preferred_configuration)
+    try:  # bad input: one line naming the value, at once
+        check_state_rate(args.rate, '--rate')
+        urdf = args.urdf.read_text() if args.urdf else default_urdf_xml()
+        model = RobotModel(urdf, args.base_link, args.tip_link, args.joints)
+        result = design(model, cl.Task(args.task), args.rate, args.effort_limits,
+                        args.friction, tuple(args.delays),
+                        friction_learning=args.friction_learning,
+                        cruise_fraction=args.cruise_fraction,
+                        preferred_configuration_rad=args.preferred_configuration)
+    except (OSError, ValueError, QuatJtError) as exc:
+        parser.error(str(exc))
     for warning in result.figures['warnings']:
         print(f'design_gains: WARNING: {warning}', file=sys.stderr)
     command = shlex.join(['python', '-m', 'quat_jt_controller.gain_design']

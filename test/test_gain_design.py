@@ -238,3 +238,27 @@ def test_a_bad_simulator_argument_writes_neither_file(tmp_path):
                             timeout=120)
     assert result.returncode != 0 and '--sim-coulomb: expected 7' in result.stderr
     assert not out.exists() and not sim_out.exists()
+
+
+def test_a_design_at_100_hz_is_stable_where_the_1_khz_one_is_not():
+    """The sampled loop at the rate given: the 1 kHz gains with 10 ms ticks diverge."""
+    model = wrist_model()
+    task = cl.Task.ORIENTATION
+    configs = gd.survey(model, task)['configurations']
+
+    def worst(d):
+        return max(gd.linearized_spectral_radius(model, q, d.gains('tanh'), 1, 0.01, M, task,
+                                                 d.shaping) for q, _, M in configs)
+    slow = gd.design(model, task, rate_hz=100.0)
+    assert slow.rate_hz == 100.0 and 'state_rate: 100.0' in gd.to_yaml(slow)
+    assert worst(slow) < 1.0 < worst(gd.design(model, task, rate_hz=1000.0))
+
+
+@pytest.mark.parametrize('rate', [50.0, 2000.0, float('nan')])
+def test_a_rate_outside_100_to_1000_hz_is_refused_by_value(rate):
+    with pytest.raises(ValueError, match=f'rate_hz {rate!r} Hz is outside'):
+        gd.design(wrist_model(), cl.Task.ORIENTATION, rate_hz=rate)
+    result = subprocess.run([sys.executable, '-m', 'quat_jt_controller.gain_design', '--rate',
+                             str(rate)], capture_output=True, text=True, timeout=120)
+    assert result.returncode == 2 and f'--rate {rate!r} Hz is outside' in result.stderr
+    assert 'Traceback' not in result.stderr
