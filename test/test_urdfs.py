@@ -128,7 +128,7 @@ def test_design_on_a_five_joint_arm_finishes(task):
     assert min(sigmas) >= data['regular_sigma_min'] > 0.0
     if task is cl.Task.POSE:
         assert data['regular_sigma_min'] < gd.REGULAR_SIGMA_MIN
-    d = gd.design(model, task)
+    d = _pose_design(model) if task is cl.Task.POSE else gd.design(model, task)
     assert all(k > 0 for k in d.kp + d.kv)
     assert max(d.figures['spectral_radius'].values()) < 1.0
     text = ' '.join(gd.to_yaml(d).replace('#', ' ').split())
@@ -150,3 +150,46 @@ def test_a_task_the_joints_cannot_do_fails_at_once():
         '<axis xyz="0 0 1"/>', '<axis xyz="0 1 0"/>'), 'base_link', 'tool')
     with pytest.raises(ValueError, match='orientation task Jacobian is singular at each of'):
         gd.survey(model, cl.Task.ORIENTATION)
+
+
+_DESIGNS = {}
+
+
+def _pose_design(model):
+    """Return design_gains' pose design of a model, computed once per URDF and joints."""
+    key = (model.tip_link, model.joint_names, model.continuous)
+    if key not in _DESIGNS:
+        _DESIGNS[key] = gd.design(model, cl.Task.POSE)
+    return _DESIGNS[key]
+
+
+def _arm(name):
+    if name == 'so100':
+        path = example_robot_data_urdf('so_arm_description/urdf/so100.urdf')
+        return path.read_text(), RobotModel(path.read_text(), 'base', 'gripper', SO100_ARM)
+    kinds = {'four': ('continuous', 'revolute', 'revolute', 'continuous'),
+             'five': ('continuous', 'revolute', 'revolute', 'continuous', 'revolute')}[name]
+    urdf = small_arm_urdf(kinds)
+    return urdf, RobotModel(urdf, 'base_link', 'tool')
+
+
+@pytest.mark.parametrize('name', ['four', 'five', 'so100'])
+def test_an_arm_of_four_or_five_joints_reaches_a_pose_it_can_reach(name):
+    """design_gains from the URDF alone, then the sampled loop in PyBullet (1 tick of delay)."""
+    from quat_jt_controller import quaternion as quat
+    from quat_jt_controller.reference_sim import ClosedLoop, run_sampled
+    urdf, model = _arm(name)
+    d = _pose_design(model)
+    mid = np.array(model.middle_of_ranges())
+    q0, q_goal = mid - 0.2, mid + 0.3
+    p_d, R, _ = model.kinematics(q_goal)
+    q_d = quat.from_rotation_matrix(R)
+    q_star = goal_configuration(model, q0, q_d, p_d, cl.Task.POSE,
+                                d.shaping.joint_limit_margin_rad)
+    assert q_star is not None
+    with WristSimulator(urdf, model.joint_names, initial_positions_rad=q0) as sim:
+        loop = ClosedLoop(model, d.gains('tanh'), cl.Task.POSE, q_d, p_d, shaping=d.shaping)
+        run = run_sampled(loop, sim, 3.5, 1, q_star, 0.1)
+    assert run.all_finite
+    position_m, orientation = run.final(window_s=0.5)
+    assert position_m < 1e-3 and orientation < 0.01, (position_m, orientation)
