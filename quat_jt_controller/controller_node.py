@@ -59,7 +59,9 @@ class QuatJtController(Node):
             preferred_configuration=model.middle_of_ranges())
         reg.set_shaping(self.shaping.current)
         self._change_log = parameters.change_log(self, reg)
-        self._check_state = StateCheck(cfg.joints, cfg.max_state_age_s)
+        self._check_state = StateCheck(cfg.joints, cfg.max_state_age_s, cfg.state_rate_hz,
+                                       model.continuous)
+        self._said_estimating = False
         self._goal_checker = GoalCheckWorker(ModelSpec(
             cfg.robot_description, cfg.base_link, cfg.tip_link, cfg.joints, cfg.task))
         self.supervisor = Supervisor(reg, cfg.state_timeout_s, cfg.publish_rate_divider,
@@ -112,6 +114,15 @@ class QuatJtController(Node):
             self.counters.rejected_states += 1
             self.counters.stale_states += isinstance(exc, StaleState)
             return self._log_rejection('joint_states', str(exc))
+        if self._check_state.estimating and not self._said_estimating:
+            self._said_estimating = True
+            self.get_logger().warn(
+                'joint_states carry no velocities: estimating them from the positions and '
+                + ('their stamps' if stamp_ns else 'their arrival times (no stamps)')
+                + f' (finite differences, low-pass of time constant '
+                f'{1e3 / self.config.state_rate_hz:g} ms = one period at state_rate '
+                f'{self.config.state_rate_hz:g} Hz); a driver that publishes velocities '
+                'gives better damping')
         sup, now_mono_ns = self.supervisor, time.monotonic_ns()
         held = sup.before_tick(q, now_mono_ns)
         if held is not None:

@@ -42,7 +42,8 @@ import numpy as np
 from quat_jt_controller import control_law as cl
 from quat_jt_controller.model import ModelError, RobotModel
 from quat_jt_controller.shaping import FULL_TURN_RAD, Shaping
-from quat_jt_runtime.joints import DEFAULT_MAX_STATE_AGE_S, DEFAULT_STATE_TIMEOUT_S
+from quat_jt_runtime.joints import check_state_rate, DEFAULT_MAX_STATE_AGE_S
+from quat_jt_runtime.joints import DEFAULT_STATE_TIMEOUT_S, STATE_RATE_RANGE_HZ
 
 TORQUE_SHARE = 0.8  # of what gravity and friction compensation leave; the rest: damping
 GUIDE_OVER_TASK = 1.2  # the goal-configuration term must overcome the task term at a stop
@@ -70,6 +71,12 @@ FRICTION_LEARNING_TIME_S = 1.0
 SAMPLES = 24  # representative regular configurations for M(q), J(q)
 SURVEY = 400  # random configurations for the largest g(q) and lever ||J_p[:, j]||
 REGULAR_SIGMA_MIN = 0.1
+# The representative configurations are looked for among at most this many random ones. If
+# fewer than SAMPLES reach REGULAR_SIGMA_MIN (a small arm: sigma_min mixes metres and
+# radians), the best ones are taken, down to REGULAR_RELATIVE x the largest sigma_min found.
+REGULAR_TRIES = 2000
+REGULAR_RELATIVE = 0.5
+SINGULAR_EVERYWHERE = 1e-6  # the largest sigma_min below this: the task is out of reach
 SHRINK = 0.8  # gains are scaled by this until the sampled loop is stable
 DELAY_MARGIN = 1  # the loop must also be stable with this many ticks more than asked for
 GAIN_MARGIN = 1.5  # ... and with the gains (stiffness and damping) this many times larger
@@ -222,7 +229,9 @@ def survey(model: RobotModel, task: cl.Task, seed: int = 0) -> dict:
     ``gravity_max`` and ``lever_max`` (the largest ||J_p[:, j]||, m) over SURVEY
     configurations within the limits; ``configurations``: SAMPLES regular ones (sigma_min of
     the task Jacobian >= REGULAR_SIGMA_MIN) within 90% of the ranges, with their task
-    Jacobians and M(q); ``inertia_min`` the smallest inertia a joint sees over all of them,
+    Jacobians and M(q), among at most REGULAR_TRIES random ones; if fewer are found, the
+    best ones down to REGULAR_RELATIVE x the largest sigma_min (``regular_sigma_min`` the
+    threshold used); ``inertia_min`` the smallest inertia a joint sees over all of them,
     ``1 / (M^-1)_jj`` (the others free to move; up to several times below M_jj on a coupled
     arm).
     """
@@ -235,18 +244,34 @@ def survey(model: RobotModel, task: cl.Task, seed: int = 0) -> dict:
         g_max = np.maximum(g_max, np.abs(model.gravity(q.tolist())))
         lever = np.maximum(lever, np.linalg.norm(np.array(J)[:3], axis=0))
         inertia_min = np.minimum(inertia_min, seen_inertia(model.mass_matrix(q.tolist())))
-    configs = []
-    while len(configs) < SAMPLES:
+    regular, others = [], []
+    for _ in range(REGULAR_TRIES):
         q = _sample(model, rng, 0.9)
         _, _, J = model.kinematics(q.tolist())
         rows = np.array(J)[3:] if task is cl.Task.ORIENTATION else np.array(J)
-        if _sigma_min(rows) < REGULAR_SIGMA_MIN:
-            continue
+        sigma = _sigma_min(rows)
+        (regular if sigma >= REGULAR_SIGMA_MIN else others).append((sigma, q, rows))
+        if len(regular) == SAMPLES:
+            break
+    threshold = REGULAR_SIGMA_MIN
+    if len(regular) < SAMPLES:
+        best = max(sigma for sigma, _, _ in regular + others)
+        if best < SINGULAR_EVERYWHERE:
+            raise ValueError(
+                f'the {task.value} task Jacobian is singular at each of {REGULAR_TRIES} random '
+                f'configurations of joints {list(model.joint_names)} (largest sigma_min '
+                f'{best:.3g}): these joints cannot move {model.tip_link!r} in every direction '
+                f'of the {task.value} task; choose another task, tip link or joints')
+        threshold = REGULAR_RELATIVE * best
+        others.sort(key=lambda c: -c[0])
+        regular += [c for c in others if c[0] >= threshold][:SAMPLES - len(regular)]
+    configs = []
+    for _, q, rows in regular:
         M = model.mass_matrix(q.tolist())
         inertia_min = np.minimum(inertia_min, seen_inertia(M))
         configs.append((q, rows, M))
     return {'gravity_max': g_max, 'lever_max': lever, 'inertia_min': inertia_min,
-            'configurations': configs}
+            'configurations': configs, 'regular_sigma_min': threshold}
 
 
 def seen_inertia(M: np.ndarray) -> np.ndarray:
@@ -402,6 +427,7 @@ def design(model: RobotModel, task: cl.Task, rate_hz: float = 1000.0,
     """
     task = cl.Task(task)
     n = model.n
+    rate_hz = check_state_rate(rate_hz, 'rate_hz')
     dt_s = 1.0 / rate_hz
     effort = np.array(model.effort_limits if effort_limits_nm is None else effort_limits_nm,
                       dtype=float)
@@ -558,6 +584,7 @@ def design(model: RobotModel, task: cl.Task, rate_hz: float = 1000.0,
         'damping_ratio': ratios, 'terminal_speed_rad_s': np.array(terminal),
         'velocity_limits_rad_s': velocity, 'friction_learning': friction_learning,
         'cruise_fraction': cruise_fraction,
+        'regular_sigma_min': data['regular_sigma_min'],
         'warnings': friction_warnings(model, friction, learning),
     }
     return Design(task, model.joint_names, model.base_link, model.tip_link, rate_hz, kp_r,
@@ -601,6 +628,15 @@ def _saturation(lam: Sequence[float], pose: bool) -> str:
     if pose:
         text += f' / {x96 / lam[0]:.2g} m'
     return text
+
+
+def _regular_note(f: dict) -> str:
+    """Say which sigma_min the representative configurations have, if not the usual one."""
+    threshold = f.get('regular_sigma_min', REGULAR_SIGMA_MIN)
+    if threshold >= REGULAR_SIGMA_MIN:
+        return ''
+    return (f' (sigma_min(J) >= {threshold:.3g}: none of {REGULAR_TRIES} random ones reached '
+            f'{REGULAR_SIGMA_MIN:g})')
 
 
 def _float(value: float) -> str:
@@ -652,7 +688,8 @@ def to_yaml(d: Design, potential: str = 'tanh', command: str = '',
         f'  sampled loop at {d.rate_hz:g} Hz with {"/".join(str(x) for x in f["delays"])} '
         f'tick(s) of delay and {max(f["delays"]) + DELAY_MARGIN}, and at {GAIN_MARGIN:g} x the '
         f'gains, per joint on the inertia it sees (1 / (M^-1)_jj, smallest '
-        f'{_fmt(f["inertia_min"])} kg m^2), linearised at {SAMPLES} regular configurations: '
+        f'{_fmt(f["inertia_min"])} kg m^2), linearised at {SAMPLES} regular configurations'
+        f'{_regular_note(f)}: '
         'worst spectral '
         f'radius {rho["tanh"]:.6f} (tanh), {rho["quadratic"]:.6f} (quadratic) < 1; median '
         f'damping ratios tanh {_fmt(zeta["tanh"])}, quadratic {_fmt(zeta["quadratic"])};',
@@ -719,6 +756,8 @@ def to_yaml(d: Design, potential: str = 'tanh', command: str = '',
         '-> zero torque (once)',
         f'    max_state_age: {DEFAULT_MAX_STATE_AGE_S}           # s; older, future or unstamped '
         'states are rejected; 0 = off',
+        f'    state_rate: {_float(d.rate_hz)}           # Hz, the joint_states rate designed for '
+        '(--rate)',
         f'    publish_rate_divider: {max(1, int(round(d.rate_hz / 100.0)))}     # feedback '
         'topics at 100 Hz',
     ]
@@ -749,6 +788,14 @@ def _number(low: float, high: float = float('inf'), low_open: bool = True,
             raise argparse.ArgumentTypeError(f'{text} is not {kind} in {interval}')
         return value
     return parse
+
+
+def _real(text: str) -> float:
+    """Return an argparse type's float (NaN and infinities too: a range check follows)."""
+    try:
+        return float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f'{text!r} is not a number') from None
 
 
 def _check_per_joint(parser: argparse.ArgumentParser, model: RobotModel,
@@ -797,7 +844,10 @@ def main(argv: Optional[list] = None) -> int:
                              'Eqs. 24/32)')
     parser.add_argument('--effort-limits', type=positive, nargs='+',
                         help='N m per joint (default: the URDF effort limits)')
-    parser.add_argument('--rate', type=positive, default=1000.0, help='control rate, Hz')
+    parser.add_argument('--rate', type=_real, default=1000.0,
+                        help='the control rate (of joint_states and commands), Hz, in '
+                        f'[{STATE_RATE_RANGE_HZ[0]:g}, {STATE_RATE_RANGE_HZ[1]:g}]; the '
+                        'sampled loop is checked at it (default 1000)')
     parser.add_argument('--friction', type=non_negative, nargs='+',
                         help='Coulomb friction estimates, N m per joint (default: none)')
     parser.add_argument('--friction-learning', type=non_negative, default=FRICTION_LEARNING,
@@ -828,6 +878,10 @@ def main(argv: Optional[list] = None) -> int:
     sim.add_argument('--sim-viscous', type=non_negative, nargs='+',
                      help='the simulated viscous friction, N m s/rad per joint (default: none)')
     args = parser.parse_args(argv)
+    try:
+        check_state_rate(args.rate, '--rate')
+    except ValueError as exc:
+        parser.error(str(exc))
     try:
         urdf = args.urdf.read_text() if args.urdf else default_urdf_xml()
     except (OSError, UnicodeDecodeError) as exc:

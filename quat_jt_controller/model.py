@@ -6,7 +6,13 @@ forward kinematics of a tip link in a base link, the geometric Jacobian J_G of E
 rows then angular rows, base-frame axes, tip-origin velocity), gravity torques g(q) of Eq. (1),
 and the joint position, velocity and effort limits. Joints of the URDF that are not controlled
 are locked at zero.
+
+A URDF ``continuous`` joint is a revolute joint without stops. Pinocchio gives it two
+configuration coordinates, (cos q, sin q), and one velocity; here it has one angle q like any
+other joint (unwrapped: q and q + 2 pi are the same configuration), position limits of
+-inf and +inf, and one column in J_G, g(q) and M(q).
 """
+from math import cos, sin
 from typing import Optional, Sequence
 
 import numpy as np
@@ -19,7 +25,7 @@ except ModuleNotFoundError as exc:  # e.g. a colcon workspace whose rosdep skipp
         'repository') from exc
 
 from quat_jt_runtime.errors import QuatJtError
-from quat_jt_runtime.joints import movable_joints, select_joints
+from quat_jt_runtime.joints import fixed_joints, movable_joints, select_joints
 
 
 class ModelError(QuatJtError):
@@ -32,27 +38,31 @@ class RobotModel:
 
     ``joint_names`` gives the order of q, qdot and tau everywhere in this package; by default
     the URDF's movable joints (``joints.movable_joints``) in document order. Each controlled
-    joint must be revolute or prismatic with one coordinate (a URDF ``continuous`` joint has
-    two in Pinocchio).
+    joint is revolute, continuous or prismatic. ``base_link`` and ``tip_link`` are looked up
+    as links (Pinocchio BODY frames), so a joint of the same name does not clash.
     """
 
     def __init__(self, urdf_xml: str, base_link: str, tip_link: str,
                  joint_names: Optional[Sequence[str]] = None) -> None:
         try:
-            full = pin.buildModelFromXML(urdf_xml)
-        except Exception as exc:  # Pinocchio raises plain RuntimeError/ValueError
-            raise ModelError(f'cannot parse the URDF: {exc}') from exc
-        try:
             movable = movable_joints(urdf_xml)
         except ValueError as exc:
-            raise ModelError(str(exc)) from exc
+            raise ModelError(f'cannot parse the URDF: {exc}') from exc
         joint_names = select_joints(joint_names, movable, ModelError)
-        movable = [full.names[i] for i in range(1, full.njoints)]
-        locked = [full.getJointId(n) for n in movable if n not in joint_names]
-        model = (pin.buildReducedModel(full, locked, pin.neutral(full)) if locked else full)
+        # Joints not controlled are locked at zero: made fixed in the URDF itself, which is
+        # what Pinocchio's buildReducedModel computes, without its lookup of frames by name
+        # alone (it stops on a link and a joint of the same name).
+        locked = [n for n in movable if n not in joint_names]
+        try:
+            model = pin.buildModelFromXML(fixed_joints(urdf_xml, locked) if locked
+                                          else urdf_xml)
+        except Exception as exc:  # Pinocchio raises plain RuntimeError/ValueError
+            raise ModelError(f'cannot parse the URDF: {exc}') from exc
         for name in (base_link, tip_link):
-            if not model.existFrame(name):
-                raise ModelError(f'link {name!r} is not in the URDF')
+            if not model.existFrame(name, pin.BODY):
+                what = (' (it names a joint; give the link)'
+                        if model.existFrame(name, pin.JOINT) else '')
+                raise ModelError(f'link {name!r} is not in the URDF{what}')
         self.model = model
         self.data = model.createData()
         self.joint_names: tuple[str, ...] = tuple(joint_names)
@@ -61,17 +71,26 @@ class RobotModel:
         self.n = len(joint_names)
 
         joint_ids = [model.getJointId(n) for n in joint_names]
+        unbounded = []
         for name, jid in zip(joint_names, joint_ids):
-            if model.joints[jid].nq != 1 or model.joints[jid].nv != 1:
-                raise ModelError(f'joint {name!r} has {model.joints[jid].nq} coordinates; only '
-                                 'one-coordinate (revolute/prismatic) joints are supported')
-        if model.nq != self.n:
-            raise ModelError(f'model has {model.nq} coordinates for {self.n} joints')
-        # Our joint order -> Pinocchio's q/v index.
-        self._idx = [model.joints[jid].idx_q for jid in joint_ids]
+            joint = model.joints[jid]
+            if joint.nv != 1 or joint.nq not in (1, 2):
+                raise ModelError(f'joint {name!r} has {joint.nq} coordinates and {joint.nv} '
+                                 'velocities; only revolute, continuous and prismatic joints '
+                                 'are supported')
+            unbounded.append(joint.nq == 2)  # continuous: (cos q, sin q)
+        if model.nv != self.n:
+            raise ModelError(f'model has {model.nv} velocities for {self.n} joints')
+        # Our joint order -> Pinocchio's configuration index and velocity index.
+        self._iq = [model.joints[jid].idx_q for jid in joint_ids]
+        self._idx = [model.joints[jid].idx_v for jid in joint_ids]
+        self._unbounded = tuple(unbounded)
+        self.continuous: tuple[bool, ...] = self._unbounded
+        self._any_unbounded = any(unbounded)
         self._identity_order = self._idx == list(range(self.n))
-        self._base_id = model.getFrameId(base_link)
-        self._tip_id = model.getFrameId(tip_link)
+        self._identity_q = self._identity_order and not self._any_unbounded
+        self._base_id = model.getFrameId(base_link, pin.BODY)
+        self._tip_id = model.getFrameId(tip_link, pin.BODY)
         if model.frames[self._base_id].parentJoint != 0:
             raise ModelError(f'base link {base_link!r} moves with joint '
                              f'{model.names[model.frames[self._base_id].parentJoint]!r}; '
@@ -83,8 +102,11 @@ class RobotModel:
         self._R_root_base = base.rotation.copy()  # base orientation in the root frame
         self._p_root_base = base.translation.copy()
 
-        self.position_lower = self._per_joint(model.lowerPositionLimit)
-        self.position_upper = self._per_joint(model.upperPositionLimit)
+        inf = float('inf')
+        self.position_lower = tuple(-inf if u else float(model.lowerPositionLimit[i])
+                                    for i, u in zip(self._iq, self._unbounded))
+        self.position_upper = tuple(inf if u else float(model.upperPositionLimit[i])
+                                    for i, u in zip(self._iq, self._unbounded))
         self.velocity_limits = self._per_joint(model.velocityLimit)
         self.effort_limits = self._per_joint(model.effortLimit)
         # the URDF's <dynamics friction>, N m (0: not given); the simulator does not use it
@@ -96,16 +118,25 @@ class RobotModel:
                      for lo, hi in zip(self.position_lower, self.position_upper))
 
     def _per_joint(self, vec: np.ndarray) -> tuple[float, ...]:
+        """Pick one entry per joint from a Pinocchio velocity-sized vector (limits, friction)."""
         return tuple(float(vec[i]) for i in self._idx)
+
+    def configuration(self, q: Sequence[float]) -> np.ndarray:
+        """Return Pinocchio's configuration vector for the joint angles ``q`` (a copy)."""
+        return self._set_q(q).copy()
 
     def _set_q(self, q: Sequence[float]) -> np.ndarray:
         if len(q) != self.n:
             raise ValueError(f'expected {self.n} joint positions, got {len(q)}')
-        if self._identity_order:
+        if self._identity_q:
             self._q[:] = q
         else:
-            for i, qi in zip(self._idx, q):
-                self._q[i] = qi
+            for i, qi, unbounded in zip(self._iq, q, self._unbounded):
+                if unbounded:
+                    self._q[i] = cos(qi)
+                    self._q[i + 1] = sin(qi)
+                else:
+                    self._q[i] = qi
         return self._q
 
     def _reorder_columns(self, rows: list[list[float]]) -> list[list[float]]:
@@ -156,8 +187,8 @@ class RobotModel:
                          tau: Sequence[float]) -> np.ndarray:
         """Return qddot = M(q)^-1 (tau - C(q, qdot) qdot - g(q)), in ``joint_names`` order."""
         qv = self._set_q(q).copy()
-        v = np.zeros(self.n)
-        t = np.zeros(self.n)
+        v = np.zeros(self.model.nv)
+        t = np.zeros(self.model.nv)
         v[self._idx] = qdot
         t[self._idx] = tau
         a = pin.aba(self.model, self.data, qv, v, t)

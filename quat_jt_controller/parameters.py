@@ -24,7 +24,9 @@ from quat_jt_controller.regulator import Regulator
 from quat_jt_controller.shaping import describe as describe_shaping
 from quat_jt_controller.shaping import from_parameters as shaping_from_parameters
 from quat_jt_controller.shaping import MAX_POSTURE_WEIGHT, Shaping
-from quat_jt_runtime.joints import DEFAULT_MAX_STATE_AGE_S, DEFAULT_STATE_TIMEOUT_S
+from quat_jt_runtime.joints import check_state_rate, DEFAULT_MAX_STATE_AGE_S
+from quat_jt_runtime.joints import DEFAULT_STATE_RATE_HZ, DEFAULT_STATE_TIMEOUT_S
+from quat_jt_runtime.joints import STATE_RATE_RANGE_HZ
 from quat_jt_runtime.params import ChangeLog, declare, joint_zeros, JOINT_ZEROS_TEXT, Kind
 from quat_jt_runtime.params import LiveParameters, markdown_value, names, Spec
 from quat_jt_runtime.realtime import DEFAULT_PREWARM_LEAD_S
@@ -58,6 +60,10 @@ STRUCTURE = (
          "node's clock, or not stamped (zero), is rejected: no command is computed from it, "
          'and it counts as no state for state_timeout. 0 = stamps are not checked (e.g. a '
          'driver without time stamps).', read_only=True, bounds=(0.0, 60.0)),
+    Spec('state_rate', Kind.DOUBLE, DEFAULT_STATE_RATE_HZ,
+         "Hz, the rate of joint_states (the plant's control rate), as design_gains --rate was "
+         'given: the time constant of the velocity estimate for states without velocities is '
+         'one period of it.', read_only=True, bounds=STATE_RATE_RANGE_HZ),
     Spec('publish_rate_divider', Kind.INT, 10,
          '~/current_pose and the error topics are published every N-th tick (N = 10: 100 Hz '
          'at a 1 kHz state rate).', read_only=True, bounds=(1, 1000)),
@@ -194,6 +200,7 @@ class StructuralConfig:
     given_robot_description: str  # the parameter as given ('' = none)
     state_timeout_s: float
     max_state_age_s: float  # 0: stamps not checked
+    state_rate_hz: float
     publish_rate_divider: int
     prewarm_lead_s: float  # 0: no throwaway tick before each state
 
@@ -216,6 +223,7 @@ class StructuralConfig:
                    given_robot_description=urdf,
                    state_timeout_s=float(values['state_timeout']),
                    max_state_age_s=float(values['max_state_age']),
+                   state_rate_hz=check_state_rate(values['state_rate']),
                    publish_rate_divider=int(values['publish_rate_divider']),
                    prewarm_lead_s=float(values['prewarm_lead']))
 

@@ -295,6 +295,8 @@ def test_pose_task_has_six_gains_and_a_position_error_topic(make_node):
     ({'task': 'position'}, ValueError, 'task must be'),
     ({'joints': ['joint1', 'jointX', 'joint3']}, ModelError, 'jointX'),
     ({'tip_link': 'nowhere'}, ModelError, 'nowhere'),
+    ({'state_rate': 50.0}, Exception, 'state_rate out of range'),
+    ({'state_rate': 2000.0}, Exception, 'state_rate out of range'),
 ])
 def test_bad_start_up_configuration_raises_a_clear_error(make_node, overrides, error, words):
     with pytest.raises(error, match=words):
@@ -375,6 +377,28 @@ def test_shuffled_and_extra_names_give_the_same_command(make_probe):
                                        names=('joint3', 'gripper', 'joint1', 'joint2')))
     again = probe.command_for(state(q, v))  # back to the first layout (cached)
     assert first == shuffled == again
+
+
+def test_states_without_velocities_get_them_estimated_and_say_so_once(make_probe):
+    probe = make_probe({'state_rate': 500.0})
+    probe.send_goal(goal(GOAL_XYZW))
+    t0 = time.time_ns() - 10_000_000
+    commands = []
+    for k in range(20):  # joint 2 at 0.5 rad/s, every 2 ms, stamped; no velocities
+        msg = state((0.3, 0.1, 0.04, 0.2 + 0.001 * k), v=(),
+                    names=('joint3', 'joint1', 'gripper', 'joint2'))
+        msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(t0 + 2_000_000 * k,
+                                                                1_000_000_000)
+        commands.append(probe.command_for(msg))
+    probe.wait_log('joint_states carry no velocities: estimating them')
+    assert sum('carry no velocities' in m for m in probe.logs) == 1
+    assert probe.node.counters.rejected_states == 0
+    _, qdot = probe.node._last_q, probe.node._last_qdot
+    assert qdot[0] == 0.0 and qdot[2] == 0.0
+    assert 0.49 < qdot[1] < 0.5  # the estimate has settled on 0.5 rad/s
+    # the damping acts on it: the same state at rest asks for a different torque
+    at_rest = probe.command_for(state((0.1, 0.2 + 0.001 * 19, 0.3), v=(0.0, 0.0, 0.0)))
+    assert at_rest[1] != commands[-1][1]
 
 
 def test_goals_breaking_a1_or_a2_are_accepted_with_a_warning(make_probe):

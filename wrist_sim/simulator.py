@@ -351,8 +351,10 @@ class WristSimulator:
         infos = [info_by_index[j] for j in self._idx]
         # URDF effort 0 (or absent) means "no limit given": no clamping.
         self.effort_limits_nm = np.array([i[10] if i[10] > 0.0 else np.inf for i in infos])
-        self.position_lower = np.array([i[8] for i in infos])
-        self.position_upper = np.array([i[9] for i in infos])
+        # PyBullet reports a joint without stops (URDF continuous) with lower > upper.
+        stops = [i[8] <= i[9] for i in infos]
+        self.position_lower = np.array([i[8] if s else -np.inf for i, s in zip(infos, stops)])
+        self.position_upper = np.array([i[9] if s else np.inf for i, s in zip(infos, stops)])
         # URDF velocity limits, enforced as a drive's speed limit: the solver clamps the joint
         # speed there (0 or absent in the URDF: no limit).
         self.velocity_limits_rad_s = np.array([i[11] if i[11] > 0.0 else np.inf for i in infos])
