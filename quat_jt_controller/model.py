@@ -6,6 +6,12 @@ forward kinematics of a tip link in a base link, the geometric Jacobian J_G of E
 rows then angular rows, base-frame axes, tip-origin velocity), gravity torques g(q) of Eq. (1),
 and the joint position, velocity and effort limits. Joints of the URDF that are not controlled
 are locked at zero.
+
+The inertia is the URDF's links plus, per joint, the rotor inertia its drive reflects (the
+``armature`` a, kg m^2 or kg): M(q) of Eq. (1) becomes M_links(q) + diag(a), in the mass matrix,
+the forward dynamics and everything designed or checked from them. A URDF rarely carries it (a
+geared drive's rotor, seen through the gear ratio r, adds r^2 I_rotor, often more than the
+link), so it is given as a model input.
 """
 from typing import Optional, Sequence
 
@@ -18,7 +24,7 @@ except ModuleNotFoundError as exc:  # e.g. a colcon workspace whose rosdep skipp
         'package on PyPI is another project) or ros-jazzy-pinocchio from the ROS apt '
         'repository') from exc
 
-from quat_jt_runtime.errors import QuatJtError
+from quat_jt_runtime.errors import checked_vector, QuatJtError
 from quat_jt_runtime.joints import movable_joints, select_joints
 
 
@@ -33,11 +39,15 @@ class RobotModel:
     ``joint_names`` gives the order of q, qdot and tau everywhere in this package; by default
     the URDF's movable joints (``joints.movable_joints``) in document order. Each controlled
     joint must be revolute or prismatic with one coordinate (a URDF ``continuous`` joint has
-    two in Pinocchio).
+    two in Pinocchio). ``armature`` is the rotor inertia per joint, in that order (kg m^2, or
+    kg for a prismatic joint; default zeros), added to the diagonal of M(q) (Pinocchio's
+    ``model.armature``); ModelError names a value that is not finite and >= 0, or a length that
+    is not one per joint.
     """
 
     def __init__(self, urdf_xml: str, base_link: str, tip_link: str,
-                 joint_names: Optional[Sequence[str]] = None) -> None:
+                 joint_names: Optional[Sequence[str]] = None,
+                 armature: Optional[Sequence[float]] = None) -> None:
         try:
             full = pin.buildModelFromXML(urdf_xml)
         except Exception as exc:  # Pinocchio raises plain RuntimeError/ValueError
@@ -69,6 +79,12 @@ class RobotModel:
             raise ModelError(f'model has {model.nq} coordinates for {self.n} joints')
         # Our joint order -> Pinocchio's q/v index.
         self._idx = [model.joints[jid].idx_q for jid in joint_ids]
+        self.armature: tuple[float, ...] = (
+            (0.0,) * self.n if armature is None else checked_vector(
+                'armature', armature, self.n, ModelError, lower=0.0, per_joint=True))
+        model.armature[:] = 0.0
+        for i, a in zip(self._idx, self.armature):
+            model.armature[i] = a
         self._identity_order = self._idx == list(range(self.n))
         self._base_id = model.getFrameId(base_link)
         self._tip_id = model.getFrameId(tip_link)
@@ -147,14 +163,18 @@ class RobotModel:
         return g.tolist() if self._identity_order else [float(g[i]) for i in self._idx]
 
     def mass_matrix(self, q: Sequence[float]) -> np.ndarray:
-        """M(q) of Eq. (1), in ``joint_names`` order."""
+        """M(q) of Eq. (1), the armature on its diagonal, in ``joint_names`` order."""
         M = pin.crba(self.model, self.data, self._set_q(q).copy())
         M = np.triu(M) + np.triu(M, 1).T
         return M[np.ix_(self._idx, self._idx)]
 
     def forward_dynamics(self, q: Sequence[float], qdot: Sequence[float],
                          tau: Sequence[float]) -> np.ndarray:
-        """Return qddot = M(q)^-1 (tau - C(q, qdot) qdot - g(q)), in ``joint_names`` order."""
+        """
+        Return qddot = M(q)^-1 (tau - C(q, qdot) qdot - g(q)), in ``joint_names`` order.
+
+        M(q) includes the armature (Pinocchio's ABA adds ``model.armature``).
+        """
         qv = self._set_q(q).copy()
         v = np.zeros(self.n)
         t = np.zeros(self.n)
