@@ -188,6 +188,32 @@ def test_the_engine_and_armature_are_read_once_and_an_unsimulated_armature_is_sa
 
 
 @pytest.mark.node
+@pytest.mark.parametrize('config', ['wrist_sim.yaml', 'xarm6_sim.yaml', 'panda_sim.yaml'])
+def test_the_robots_of_the_configs_run_in_mujoco(context, config):
+    """Each config's robot, friction and start in engine mujoco: a few steps, finite."""
+    pytest.importorskip('mujoco')
+    from quat_jt_runtime.resources import share_path
+    from robots import PANDA_URDF, XARM6_URDF
+    urdf = {'xarm6_sim.yaml': XARM6_URDF, 'panda_sim.yaml': PANDA_URDF}.get(config)
+    from wrist_sim.sim_node import WristSimNode
+    node = WristSimNode(context=context, cli_args=[
+        '--ros-args', '--params-file', str(share_path(f'config/{config}'))],
+        parameter_overrides=[Parameter('engine', value='mujoco')] + (
+            [Parameter('robot_description', value=urdf.read_text())] if urdf else []))
+    try:
+        assert node.sim.engine == 'mujoco'
+        start = list(node.get_parameter('initial_positions').value)
+        np.testing.assert_allclose(node.sim.q_rad, start)
+        np.testing.assert_allclose(node.sim.friction[1],
+                                   node.get_parameter('coulomb_friction').value)
+        for _ in range(20):
+            node.sim.step(np.zeros(node.sim.n))
+        assert np.all(np.isfinite(node.sim.q_rad)) and node.sim.step_count == 20
+    finally:
+        node.destroy_node()
+
+
+@pytest.mark.node
 @pytest.mark.parametrize('overrides, words', [
     ({'engine': 'ode'}, r"engine must be one of \['pybullet', 'mujoco'\], got 'ode'"),
     ({'armature': [0.1, -0.2, 0.0]}, r'armature: values must be >= 0, got \[0.1, -0.2, 0.0\]'),
