@@ -29,6 +29,8 @@ setup(
         'core': ['numpy>=1.24', 'pin>=2.7', 'pybullet>=3.2.5'],
         # rclpy and messages from the ROS 2 Jazzy wheels on PyPI (no ROS install needed).
         'ros': ['ros-jazzy-rclpy[fastrtps]', 'ros-jazzy-common-interfaces'],
+        # The simulator's second physics engine (wrist_sim_node engine:=mujoco).
+        'mujoco': ['mujoco>=3.1'],
         # Experiment recording, figures and animations (GIFs through Pillow).
         'demo': ['matplotlib>=3.7', 'mcap>=1.1', 'mcap-ros2-support>=0.5', 'Pillow>=9.1',
                  'pyyaml'],

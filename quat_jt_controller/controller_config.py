@@ -34,7 +34,8 @@ def controller_from_config(params: Mapping[str, Any], urdf_xml: str = '',
     empty the bundled wrist, as for the node); ``potential`` and ``overrides`` replace the
     parameters' values. Raises the node's errors (ModelError, GainsError, ShapingError), each
     naming the bad value, or ConfigError naming a missing one. A missing
-    ``preferred_configuration`` is the middle of the ranges, as the node's default.
+    ``preferred_configuration`` is the middle of the ranges, and a missing ``armature`` zeros,
+    as the node's defaults.
     """
     p = {**params, **(overrides or {})}
     missing = [name for name in REQUIRED if name not in p and not (
@@ -42,7 +43,7 @@ def controller_from_config(params: Mapping[str, Any], urdf_xml: str = '',
     if missing:
         raise ConfigError(f'the controller parameters lack {missing}')
     model = RobotModel(urdf_xml or p.get('robot_description') or default_urdf_xml(),
-                       p['base_link'], p['tip_link'], p['joints'])
+                       p['base_link'], p['tip_link'], p['joints'], p.get('armature') or None)
     task = cl.Task(p['task'])
     gains = cl.Gains.create(potential or p['potential'], p['kp'], p['kv'], p['lambda'], task,
                             model.n, p.get('gravity_compensation', True), model.effort_limits)

@@ -48,7 +48,8 @@ class QuatJtController(Node):
         # applied by lifecycle.run_node; on simulated time there are no deadlines to keep
         self.realtime = declare_realtime(self, 'simulated time' if self._use_sim_time else '')
         try:
-            model = RobotModel(cfg.robot_description, cfg.base_link, cfg.tip_link, cfg.joints)
+            model = RobotModel(cfg.robot_description, cfg.base_link, cfg.tip_link, cfg.joints,
+                               cfg.armature)
         except ModelError as exc:
             raise ModelError(f'{exc}{bundled_urdf_hint(cfg.given_robot_description)}') from None
         gains = parameters.declare_gains(  # each change logged once by the ChangeLog

@@ -4,8 +4,9 @@ Gains from the robot, by rules: the paper's open problem (docs/gain_design.md).
 Section 5 of the paper regrets "the lack of a procedure for tuning their gains", and Section 6
 leaves gain tuning open.
 
-From the URDF (kinematics, inertias, effort and velocity limits), the task, the control rate
-and the Coulomb friction estimates, :func:`design` computes K_p, K_v and Lambda (one set that
+From the URDF (kinematics, inertias, effort and velocity limits) with the drives' rotor
+inertia (the model's armature, on the diagonal of M(q)), the task, the control rate and the
+Coulomb friction estimates, :func:`design` computes K_p, K_v and Lambda (one set that
 serves both potentials, so ``potential`` can be switched live) and the extensions
 (``shaping.Shaping``): joint-limit band, goal-configuration term, cubic damping, friction
 compensation. In short:
@@ -87,6 +88,7 @@ GOAL_VELOCITY_GAIN = 1.0
 # redundant arm's q* (goal_check.posture): nearest first, the posture breaks near-ties
 POSTURE_WEIGHT = 0.1
 QO = 0.5  # |Q| on the orientation rows (Eq. 15)
+ENGINES = ('pybullet', 'mujoco')  # the simulator's engine parameter (sim_yaml)
 
 
 def _dynamics_matrix(M: np.ndarray, K: np.ndarray, D: np.ndarray, delay_ticks: int,
@@ -180,6 +182,7 @@ class Design:
     lam: tuple[float, ...]
     shaping: Shaping
     figures: dict = field(default_factory=dict)
+    armature: tuple[float, ...] = ()  # kg m^2 per joint, in M(q) of the design (the model's)
 
     def gains(self, potential: str = 'tanh') -> cl.Gains:
         """Return the K_p, K_v, Lambda of the design as validated Gains for ``potential``."""
@@ -588,7 +591,7 @@ def design(model: RobotModel, task: cl.Task, rate_hz: float = 1000.0,
         'warnings': friction_warnings(model, friction, learning),
     }
     return Design(task, model.joint_names, model.base_link, model.tip_link, rate_hz, kp_r,
-                  kv_r, lam_r, shaping, figures)
+                  kv_r, lam_r, shaping, figures, model.armature)
 
 
 def friction_warnings(model: RobotModel, friction: np.ndarray,
@@ -677,7 +680,8 @@ def to_yaml(d: Design, potential: str = 'tanh', command: str = '',
         'The design, per joint (N m unless said):',
         f'  effort limits {_fmt(f["effort_limits_nm"])}, largest |g(q)| '
         f'{_fmt(np.round(f["gravity_max_nm"], 4))}, friction estimates '
-        f'{_fmt(f["friction_nm"])};',
+        f'{_fmt(f["friction_nm"])}, rotor inertia (armature, in M(q)) '
+        f'{_fmt(d.armature or [0.0] * len(d.joints))} kg m^2;',
         f'  at rest the regulator may learn {f["friction_learning"]:g} x the estimates more, '
         f'in {FRICTION_LEARNING_TIME_S:g} s;',
         f'  budget {TORQUE_SHARE:g} x (effort - gravity - friction - learnable friction) = '
@@ -748,6 +752,8 @@ def to_yaml(d: Design, potential: str = 'tanh', command: str = '',
         f'    posture_weight: {_float(s.posture_weight)}   # of that posture against the '
         'distance to the arm (no effect without self-motion)',
         f'    joints: [{", ".join(d.joints)}]',
+        f'    armature: {_fmt(d.armature or [0.0] * len(d.joints))}  # kg m^2, rotor inertia '
+        'per joint, in M(q) of the design',
         f'    base_link: {d.base_link}',
         f'    tip_link: {d.tip_link}',
         "    robot_description: ''        # URDF XML; '' = the bundled wrist"
@@ -844,6 +850,11 @@ def main(argv: Optional[list] = None) -> int:
                              'Eqs. 24/32)')
     parser.add_argument('--effort-limits', type=positive, nargs='+',
                         help='N m per joint (default: the URDF effort limits)')
+    parser.add_argument('--armature', type=_real, nargs='+',
+                        help='rotor inertia the drives add about their joints, kg m^2: one '
+                        'value for every joint, or one per joint (default 0). Added to the '
+                        "diagonal of the URDF's M(q); written to the file as the controller's "
+                        'armature')
     parser.add_argument('--rate', type=_real, default=1000.0,
                         help='the control rate (of joint_states and commands), Hz, in '
                         f'[{STATE_RATE_RANGE_HZ[0]:g}, {STATE_RATE_RANGE_HZ[1]:g}]; the '
@@ -877,6 +888,10 @@ def main(argv: Optional[list] = None) -> int:
                      help='the simulated Coulomb friction, N m per joint (default: none)')
     sim.add_argument('--sim-viscous', type=non_negative, nargs='+',
                      help='the simulated viscous friction, N m s/rad per joint (default: none)')
+    sim.add_argument('--sim-armature', type=non_negative, nargs='+',
+                     help="the simulated rotor inertia, kg m^2 (default: --armature's)")
+    sim.add_argument('--sim-engine', choices=ENGINES, default=ENGINES[0],
+                     help=f'the physics engine of the simulator (default {ENGINES[0]})')
     args = parser.parse_args(argv)
     try:
         check_state_rate(args.rate, '--rate')
@@ -897,6 +912,13 @@ def main(argv: Optional[list] = None) -> int:
         model = RobotModel(urdf, args.base_link, args.tip_link, args.joints)
     except ModelError as exc:
         parser.error(f'{exc} (--urdf {args.urdf or "<the bundled wrist>"})')
+    try:  # one value for every joint or one per joint, each finite and >= 0
+        if args.armature is not None:
+            model = RobotModel(urdf, args.base_link, args.tip_link, args.joints,
+                               per_joint_values(args.armature, model.n, '--armature'))
+        sim_armature = per_joint_values(args.sim_armature, model.n, '--sim-armature')
+    except (ModelError, ValueError) as exc:
+        parser.error(str(exc))
     _check_per_joint(parser, model, args)
     try:
         result = design(model, cl.Task(args.task), args.rate, args.effort_limits,
@@ -908,7 +930,9 @@ def main(argv: Optional[list] = None) -> int:
                              + _public_argv(sys.argv[1:] if argv is None else argv))
         text = to_yaml(result, args.potential, command, args.robot_note)
         sim_text = (sim_yaml(model, args.rate, args.initial_positions, args.sim_coulomb,
-                             args.sim_viscous, command, args.robot_note)
+                             args.sim_viscous, command, args.robot_note,
+                             model.armature if sim_armature is None else sim_armature,
+                             args.sim_engine)
                     if args.sim_out else None)  # both checked before either is written
     except ValueError as exc:  # the robot leaves no gains that meet the design's checks
         print(f'design_gains: error: no design: {exc}', file=sys.stderr)
@@ -935,13 +959,15 @@ def sim_yaml(model: RobotModel, rate_hz: float,
              initial_positions_rad: Optional[Sequence[float]],
              coulomb_nm: Optional[Sequence[float]],
              viscous_nm_s_per_rad: Optional[Sequence[float]],
-             command: str = '', robot_description_note: str = '') -> str:
+             command: str = '', robot_description_note: str = '',
+             armature: Optional[Sequence[float]] = None, engine: str = ENGINES[0]) -> str:
     """
     Return a parameter file for wrist_sim_node in the format of config/*_sim.yaml.
 
     The joints are the design's; the others of the URDF (a gripper's fingers) are held where
     they are by the simulator. The start defaults to the middle of the ranges, the friction to
-    none. Raises ValueError on a list of the wrong length or a start outside the limits.
+    none, the rotor inertia (``armature``) to the model's. Raises ValueError on a list of the
+    wrong length or a start outside the limits.
     """
     n = model.n
     lower, upper = np.array(model.position_lower), np.array(model.position_upper)
@@ -950,10 +976,15 @@ def sim_yaml(model: RobotModel, rate_hz: float,
     coulomb = np.zeros(n) if coulomb_nm is None else np.array(coulomb_nm, float)
     viscous = (np.zeros(n) if viscous_nm_s_per_rad is None
                else np.array(viscous_nm_s_per_rad, float))
+    rotor = np.array(model.armature if armature is None else armature, float)
+    if engine not in ENGINES:
+        raise ValueError(f'engine must be one of {list(ENGINES)}, got {engine!r}')
     for name, values in (('--initial-positions', start), ('--sim-coulomb', coulomb),
-                         ('--sim-viscous', viscous)):
+                         ('--sim-viscous', viscous), ('--sim-armature', rotor)):
         if values.size != n or not np.all(np.isfinite(values)):
             raise ValueError(f'{name}: expected {n} finite values, got {values.tolist()}')
+    if np.any(rotor < 0.0):
+        raise ValueError(f'--sim-armature: values must be >= 0, got {rotor.tolist()}')
     if np.any(start < lower) or np.any(start > upper):
         raise ValueError(f'--initial-positions {start.tolist()} are outside the limits')
     _, _, J = model.kinematics(start.tolist())
@@ -982,12 +1013,28 @@ def sim_yaml(model: RobotModel, rate_hz: float,
         '    max_real_time_factor: 0.0',
         f'    viscous_friction: {_fmt(viscous)}  # N m s/rad',
         f'    coulomb_friction: {_fmt(coulomb)}  # N m (stiction level)',
+        f'    armature: {_fmt(rotor)}  # kg m^2, rotor inertia per joint (engine mujoco)',
+        f'    engine: {engine}                 # or '
+        + ' or '.join(e for e in ENGINES if e != engine),
         '    command_timeout: 0.5             # s without a valid command -> zero torque',
         '    enforce_velocity_limits: true    # the URDF velocity limits, as a drive holds them',
         '    hold_until_first_command: true   # brakes on until the first command',
         "    stats_file: ''",
     ]
     return '\n'.join(lines) + '\n'
+
+
+def per_joint_values(values: Optional[Sequence[float]], n: int,
+                     name: str) -> Optional[list[float]]:
+    """Return one value per joint: ``values`` as given, or its one value ``n`` times."""
+    if values is None:
+        return None
+    if len(values) == 1:
+        return [float(values[0])] * n
+    if len(values) != n:
+        raise ValueError(f'{name}: give one value for every joint or {n} (one per joint), got '
+                         f'{len(values)}: {list(values)}')
+    return [float(v) for v in values]
 
 
 def _public_argv(argv: Sequence[str]) -> list[str]:

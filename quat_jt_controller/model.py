@@ -11,6 +11,12 @@ A URDF ``continuous`` joint is a revolute joint without stops. Pinocchio gives i
 configuration coordinates, (cos q, sin q), and one velocity; here it has one angle q like any
 other joint (unwrapped: q and q + 2 pi are the same configuration), position limits of
 -inf and +inf, and one column in J_G, g(q) and M(q).
+
+The inertia is the URDF's links plus, per joint, the rotor inertia its drive reflects (the
+``armature`` a, kg m^2 or kg): M(q) of Eq. (1) becomes M_links(q) + diag(a), in the mass matrix,
+the forward dynamics and everything designed or checked from them. A URDF rarely carries it (a
+geared drive's rotor, seen through the gear ratio r, adds r^2 I_rotor, often more than the
+link), so it is given as a model input.
 """
 from math import cos, sin
 from typing import Optional, Sequence
@@ -24,7 +30,7 @@ except ModuleNotFoundError as exc:  # e.g. a colcon workspace whose rosdep skipp
         'package on PyPI is another project) or ros-jazzy-pinocchio from the ROS apt '
         'repository') from exc
 
-from quat_jt_runtime.errors import QuatJtError
+from quat_jt_runtime.errors import checked_vector, QuatJtError
 from quat_jt_runtime.joints import fixed_joints, movable_joints, select_joints
 
 
@@ -39,11 +45,16 @@ class RobotModel:
     ``joint_names`` gives the order of q, qdot and tau everywhere in this package; by default
     the URDF's movable joints (``joints.movable_joints``) in document order. Each controlled
     joint is revolute, continuous or prismatic. ``base_link`` and ``tip_link`` are looked up
-    as links (Pinocchio BODY frames), so a joint of the same name does not clash.
+    as links (Pinocchio BODY frames), so a joint of the same name does not clash. ``armature``
+    is the rotor inertia per joint, in that order (kg m^2, or kg for a prismatic joint; default
+    zeros), added to the diagonal of M(q) (Pinocchio's ``model.armature``, at each joint's
+    velocity index); ModelError names a value that is not finite and >= 0, or a length that is
+    not one per joint.
     """
 
     def __init__(self, urdf_xml: str, base_link: str, tip_link: str,
-                 joint_names: Optional[Sequence[str]] = None) -> None:
+                 joint_names: Optional[Sequence[str]] = None,
+                 armature: Optional[Sequence[float]] = None) -> None:
         try:
             movable = movable_joints(urdf_xml)
         except ValueError as exc:
@@ -87,6 +98,12 @@ class RobotModel:
         self._unbounded = tuple(unbounded)
         self.continuous: tuple[bool, ...] = self._unbounded
         self._any_unbounded = any(unbounded)
+        self.armature: tuple[float, ...] = (
+            (0.0,) * self.n if armature is None else checked_vector(
+                'armature', armature, self.n, ModelError, lower=0.0, per_joint=True))
+        model.armature[:] = 0.0
+        for i, a in zip(self._idx, self.armature):  # velocity indices
+            model.armature[i] = a
         self._identity_order = self._idx == list(range(self.n))
         self._identity_q = self._identity_order and not self._any_unbounded
         self._base_id = model.getFrameId(base_link, pin.BODY)
@@ -178,14 +195,18 @@ class RobotModel:
         return g.tolist() if self._identity_order else [float(g[i]) for i in self._idx]
 
     def mass_matrix(self, q: Sequence[float]) -> np.ndarray:
-        """M(q) of Eq. (1), in ``joint_names`` order."""
+        """M(q) of Eq. (1), the armature on its diagonal, in ``joint_names`` order."""
         M = pin.crba(self.model, self.data, self._set_q(q).copy())
         M = np.triu(M) + np.triu(M, 1).T
         return M[np.ix_(self._idx, self._idx)]
 
     def forward_dynamics(self, q: Sequence[float], qdot: Sequence[float],
                          tau: Sequence[float]) -> np.ndarray:
-        """Return qddot = M(q)^-1 (tau - C(q, qdot) qdot - g(q)), in ``joint_names`` order."""
+        """
+        Return qddot = M(q)^-1 (tau - C(q, qdot) qdot - g(q)), in ``joint_names`` order.
+
+        M(q) includes the armature (Pinocchio's ABA adds ``model.armature``).
+        """
         qv = self._set_q(q).copy()
         v = np.zeros(self.model.nv)
         t = np.zeros(self.model.nv)

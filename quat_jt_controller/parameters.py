@@ -24,6 +24,7 @@ from quat_jt_controller.regulator import Regulator
 from quat_jt_controller.shaping import describe as describe_shaping
 from quat_jt_controller.shaping import from_parameters as shaping_from_parameters
 from quat_jt_controller.shaping import MAX_POSTURE_WEIGHT, Shaping
+from quat_jt_runtime.errors import checked_vector
 from quat_jt_runtime.joints import check_state_rate, DEFAULT_MAX_STATE_AGE_S
 from quat_jt_runtime.joints import DEFAULT_STATE_RATE_HZ, DEFAULT_STATE_TIMEOUT_S
 from quat_jt_runtime.joints import STATE_RATE_RANGE_HZ
@@ -37,6 +38,15 @@ from rclpy.node import Node
 DEFAULT_KP_POSITION = (200.0, 200.0, 200.0)
 DEFAULT_LAMBDA_POSITION = (100.0, 100.0, 100.0)
 
+# Declared after ``joints``, whose length is its context's ``n``.
+ARMATURE = Spec(
+    'armature', Kind.DOUBLE_ARRAY, joint_zeros,
+    'Rotor inertia each drive adds about its joint, one per joint ({n}), kg m^2 (kg for a '
+    "prismatic joint): added to the diagonal of the URDF's M(q) wherever the controller uses "
+    "the inertia (Pinocchio's model.armature). A geared drive reflects its rotor times the "
+    'square of the gear ratio, often more than the links; design_gains --armature takes the '
+    'same values.', read_only=True, constraints='{n} finite values >= 0',
+    default_text=JOINT_ZEROS_TEXT)
 STRUCTURE = (
     Spec('task', Kind.STRING, Task.ORIENTATION.value,
          "What is regulated: 'orientation' (y = e, Eqs. 37/38; the paper's wrist) or 'pose' "
@@ -52,6 +62,7 @@ STRUCTURE = (
     Spec('robot_description', Kind.STRING, '',
          'URDF XML of the robot (kinematics, gravity, effort limits); empty = the bundled '
          'spherical wrist.', read_only=True),
+    ARMATURE,
     Spec('state_timeout', Kind.DOUBLE, DEFAULT_STATE_TIMEOUT_S,
          'Seconds without a valid joint_states message after which the command is zeroed '
          '(published once) until states return.', read_only=True, bounds=(0.005, 10.0)),
@@ -198,6 +209,7 @@ class StructuralConfig:
     tip_link: str
     robot_description: str  # the URDF in use (the bundled wrist's if none was given)
     given_robot_description: str  # the parameter as given ('' = none)
+    armature: tuple[float, ...]  # kg m^2 per joint, finite and >= 0
     state_timeout_s: float
     max_state_age_s: float  # 0: stamps not checked
     state_rate_hz: float
@@ -221,6 +233,8 @@ class StructuralConfig:
         return cls(task=task, joints=joints, base_link=values['base_link'],
                    tip_link=values['tip_link'], robot_description=urdf or default_urdf_xml(),
                    given_robot_description=urdf,
+                   armature=checked_vector('armature', values['armature'], len(joints),
+                                           ValueError, lower=0.0, per_joint=True),
                    state_timeout_s=float(values['state_timeout']),
                    max_state_age_s=float(values['max_state_age']),
                    state_rate_hz=check_state_rate(values['state_rate']),
@@ -234,7 +248,9 @@ def declare_structural(node: Node) -> StructuralConfig:
 
     Raises ValueError naming the parameter if a value is unusable.
     """
-    return StructuralConfig.create(declare(node, STRUCTURE))
+    values = declare(node, tuple(s for s in STRUCTURE if s is not ARMATURE))
+    values.update(declare(node, (ARMATURE,), {'n': len(values['joints'])}))
+    return StructuralConfig.create(values)
 
 
 def gains_context(config: StructuralConfig, effort_limits_nm: Sequence[float]) -> dict:

@@ -13,6 +13,7 @@ from typing import Callable
 
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped
+import numpy as np
 import pytest
 from quat_jt_controller import paper
 from quat_jt_controller import quaternion as quat
@@ -205,11 +206,22 @@ def test_the_tools_build_the_controller_the_node_runs_from_a_config(make_node, n
     assert tools.gains == node.regulator.gains
     assert tools.shaping == node.regulator.shaping
     assert tools.model.joint_names == node.regulator.model.joint_names
+    assert tools.model.armature == node.regulator.model.armature
     with pytest.raises(GainsError, match='kv'):  # the node's ceilings, here too
         controller_from_package_config(name, xml, overrides={
             'kv': [1e6] * tools.n})
     with pytest.raises(ShapingError, match='posture_weight'):  # and the node's ranges
         controller_from_package_config(name, xml, overrides={'posture_weight': 101.0})
+
+
+def test_the_armature_is_in_the_inertia_the_controller_uses(make_node):
+    """The read-only armature goes on the diagonal of the node's M(q) (the Lyapunov V)."""
+    plain = make_node().regulator.model
+    model = make_node({'armature': [0.1, 0.2, 0.3]}).regulator.model
+    q = [0.2, -0.4, 0.9]
+    assert model.armature == (0.1, 0.2, 0.3)
+    np.testing.assert_allclose(model.mass_matrix(q) - plain.mass_matrix(q),
+                               np.diag([0.1, 0.2, 0.3]), atol=1e-12)
 
 
 def test_a_config_without_gains_is_refused_by_name():
@@ -297,6 +309,9 @@ def test_pose_task_has_six_gains_and_a_position_error_topic(make_node):
     ({'tip_link': 'nowhere'}, ModelError, 'nowhere'),
     ({'state_rate': 50.0}, Exception, 'state_rate out of range'),
     ({'state_rate': 2000.0}, Exception, 'state_rate out of range'),
+    ({'armature': [0.1, -1.0, 0.0]}, ValueError, r'armature\[1\] must be finite and >= 0, got -1'),
+    ({'armature': [0.1, 0.1]}, ValueError, r'armature must have 3 values \(one per joint\)'),
+    ({'armature': [0.1, float('inf'), 0.0]}, ValueError, r'armature\[1\] must be finite'),
 ])
 def test_bad_start_up_configuration_raises_a_clear_error(make_node, overrides, error, words):
     with pytest.raises(error, match=words):

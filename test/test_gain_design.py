@@ -18,6 +18,8 @@ from quat_jt_controller import control_law as cl
 from quat_jt_controller import gain_design as gd
 from quat_jt_controller import quaternion as quat
 from quat_jt_controller import shaping as sh
+from quat_jt_controller.model import RobotModel
+from quat_jt_runtime.resources import default_urdf_xml
 from robots import PANDA_JOINTS, panda_model, PANDA_URDF, random_q, wrist_model, xarm6_model
 import yaml
 
@@ -311,3 +313,48 @@ def test_a_rate_outside_100_to_1000_hz_is_refused_by_value(rate):
                              str(rate)], capture_output=True, text=True, timeout=120)
     assert result.returncode == 2 and f'--rate {rate!r} Hz is outside' in result.stderr
     assert 'Traceback' not in result.stderr
+
+
+def test_rotor_inertia_enters_the_design_through_the_inertia():
+    """With armature, each joint sees more inertia, so K_v grows (the same damping ratio)."""
+    plain = gd.design(wrist_model(), cl.Task.ORIENTATION, friction_nm=(1.8, 0.72, 0.45))
+    armature = (0.2, 0.2, 0.2)
+    rotor_model = RobotModel(default_urdf_xml(), 'base_link', 'tool0', armature=armature)
+    rotor = gd.design(rotor_model, cl.Task.ORIENTATION, friction_nm=(1.8, 0.72, 0.45))
+    # the inertia each joint sees is the links' plus at least its rotor
+    assert np.all(rotor.figures['inertia_min']
+                  >= plain.figures['inertia_min'] + 0.99 * np.array(armature))
+    assert all(b > a for a, b in zip(plain.kv, rotor.kv))  # more inertia, more damping
+    assert rotor.armature == armature and plain.armature == (0.0, 0.0, 0.0)
+    assert max(rotor.figures['spectral_radius'].values()) < 1.0
+    assert params_of(gd.to_yaml(rotor))['armature'] == list(armature)
+    assert params_of(gd.to_yaml(plain))['armature'] == [0.0, 0.0, 0.0]
+
+
+def test_the_command_takes_one_armature_for_all_joints_or_one_per_joint(tmp_path):
+    def run(*args):
+        return subprocess.run([sys.executable, '-m', 'quat_jt_controller.gain_design', *args],
+                              capture_output=True, text=True, timeout=120)
+
+    one, each = run('--armature', '0.1'), run('--armature', '0.1', '0.1', '0.1')
+    assert one.returncode == 0 and each.returncode == 0, one.stderr + each.stderr
+    assert params_of(one.stdout)['armature'] == [0.1, 0.1, 0.1]
+    assert params_of(one.stdout)['kv'] == params_of(each.stdout)['kv']
+    wrong = run('--armature', '0.1', '0.2')
+    assert wrong.returncode == 2
+    assert '--armature: give one value for every joint or 3 (one per joint), got 2' in (
+        wrong.stderr)
+    negative = run('--armature', '-0.1')
+    assert negative.returncode == 2 and 'armature[0] must be finite and >= 0, got -0.1' in (
+        negative.stderr)
+    sim_out = tmp_path / 's.yaml'
+    both = run('--armature', '0.1', '--sim-out', str(sim_out), '--sim-engine', 'mujoco',
+               '--out', str(tmp_path / 'c.yaml'))
+    assert both.returncode == 0, both.stderr
+    sim = params_of(sim_out.read_text())  # the simulated rotor defaults to the designed one
+    assert sim['armature'] == [0.1, 0.1, 0.1] and sim['engine'] == 'mujoco'
+
+
+def test_the_simulator_engines_are_the_ones_the_tool_writes():
+    from wrist_sim.simulator import ENGINES
+    assert gd.ENGINES == ENGINES

@@ -288,12 +288,11 @@ def test_links_pybullet_gives_no_inertia_are_named_once_and_its_warnings_kept_ou
     """The xArm6's link2 and link3 tensors break the triangle inequality: PyBullet zeroes them."""
     with WristSimulator(XARM.read_text()) as s:
         assert s.zero_inertia_links == ('link2', 'link3')
-        c = s._client
-        names = {c.getJointInfo(s._body, j)[12].decode(): j for j in range(c.getNumJoints(
-            s._body))}
+        c, body = s._engine._client, s._engine._body
+        names = {c.getJointInfo(body, j)[12].decode(): j for j in range(c.getNumJoints(body))}
         for link in ('link2', 'link3'):  # what the note says is what PyBullet simulates
-            assert c.getDynamicsInfo(s._body, names[link])[2] == (0.0, 0.0, 0.0), link
-        assert c.getDynamicsInfo(s._body, names['link4'])[2] != (0.0, 0.0, 0.0)
+            assert c.getDynamicsInfo(body, names[link])[2] == (0.0, 0.0, 0.0), link
+        assert c.getDynamicsInfo(body, names['link4'])[2] != (0.0, 0.0, 0.0)
     out, err = capfd.readouterr()
     assert 'inertia' not in out + err, out + err
     note = zero_inertia_note(('link2', 'link3'))

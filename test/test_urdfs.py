@@ -69,6 +69,23 @@ def test_continuous_joints_have_the_dynamics_of_revolute_ones():
                                    rev.forward_dynamics(q, qdot, tau), atol=1e-9)
 
 
+def test_armature_sits_at_each_continuous_joints_velocity_index():
+    """Continuous joints take two coordinates but one velocity: the rotor inertia follows v."""
+    joints = ['tool', 'joint4', 'joint1', 'joint3']  # joint2 locked; not Pinocchio's order
+    armature = (0.05, 0.4, 0.2, 0.1)
+    plain = RobotModel(small_arm_urdf(), 'base_link', 'tool', joints)
+    rotor = RobotModel(small_arm_urdf(), 'base_link', 'tool', joints, armature)
+    assert rotor.model.nq > rotor.model.nv == 4
+    rng = np.random.default_rng(5)
+    for _ in range(5):
+        q, qdot, tau = rng.uniform(-2, 2, (3, 4))
+        M = plain.mass_matrix(q) + np.diag(armature)
+        np.testing.assert_allclose(rotor.mass_matrix(q), M, atol=1e-12)
+        h = plain.mass_matrix(q) @ plain.forward_dynamics(q, qdot, np.zeros(4)) * -1.0
+        np.testing.assert_allclose(rotor.forward_dynamics(q, qdot, tau),
+                                   np.linalg.solve(M, tau - h), atol=1e-9)
+
+
 def test_links_are_looked_up_as_links_when_a_joint_has_the_name():
     model = RobotModel(small_arm_urdf(), 'base_link', 'tool')  # 'tool': a link and a joint
     p, _ = model.forward_kinematics([0.0] * model.n)

@@ -19,20 +19,33 @@ from quat_jt_runtime.params import Spec
 from quat_jt_runtime.resources import default_urdf_xml
 from rclpy.node import Node
 from wrist_sim.config import SimConfig
-from wrist_sim.simulator import SimulatorError
+from wrist_sim.simulator import ENGINES, per_joint, SimulatorError
 
 
 ROBOT_DESCRIPTION = Spec('robot_description', Kind.STRING, '',
                          'URDF as an XML string; empty = the bundled spherical wrist',
                          read_only=True)
+ENGINE = Spec('engine', Kind.STRING, ENGINES[0],
+              "the physics engine: 'pybullet' (the default) or 'mujoco' (the mujoco package, "
+              'the same URDF compiled by MuJoCo; it simulates the armature, and has no '
+              'window). docs/ros.md compares them', read_only=True,
+              constraints=' or '.join(f"'{e}'" for e in ENGINES))
+# Declared after ``joints``, whose length is its context's ``n``.
+ARMATURE = Spec('armature', Kind.DOUBLE_ARRAY, joint_zeros,
+                'rotor inertia per joint, kg m^2 (>= 0), added to the diagonal of M(q) by '
+                "engine 'mujoco'; PyBullet has no joint armature, so with engine 'pybullet' a "
+                'non-zero value is not simulated and the node warns once',
+                read_only=True, constraints='{n} finite values >= 0',
+                default_text=JOINT_ZEROS_TEXT)
 JOINTS = Spec('joints', Kind.STRING_ARRAY, lambda context: list(context['movable']),
               'joints to drive, in command/state order; default the URDF movable joints',
               read_only=True, default_text="the URDF's movable joints")
 STRUCTURE = (
-    ROBOT_DESCRIPTION, JOINTS,
+    ROBOT_DESCRIPTION, JOINTS, ENGINE, ARMATURE,
     Spec('rate_hz', Kind.INT, 1000, 'steps per second; the time step is 1 / rate_hz',
          read_only=True, bounds=(1, 20000)),
-    Spec('use_gui', Kind.BOOL, False, 'open the PyBullet window', read_only=True),
+    Spec('use_gui', Kind.BOOL, False, "open the PyBullet window (engine 'pybullet' only)",
+         read_only=True),
     Spec('publish_clock', Kind.BOOL, False,
          'publish /clock with the simulation time and step in lockstep with the commands '
          'instead of in real time', read_only=True),
@@ -77,6 +90,15 @@ LIVE_PARAMETERS = names(LIVE)
 DOCS_CONTEXT = {'n': 'n', 'movable': ()}
 
 
+def armature_note(structure: 'SimStructure', simulated: bool) -> str:
+    """Say that the armature asked for is not simulated ('' if it is, or if it is zero)."""
+    if simulated or not any(structure.armature):
+        return ''
+    return (f'armature {list(structure.armature)} kg m^2 is NOT simulated: engine '
+            f"'{structure.engine}' has no joint armature, so the plant's inertia is the URDF's "
+            "alone; use engine 'mujoco' to simulate the rotor inertia")
+
+
 @dataclass(frozen=True)
 class SimStructure:
     """The read-only parameters, read once at start-up."""
@@ -84,6 +106,8 @@ class SimStructure:
     urdf_xml: str  # the URDF in use (the bundled wrist's if none was given)
     given_urdf: str  # robot_description as given ('' = none)
     joints: tuple[str, ...]
+    engine: str  # one of wrist_sim.simulator.ENGINES
+    armature: tuple[float, ...]  # kg m^2 per joint, finite and >= 0
     rate_hz: int
     use_gui: bool
     publish_clock: bool
@@ -110,7 +134,13 @@ def declare_structure(node: Node) -> SimStructure:
         raise SimulatorError(f'robot_description: {exc}') from None
     if not movable:
         raise SimulatorError('the URDF has no movable joints')
-    values = declare(node, STRUCTURE[1:] + REALTIME, {'movable': movable})
+    values = declare(node, tuple(s for s in STRUCTURE[1:] if s is not ARMATURE) + REALTIME,
+                     {'movable': movable})
+    values.update(declare(node, (ARMATURE,), {'n': len(values['joints'])}))
+    if values['engine'] not in ENGINES:
+        raise SimulatorError(f"engine must be one of {list(ENGINES)}, got {values['engine']!r}")
+    armature = per_joint('armature', values['armature'], len(values['joints']),
+                         nonnegative=True)
     # Applied by lifecycle.run_node; no deadlines in lockstep, and the window renders in a
     # thread of its own: normal scheduling there.
     off = 'lockstep' if values['publish_clock'] else 'the PyBullet window' if values[
@@ -121,6 +151,7 @@ def declare_structure(node: Node) -> SimStructure:
         raise SimulatorError(str(exc)) from None
     return SimStructure(
         urdf_xml=urdf, given_urdf=given, joints=tuple(values['joints']),
+        engine=values['engine'], armature=armature,
         rate_hz=int(values['rate_hz']), use_gui=bool(values['use_gui']),
         publish_clock=bool(values['publish_clock']),
         clock_divider=int(values['clock_divider']),

@@ -3,7 +3,7 @@
 
 A thin rclpy layer, with the interface of a ros2_control robot driven by a
 JointGroupEffortController, over the ROS-free parts: the physics
-(:class:`wrist_sim.simulator.WristSimulator`), the command path
+(:class:`wrist_sim.simulator.WristSimulator`, in PyBullet or MuJoCo: ``engine``), the command path
 (:class:`wrist_sim.command_gate.CommandGate`: validation, watchdog, hold until the first
 command, the reset gate) and the stepping loops (``wrist_sim.pacing``: real-time deadlines, or
 lockstep with ``/clock``). It publishes ``joint_states`` after every step (effort = the motor
@@ -33,7 +33,7 @@ from std_srvs.srv import Trigger
 from wrist_sim import pacing
 from wrist_sim.command_gate import CommandGate, RESUMED, TRIPPED
 from wrist_sim.config import SimConfig
-from wrist_sim.parameters import change_log, declare_live, declare_structure
+from wrist_sim.parameters import armature_note, change_log, declare_live, declare_structure
 from wrist_sim.simulator import at_limit, missing_meshes_note, NoDisplayError, SimulatorError
 from wrist_sim.simulator import WristSimulator, zero_inertia_note
 
@@ -61,7 +61,8 @@ class WristSimNode(Node):
                 p.urdf_xml, p.joints, dt_s=self.dt_ns * 1e-9, use_gui=p.use_gui,
                 viscous_nm_s_per_rad=c.viscous_nm_s_per_rad, coulomb_nm=c.coulomb_nm,
                 initial_positions_rad=c.initial_positions_rad,
-                enforce_velocity_limits=p.enforce_velocity_limits)
+                enforce_velocity_limits=p.enforce_velocity_limits, engine=p.engine,
+                armature=p.armature)
         except NoDisplayError:  # nothing to do with the robot: no advice on its URDF
             raise
         except SimulatorError as exc:
@@ -70,6 +71,9 @@ class WristSimNode(Node):
             self.get_logger().warning(missing_meshes_note(self.sim.missing_meshes))
         if self.sim.zero_inertia_links:
             self.get_logger().warning(zero_inertia_note(self.sim.zero_inertia_links))
+        unsimulated = armature_note(p, self.sim.supports_armature)
+        if unsimulated:
+            self.get_logger().warning(unsimulated)
         self._effort_limits = self.sim.effort_limits_nm.tolist()
         self._velocity_limits = self.sim.velocity_limits_rad_s.tolist()
         self._at_velocity_limit = [0.999 * v for v in self._velocity_limits]
@@ -100,7 +104,8 @@ class WristSimNode(Node):
         self._hold = p.hold_until_first_command
         self._no_command_warn_s = float('inf')  # set when the loop starts (run)
         self.get_logger().info(
-            f'simulating joints {list(self.sim.joint_names)} at {p.rate_hz} Hz, '
+            f'simulating joints {list(self.sim.joint_names)} in {self.sim.engine} at '
+            f'{p.rate_hz} Hz, armature {list(p.armature)} kg m^2, '
             f'effort limits {self.sim.effort_limits_nm.tolist()} N m, '
             + ('lockstep with /clock' if self.publish_clock else 'real time')
             + f'; {self._before_first_command()} until the first command on '
