@@ -477,8 +477,8 @@ def test_namespaced_node_keeps_its_config_file(context):
 
 
 def test_xarm6_joints_without_its_urdf_say_what_to_pass(make_node):
-    with pytest.raises(ModelError, match='robot_description is empty, so the bundled spherical '
-                                         'wrist'):
+    with pytest.raises(ModelError, match='No robot description was given, so the bundled '
+                                         'spherical wrist'):
         make_node({'joints': [f'joint{i}' for i in range(1, 7)], 'base_link': 'link_base',
                    'tip_link': 'link6', 'task': 'pose'})
 

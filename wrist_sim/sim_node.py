@@ -10,7 +10,9 @@ lockstep with ``/clock``). It publishes ``joint_states`` after every step (effor
 torque applied, clamped to the URDF limits, friction not included), takes
 ``effort_controller/commands`` (one torque in N m per joint, in ``joints`` order; bad ones are
 refused with a throttled warning and the last good one stays), and serves ``~/reset`` (back to
-``initial_positions`` at rest). Timing figures are kept in ``node.stats``, logged at shutdown
+``initial_positions`` at rest). It publishes the URDF in use on ``robot_description``
+(transient local, ``publish_robot_description``), so RViz and robot_state_publisher's users
+see the robot. Timing figures are kept in ``node.stats``, logged at shutdown
 and written as JSON to ``stats_file`` if set. The parameters are the table of
 ``wrist_sim/parameters.py``; docs/ros.md tells the rest.
 """
@@ -20,9 +22,11 @@ from typing import Any, Callable, Optional
 
 from quat_jt_runtime import lifecycle
 from quat_jt_runtime import realtime
+from quat_jt_runtime.description import publish_description
 from quat_jt_runtime.loop_stats import LoopStats, write_summary
 from quat_jt_runtime.params import history_qos
 from quat_jt_runtime.resources import bundled_urdf_hint
+from quat_jt_runtime.urdf_source import Source
 from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.node import Node
 from rclpy.qos import QoSProfile
@@ -88,10 +92,17 @@ class WristSimNode(Node):
             Float64MultiArray, 'effort_controller/commands', self._on_command, 10,
             event_callbacks=SubscriptionEventCallbacks(matched=self._on_command_matched))
         self.reset_srv = self.create_service(Trigger, '~/reset', self._on_reset)
+        # the URDF for RViz, robot_state_publisher's users and a controller that reads the topic
+        self.description_pub = (publish_description(self, p.urdf_xml)
+                                if p.publish_robot_description else None)
         self.get_logger().info(
             f'simulating joints {list(self.sim.joint_names)} at {p.rate_hz} Hz, '
             f'effort limits {self.sim.effort_limits_nm.tolist()} N m, '
-            + ('lockstep with /clock' if self.publish_clock else 'real time'))
+            + ('lockstep with /clock' if self.publish_clock else 'real time')
+            + (f'; URDF from {p.description.describe()}'
+               if p.description.source is not Source.BUNDLED else '')
+            + (f', published on {self.description_pub.topic_name}'
+               if self.description_pub is not None else ''))
 
     def _apply_config(self, config: SimConfig) -> None:  # its friction, if it changed
         friction = [list(config.viscous_nm_s_per_rad), list(config.coulomb_nm)]
