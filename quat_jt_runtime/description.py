@@ -21,10 +21,11 @@ from rclpy.node import Node
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from std_msgs.msg import String
 
-# robot_state_publisher's /robot_description: the last message kept for late subscribers.
-DESCRIPTION_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
-                             reliability=ReliabilityPolicy.RELIABLE,
-                             durability=DurabilityPolicy.TRANSIENT_LOCAL)
+# Latched, as robot_state_publisher's /robot_description: the last message kept for late
+# subscribers (the robot description, the controller's goal).
+LATCHED_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
+                         reliability=ReliabilityPolicy.RELIABLE,
+                         durability=DurabilityPolicy.TRANSIENT_LOCAL)
 DEFAULT_TIMEOUT_S = 30.0
 WAIT_LOG_PERIOD_S = 5.0  # while waiting: a line this often, with the publishers seen
 
@@ -70,7 +71,7 @@ def wait_for_description(node: Node, topic: str, timeout_s: float) -> Descriptio
     """
     received: list[str] = []
     sub = node.create_subscription(String, topic, lambda msg: received.append(msg.data)
-                                   if msg.data.strip() else None, DESCRIPTION_QOS)
+                                   if msg.data.strip() else None, LATCHED_QOS)
     name = sub.topic_name
     log = node.get_logger()
     log.info(f'waiting up to {timeout_s:g} s for the robot description on {name} '
@@ -112,6 +113,6 @@ def wait_for_description(node: Node, topic: str, timeout_s: float) -> Descriptio
 
 def publish_description(node: Node, xml: str, topic: str = 'robot_description'):
     """Publish ``xml`` once on ``topic``, transient local (kept for late subscribers)."""
-    publisher = node.create_publisher(String, topic, DESCRIPTION_QOS)
+    publisher = node.create_publisher(String, topic, LATCHED_QOS)
     publisher.publish(String(data=xml))
     return publisher

@@ -97,9 +97,9 @@ class Rig(ProcessHarnessMixin):
                         f'{fragment!r} in the log of {name}')
 
     def description_publisher(self):
-        from quat_jt_runtime.description import DESCRIPTION_QOS
+        from quat_jt_runtime.description import LATCHED_QOS
         from std_msgs.msg import String
-        return self.node.create_publisher(String, '/robot_description', DESCRIPTION_QOS)
+        return self.node.create_publisher(String, '/robot_description', LATCHED_QOS)
 
 
 @pytest.fixture
@@ -112,7 +112,7 @@ def rig(tmp_path):
 @pytest.mark.dds
 def test_both_nodes_take_a_urdf_file_from_the_command_line(rig):
     """The hint's command: -p robot_description_file:=<path>; the simulator republishes it."""
-    from quat_jt_runtime.description import DESCRIPTION_QOS
+    from quat_jt_runtime.description import LATCHED_QOS
     from std_msgs.msg import String
     file_arg = ('-p', f'robot_description_file:={XARM6_URDF}')
     rig.spawn('xarm6_sim', 'wrist_sim_node', XARM6_SIM, file_arg)
@@ -123,7 +123,7 @@ def test_both_nodes_take_a_urdf_file_from_the_command_line(rig):
     received = []
     # subscribed after the simulator published: transient local, so it still arrives
     rig.node.create_subscription(String, '/robot_description',
-                                 lambda msg: received.append(msg.data), DESCRIPTION_QOS)
+                                 lambda msg: received.append(msg.data), LATCHED_QOS)
     rig.spin_until(lambda: received, 20.0, 'the URDF on /robot_description')
     assert received == [XARM6_URDF.read_text()]
     # the controller answers the simulator: both run the xArm6 from the file
