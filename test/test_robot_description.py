@@ -67,6 +67,19 @@ def test_a_file_that_cannot_be_read_says_why(tmp_path):
         read_file(str(empty))
 
 
+@pytest.mark.unit
+def test_the_tools_build_a_config_with_a_urdf_file_as_the_node_does():
+    from quat_jt_controller.controller_config import controller_from_config
+    from quat_jt_runtime.resources import config_parameters
+    params = {**config_parameters('xarm6_controller.yaml'),
+              'robot_description_file': str(XARM6_URDF)}
+    assert controller_from_config(params).model.joint_names == tuple(
+        f'joint{i}' for i in range(1, 7))
+    with pytest.raises(DescriptionError, match='needs a node'):
+        controller_from_config({**params, 'robot_description_file': '',
+                                'robot_description_topic': '/robot_description'})
+
+
 # ------------------------------------------------------------------------------------- dds
 class Rig(ProcessHarnessMixin):
     """This test's own node (publishes and listens) beside the spawned node processes."""
@@ -167,3 +180,13 @@ def test_no_description_on_the_topic_is_a_clear_error(rig):
             'robot_description_timeout 0.5 s (no publisher)') in log
     assert 'robot_description_file:=/path/robot.urdf' in log
     assert 'Traceback' not in log
+
+
+@pytest.mark.dds
+def test_a_ctrl_c_while_waiting_for_the_topic_is_a_clean_stop(rig):
+    rig.spawn('controller', 'controller_node', XARM6_CONTROLLER,
+              ('-p', 'robot_description_topic:=/robot_description'))
+    rig.wait_log('controller', 'waiting up to 30 s for the robot description')
+    proc = rig.procs.pop('controller')
+    assert local_ros.stop_node(proc) == 0, rig.log('controller')
+    assert 'Traceback' not in rig.log('controller')

@@ -26,7 +26,6 @@ from quat_jt_runtime.description import publish_description
 from quat_jt_runtime.loop_stats import LoopStats, write_summary
 from quat_jt_runtime.params import history_qos
 from quat_jt_runtime.resources import bundled_urdf_hint
-from quat_jt_runtime.urdf_source import Source
 from rclpy.event_handler import SubscriptionEventCallbacks
 from rclpy.node import Node
 from rclpy.qos import QoSProfile
@@ -99,8 +98,7 @@ class WristSimNode(Node):
             f'simulating joints {list(self.sim.joint_names)} at {p.rate_hz} Hz, '
             f'effort limits {self.sim.effort_limits_nm.tolist()} N m, '
             + ('lockstep with /clock' if self.publish_clock else 'real time')
-            + (f'; URDF from {p.description.describe()}'
-               if p.description.source is not Source.BUNDLED else '')
+            + f'; URDF from {p.description.describe()}'
             + (f', published on {self.description_pub.topic_name}'
                if self.description_pub is not None else ''))
 
