@@ -19,6 +19,7 @@ setup(
         ('share/' + package_name + '/config', glob('config/*.yaml') + glob('config/*.xml')),
         ('share/' + package_name + '/launch', glob('launch/*.launch.py')),
         ('share/' + package_name + '/urdf', glob('urdf/*.urdf')),
+        ('share/' + package_name + '/rviz', glob('rviz/*.rviz')),  # rviz:=true of the launches
         # the docs the code and the configs point to (errata, model, stability, gain design)
         ('share/' + package_name + '/docs', glob('docs/*.md')),
     ],

@@ -14,9 +14,10 @@ from quat_jt_controller import diagnostics
 from quat_jt_controller import parameters
 from quat_jt_controller.control_law import Gains, GainsError, Task
 from quat_jt_controller.goal_check import GoalCheckWorker, ModelSpec
+from quat_jt_controller.goal_frames import GoalFrames
 from quat_jt_controller.model import ModelError, RobotModel
-from quat_jt_controller.regulator import Goal, Regulator, TickOutput
-from quat_jt_controller.reports import Diagnostics, Feedback
+from quat_jt_controller.regulator import Regulator, TickOutput
+from quat_jt_controller.reports import Diagnostics, Feedback, GoalPose
 from quat_jt_controller.stall import StallDetector
 from quat_jt_controller.supervision import Supervisor
 from quat_jt_runtime import lifecycle
@@ -60,6 +61,7 @@ class QuatJtController(Node):
             preferred_configuration=model.middle_of_ranges())
         reg.set_shaping(self.shaping.current)
         self._change_log = parameters.change_log(self, reg)
+        self._frames = GoalFrames(model, cfg.task)  # the base and every link of the URDF
         self._check_state = StateCheck(cfg.joints, cfg.max_state_age_s, cfg.state_rate_hz,
                                        model.continuous)
         self._said_estimating = False
@@ -74,10 +76,12 @@ class QuatJtController(Node):
         self.stats = TickStats()
         self._last: Optional[TickOutput] = None  # the last tick's output, q and qdot
         self._last_q = self._last_qdot = None
+        self._goal_anchor = None  # the tip's position when the goal took force (~/goal_pose)
         self._cmd_msg = Float64MultiArray(data=[0.0] * model.n)
         self._cmd_pub = self.create_publisher(
             Float64MultiArray, 'effort_controller/commands', history_qos(self._use_sim_time))
         self._feedback = Feedback(self, cfg.base_link, cfg.task is Task.POSE)
+        self._goal_pose = GoalPose(self, cfg.base_link, cfg.task is Task.POSE)
         self._diagnostics = Diagnostics(
             self, cfg.tip_link, self._cmd_pub.topic_name, self.supervisor, self.stats,
             self.counters, self._goal_checker, self.stall, lambda: (self._last, self._last_qdot))
@@ -127,6 +131,7 @@ class QuatJtController(Node):
         sup, now_mono_ns = self.supervisor, time.monotonic_ns()
         held = sup.before_tick(q, now_mono_ns)
         if held is not None:
+            self._goal_anchor = held.p_desired_base
             self.get_logger().info(
                 f'first joint state, {(now_mono_ns - sup.started_ns) * 1e-9:.2f} s after start: '
                 f'holding the measured pose, {held.describe()}')
@@ -186,11 +191,16 @@ class QuatJtController(Node):
                 f'{self.config.state_timeout_s} s): published zero torque, waiting for states')
 
     def _on_target_pose(self, msg: PoseStamped) -> None:
-        """Validate a goal (frame, tf2-style unit quaternion, finite position) and swap it in."""
+        """
+        Validate a goal (frame, tf2-style unit quaternion, finite position) and swap it in.
+
+        A goal in a link of the robot is placed in the base frame here, with the last measured
+        joints (``GoalFrames``), and held there.
+        """
         o, p, stamp = msg.pose.orientation, msg.pose.position, msg.header.stamp
+        frame = msg.header.frame_id
         try:
-            goal = Goal.from_request(msg.header.frame_id, self.config.base_link,
-                                     (o.x, o.y, o.z, o.w), (p.x, p.y, p.z), self.config.task)
+            goal = self._frames.goal(frame, (o.x, o.y, o.z, o.w), (p.x, p.y, p.z), self._last_q)
         except ValueError as exc:
             self.counters.rejected_goals += 1
             return self._log_rejection('target_pose', f'previous goal stays in force: {exc}')
@@ -198,10 +208,14 @@ class QuatJtController(Node):
         taken = self.supervisor.on_goal(goal, stamp.sec + 1e-9 * stamp.nanosec,
                                         time.monotonic_ns())
         if taken.new:
+            self._goal_anchor = None if self._last is None else self._last.p_tip_base
             self.supervisor.check_goal(goal, taken.nu_desired_base, self._last_q)
+            placed = ('' if frame in ('', self.config.base_link) else
+                      f' (given in {frame}, placed in {self.config.base_link} at the measured '
+                      'joints)')
             line = self._goal_log.line(  # one line per distinct goal, at most 5 a second
-                'goal', lambda: f'new goal: {goal.describe(self.config.task is Task.POSE)}',
-                ' ({} more distinct goals since the last line)')
+                'goal', lambda: f'new goal: {goal.describe(self.config.task is Task.POSE)}'
+                f'{placed}', ' ({} more distinct goals since the last line)')
             if line is not None:
                 self.get_logger().info(line)
 
@@ -212,7 +226,8 @@ class QuatJtController(Node):
             self.get_logger().warn(line)
 
     def _on_goal_checks(self) -> None:
-        """Take the worker's answers (the Supervisor applies them); log what it says to."""
+        """Take the worker's answers (the Supervisor applies them); log; publish a new goal."""
+        self._goal_pose.update(self.regulator.goal, self._goal_anchor)
         failure, warnings = self.supervisor.take_checks()
         if failure is not None:  # once per death; the worker restarts by itself
             self.get_logger().error(f'{failure}; regulation goes on')

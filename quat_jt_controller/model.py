@@ -113,6 +113,7 @@ class RobotModel:
                              f'{model.names[model.frames[self._base_id].parentJoint]!r}; '
                              'it must be fixed to the URDF root')
         self._q = pin.neutral(model)
+        self._link_data = None  # link_pose's own, made when first asked
         pin.framesForwardKinematics(model, self.data, self._q)
         base = self.data.oMf[self._base_id]
         self._base_is_root = bool(np.allclose(base.homogeneous, np.eye(4)))
@@ -128,6 +129,30 @@ class RobotModel:
         self.effort_limits = self._per_joint(model.effortLimit)
         # the URDF's <dynamics friction>, N m (0: not given); the simulator does not use it
         self.friction_nm = self._per_joint(model.friction)
+
+    def link_names(self) -> tuple[str, ...]:
+        """Return the names of the URDF's links (Pinocchio's body frames), in its order."""
+        return tuple(f.name for f in self.model.frames if f.type == pin.FrameType.BODY)
+
+    def link_pose(self, link: str, q: Sequence[float]) -> tuple[list[float], list[list[float]]]:
+        """
+        Return the position (m) and rotation of ``link`` in the base frame at ``q``.
+
+        Works on a data object of its own, so it never disturbs the tick's. Raises ModelError
+        for a name that is not a link of the URDF.
+        """
+        if link not in self.link_names():
+            raise ModelError(f'link {link!r} is not in the URDF')
+        if self._link_data is None:
+            self._link_data = self.model.createData()
+        qv = self._set_q(q).copy()
+        pin.framesForwardKinematics(self.model, self._link_data, qv)
+        frame = self._link_data.oMf[self.model.getFrameId(link, pin.FrameType.BODY)]
+        if self._base_is_root:
+            return frame.translation.tolist(), frame.rotation.tolist()
+        Rb = self._R_root_base.T
+        return ((Rb @ (frame.translation - self._p_root_base)).tolist(),
+                (Rb @ frame.rotation).tolist())
 
     def middle_of_ranges(self) -> tuple[float, ...]:
         """Return the middle of each joint's range, its limits taken within [-pi, pi] (rad)."""

@@ -436,7 +436,7 @@ def test_rejected_goal_keeps_the_previous_one(make_probe):
     probe.send_goal(goal(GOAL_XYZW))
     kept = probe.node.regulator.goal
     for bad in (goal(quat.to_xyzw(paper.Q_DESIRED_AS_PRINTED)), goal((math.nan, 0.0, 0.0, 1.0)),
-                goal((0.0, 0.0, 0.0, 1.0), frame='tool0'),
+                goal((0.0, 0.0, 0.0, 1.0), frame='world'),
                 goal((0.0, 0.0, 0.0, 1.0), frame='/base_link')):  # tf2: no leading slash
         probe.send_goal(bad)
         assert probe.node.regulator.goal is kept
@@ -444,6 +444,44 @@ def test_rejected_goal_keeps_the_previous_one(make_probe):
     probe.wait_log("header.frame_id is '/base_link', expected 'base_link' (tf2 frame ids have")
     probe.send_goal(goal(tuple(-c for c in GOAL_XYZW), frame=''))
     assert probe.node.regulator.goal is not kept
+
+
+def test_goals_in_a_link_of_the_robot_are_placed_with_the_measured_joints(make_probe):
+    """A goal in tool0 is placed in base_link at the last measured q, then held there."""
+    from quat_jt_runtime.description import LATCHED_QOS
+    probe = make_probe()
+    node = probe.node
+    probe.send_goal(goal((0.0, 0.0, 0.0, 1.0), frame='tool0'))  # no joint state yet
+    probe.wait_log("'tool0' is a link of the robot, placed with the measured joints, and no "
+                   'joint state has come yet')
+    q = (0.3, -0.4, 0.5)
+    probe.command_for(state(q))
+    p_tip, R_tip = node.regulator.model.forward_kinematics(list(q))
+    half = 0.1  # 0.2 rad about tool0's own x axis
+    probe.send_goal(goal((math.sin(half), 0.0, 0.0, math.cos(half)), frame='tool0'))
+    placed = node.regulator.goal
+    c, s = math.cos(2 * half), math.sin(2 * half)
+    want = [[sum(R_tip[i][k] * ((1.0, 0.0, 0.0), (0.0, c, -s), (0.0, s, c))[k][j]
+                 for k in range(3)) for j in range(3)] for i in range(3)]
+    got = quat.to_rotation_matrix(placed.q_desired_base)
+    assert all(abs(got[i][j] - want[i][j]) < 1e-9 for i in range(3) for j in range(3))
+    probe.wait_log('(given in tool0, placed in base_link at the measured joints)')
+    probe.command_for(state((0.0, 0.0, 0.0)))  # the robot moves on: the goal stays
+    assert node.regulator.goal == placed
+    # ~/goal_pose: latched, so a viewer that joins now still gets the goal in force
+    poses: list[PoseStamped] = []
+    probe.probe.create_subscription(PoseStamped, f'{NODE_NAME}/goal_pose', poses.append,
+                                    LATCHED_QOS)
+    probe.spin_until(lambda: poses, 'the goal on ~/goal_pose')
+    o = poses[-1].pose.orientation
+    assert poses[-1].header.frame_id == 'base_link'
+    assert (o.x, o.y, o.z, o.w) == pytest.approx(placed.xyzw(), abs=1e-12)
+    assert [poses[-1].pose.position.x, poses[-1].pose.position.y,
+            poses[-1].pose.position.z] == pytest.approx(p_tip, abs=1e-9)  # at the tip then
+    probe.send_goal(goal((0.0, 0.0, 0.0, 1.0), frame='world'))
+    probe.wait_log("header.frame_id is 'world', expected 'base_link' (or empty) or a link of "
+                   "the robot: ['link1', 'link2', 'link3', 'tool0']")
+    assert node.regulator.goal == placed
 
 
 def test_diagnostics_warn_near_180_degrees(make_probe):
@@ -563,8 +601,8 @@ def test_namespaced_node_keeps_its_config_file(context):
 
 
 def test_xarm6_joints_without_its_urdf_say_what_to_pass(make_node):
-    with pytest.raises(ModelError, match='robot_description is empty, so the bundled spherical '
-                                         'wrist'):
+    with pytest.raises(ModelError, match='No robot description was given, so the bundled '
+                                         'spherical wrist'):
         make_node({'joints': [f'joint{i}' for i in range(1, 7)], 'base_link': 'link_base',
                    'tip_link': 'link6', 'task': 'pose'})
 

@@ -180,7 +180,7 @@ def test_a_start_up_error_gives_the_urdf_advice_only_when_it_is_about_the_robot(
         _make_node(context, use_gui=True)
     assert 'DISPLAY is not set' in str(no_window.value)
     assert 'robot_description' not in str(no_window.value)
-    with pytest.raises(SimulatorError, match="'nope'.*robot_description is empty, so the "
+    with pytest.raises(SimulatorError, match="'nope'.*No robot description was given, so the "
                                              'bundled spherical wrist'):
         _make_node(context, joints=['joint1', 'nope'])
 

@@ -10,7 +10,9 @@ lockstep with ``/clock``). It publishes ``joint_states`` after every step (effor
 torque applied, clamped to the URDF limits, friction not included), takes
 ``effort_controller/commands`` (one torque in N m per joint, in ``joints`` order; bad ones are
 refused with a throttled warning and the last good one stays), and serves ``~/reset`` (back to
-``initial_positions`` at rest). Timing figures are kept in ``node.stats``, logged at shutdown
+``initial_positions`` at rest). It publishes the URDF in use on ``robot_description``
+(transient local, ``publish_robot_description``), so RViz and robot_state_publisher's users
+see the robot. Timing figures are kept in ``node.stats``, logged at shutdown
 and written as JSON to ``stats_file`` if set. The parameters are the table of
 ``wrist_sim/parameters.py``; docs/ros.md tells the rest.
 """
@@ -20,6 +22,7 @@ from typing import Any, Callable, Optional
 
 from quat_jt_runtime import lifecycle
 from quat_jt_runtime import realtime
+from quat_jt_runtime.description import publish_description
 from quat_jt_runtime.loop_stats import LoopStats, write_summary
 from quat_jt_runtime.params import history_qos
 from quat_jt_runtime.resources import bundled_urdf_hint
@@ -50,6 +53,15 @@ class WristSimNode(Node):
 
     def __init__(self, **kwargs: Any) -> None:
         super().__init__(NODE_NAME, **kwargs)
+        try:
+            self._start()
+        except BaseException:
+            # A node that cannot start gives its handles back at once (its /rosout logger
+            # too, which a later node of the same name in this process would not get).
+            Node.destroy_node(self)
+            raise
+
+    def _start(self) -> None:
         p = self.structure = declare_structure(self)
         self.realtime = p.realtime  # applied by lifecycle.run_node
         self.live = declare_live(self, len(p.joints), on_apply=self._apply_config)
@@ -103,13 +115,19 @@ class WristSimNode(Node):
         self.reset_srv = self.create_service(Trigger, '~/reset', self._on_reset)
         self._hold = p.hold_until_first_command
         self._no_command_warn_s = float('inf')  # set when the loop starts (run)
+        # the URDF for RViz, robot_state_publisher's users and a controller that reads the topic
+        self.description_pub = (publish_description(self, p.urdf_xml)
+                                if p.publish_robot_description else None)
         self.get_logger().info(
             f'simulating joints {list(self.sim.joint_names)} in {self.sim.engine} at '
             f'{p.rate_hz} Hz, armature {list(p.armature)} kg m^2, '
             f'effort limits {self.sim.effort_limits_nm.tolist()} N m, '
             + ('lockstep with /clock' if self.publish_clock else 'real time')
             + f'; {self._before_first_command()} until the first command on '
-            f'{self.cmd_sub.topic_name}')
+            f'{self.cmd_sub.topic_name}'
+            + f'; URDF from {p.description.describe()}'
+            + (f', published on {self.description_pub.topic_name}'
+               if self.description_pub is not None else ''))
 
     def _before_first_command(self) -> str:
         return 'joints held at rest' if self._hold else 'zero torque'
