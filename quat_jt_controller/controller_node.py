@@ -14,9 +14,10 @@ from quat_jt_controller import diagnostics
 from quat_jt_controller import parameters
 from quat_jt_controller.control_law import Gains, GainsError, Task
 from quat_jt_controller.goal_check import GoalCheckWorker, ModelSpec
+from quat_jt_controller.goal_frames import GoalFrames
 from quat_jt_controller.model import ModelError, RobotModel
-from quat_jt_controller.regulator import Goal, Regulator, TickOutput
-from quat_jt_controller.reports import Diagnostics, Feedback
+from quat_jt_controller.regulator import Regulator, TickOutput
+from quat_jt_controller.reports import Diagnostics, Feedback, GoalPose
 from quat_jt_controller.stall import StallDetector
 from quat_jt_controller.supervision import Supervisor
 from quat_jt_runtime import lifecycle
@@ -26,6 +27,7 @@ from quat_jt_runtime.params import declare_realtime, history_qos
 from quat_jt_runtime.prewarm_timer import describe_prewarm, prewarm_off_reason, PrewarmTimer
 from quat_jt_runtime.resources import bundled_urdf_hint
 from quat_jt_runtime.throttle import cause, Throttle
+from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
@@ -33,6 +35,7 @@ from std_msgs.msg import Float64MultiArray
 NODE_NAME = 'quat_jt_controller'
 THROTTLE_S = 1.0  # rejected goals and states: at most one log line per second and cause
 GOAL_LOG_PERIOD_S = 0.2  # accepted distinct goals: one line each, at most 5 a second
+NO_STATE_CHECK_S = 0.3  # until the first state: is a no-state warning due (Supervisor)?
 
 
 class QuatJtController(Node):
@@ -46,7 +49,8 @@ class QuatJtController(Node):
         # applied by lifecycle.run_node; on simulated time there are no deadlines to keep
         self.realtime = declare_realtime(self, 'simulated time' if self._use_sim_time else '')
         try:
-            model = RobotModel(cfg.robot_description, cfg.base_link, cfg.tip_link, cfg.joints)
+            model = RobotModel(cfg.robot_description, cfg.base_link, cfg.tip_link, cfg.joints,
+                               cfg.armature)
         except ModelError as exc:
             raise ModelError(f'{exc}{bundled_urdf_hint(cfg.given_robot_description)}') from None
         gains = parameters.declare_gains(  # each change logged once by the ChangeLog
@@ -57,11 +61,14 @@ class QuatJtController(Node):
             preferred_configuration=model.middle_of_ranges())
         reg.set_shaping(self.shaping.current)
         self._change_log = parameters.change_log(self, reg)
-        self._check_state = StateCheck(cfg.joints, cfg.max_state_age_s)
+        self._frames = GoalFrames(model, cfg.task)  # the base and every link of the URDF
+        self._check_state = StateCheck(cfg.joints, cfg.max_state_age_s, cfg.state_rate_hz,
+                                       model.continuous)
+        self._said_estimating = False
         self._goal_checker = GoalCheckWorker(ModelSpec(
             cfg.robot_description, cfg.base_link, cfg.tip_link, cfg.joints, cfg.task))
         self.supervisor = Supervisor(reg, cfg.state_timeout_s, cfg.publish_rate_divider,
-                                     self._goal_checker)
+                                     self._goal_checker, started_ns=time.monotonic_ns())
         self.stall = StallDetector(reg)
         self._reject_log = Throttle(THROTTLE_S)  # per cause (the reason without numbers)
         self._goal_log = Throttle(GOAL_LOG_PERIOD_S)
@@ -69,23 +76,29 @@ class QuatJtController(Node):
         self.stats = TickStats()
         self._last: Optional[TickOutput] = None  # the last tick's output, q and qdot
         self._last_q = self._last_qdot = None
+        self._goal_anchor = None  # the tip's position when the goal took force (~/goal_pose)
         self._cmd_msg = Float64MultiArray(data=[0.0] * model.n)
         self._cmd_pub = self.create_publisher(
             Float64MultiArray, 'effort_controller/commands', history_qos(self._use_sim_time))
         self._feedback = Feedback(self, cfg.base_link, cfg.task is Task.POSE)
+        self._goal_pose = GoalPose(self, cfg.base_link, cfg.task is Task.POSE)
         self._diagnostics = Diagnostics(
             self, cfg.tip_link, self._cmd_pub.topic_name, self.supervisor, self.stats,
             self.counters, self._goal_checker, self.stall, lambda: (self._last, self._last_qdot))
-        self.create_subscription(JointState, 'joint_states', self._on_joint_state, 10)
+        self._state_sub = self.create_subscription(
+            JointState, 'joint_states', self._on_joint_state, 10)
         self.create_subscription(PoseStamped, '~/target_pose', self._on_target_pose, 10)
         self.create_timer(min(0.05, cfg.state_timeout_s / 4.0), self._on_watchdog)
+        self._no_state_timer = self.create_timer(
+            NO_STATE_CHECK_S, self._on_no_state_yet, clock=Clock(clock_type=ClockType.STEADY_TIME))
         self.create_timer(0.05, self._on_goal_checks)
         self.create_timer(1.0, lambda: (  # /diagnostics after the next command, or now
             self.supervisor.on_diagnostics_timer(time.monotonic_ns())
             and self._diagnostics.publish()))
         off = prewarm_off_reason(cfg.prewarm_lead_s, not prewarm, self._use_sim_time)
         self._prewarm = None if off else PrewarmTimer(self, cfg.prewarm_lead_s, self._prewarm_tick)
-        for line in parameters.describe_start(cfg, reg) + [describe_prewarm(
+        for line in parameters.describe_start(cfg, reg, self._state_sub.topic_name) + [
+                describe_prewarm(
                 cfg.prewarm_lead_s, off)]:
             self.get_logger().info(line)
 
@@ -106,11 +119,22 @@ class QuatJtController(Node):
             self.counters.rejected_states += 1
             self.counters.stale_states += isinstance(exc, StaleState)
             return self._log_rejection('joint_states', str(exc))
+        if self._check_state.estimating and not self._said_estimating:
+            self._said_estimating = True
+            self.get_logger().warn(
+                'joint_states carry no velocities: estimating them from the positions and '
+                + ('their stamps' if stamp_ns else 'their arrival times (no stamps)')
+                + f' (finite differences, low-pass of time constant '
+                f'{1e3 / self.config.state_rate_hz:g} ms = one period at state_rate '
+                f'{self.config.state_rate_hz:g} Hz); a driver that publishes velocities '
+                'gives better damping')
         sup, now_mono_ns = self.supervisor, time.monotonic_ns()
         held = sup.before_tick(q, now_mono_ns)
         if held is not None:
-            self.get_logger().info(f'first joint state: holding the measured pose, '
-                                   f'{held.describe()}')
+            self._goal_anchor = held.p_desired_base
+            self.get_logger().info(
+                f'first joint state, {(now_mono_ns - sup.started_ns) * 1e-9:.2f} s after start: '
+                f'holding the measured pose, {held.describe()}')
         out = self.regulator.update(q, qdot, sup.tick_interval_s(stamp_ns))
         self._cmd_msg.data = out.tau_nm
         t1 = time.perf_counter_ns()
@@ -140,6 +164,22 @@ class QuatJtController(Node):
         self.regulator.update(self._last_q, self._last_qdot)
         self.counters.prewarm_passes += 1
 
+    def _on_no_state_yet(self) -> None:
+        """
+        Before the first valid state, warn (slowly throttled) with the publishers on the topic.
+
+        On a steady-clock timer (simulated time does not run without a simulator), which the
+        first state cancels: the graph is read here, only while no state has come.
+        """
+        if self.supervisor.last_state_ns:
+            self._no_state_timer.cancel()
+            return
+        waited_s = self.supervisor.no_state_yet(time.monotonic_ns())
+        if waited_s is not None:
+            topic = self._state_sub.topic_name
+            self.get_logger().warn(diagnostics.no_state_warning(
+                topic, waited_s, self.count_publishers(topic), self.counters.rejected_states))
+
     def _on_watchdog(self) -> None:
         """Zero the command once when valid joint states stop for longer than state_timeout."""
         silent_s = self.supervisor.on_silence(time.monotonic_ns())
@@ -151,11 +191,16 @@ class QuatJtController(Node):
                 f'{self.config.state_timeout_s} s): published zero torque, waiting for states')
 
     def _on_target_pose(self, msg: PoseStamped) -> None:
-        """Validate a goal (frame, tf2-style unit quaternion, finite position) and swap it in."""
+        """
+        Validate a goal (frame, tf2-style unit quaternion, finite position) and swap it in.
+
+        A goal in a link of the robot is placed in the base frame here, with the last measured
+        joints (``GoalFrames``), and held there.
+        """
         o, p, stamp = msg.pose.orientation, msg.pose.position, msg.header.stamp
+        frame = msg.header.frame_id
         try:
-            goal = Goal.from_request(msg.header.frame_id, self.config.base_link,
-                                     (o.x, o.y, o.z, o.w), (p.x, p.y, p.z), self.config.task)
+            goal = self._frames.goal(frame, (o.x, o.y, o.z, o.w), (p.x, p.y, p.z), self._last_q)
         except ValueError as exc:
             self.counters.rejected_goals += 1
             return self._log_rejection('target_pose', f'previous goal stays in force: {exc}')
@@ -163,10 +208,14 @@ class QuatJtController(Node):
         taken = self.supervisor.on_goal(goal, stamp.sec + 1e-9 * stamp.nanosec,
                                         time.monotonic_ns())
         if taken.new:
+            self._goal_anchor = None if self._last is None else self._last.p_tip_base
             self.supervisor.check_goal(goal, taken.nu_desired_base, self._last_q)
+            placed = ('' if frame in ('', self.config.base_link) else
+                      f' (given in {frame}, placed in {self.config.base_link} at the measured '
+                      'joints)')
             line = self._goal_log.line(  # one line per distinct goal, at most 5 a second
-                'goal', lambda: f'new goal: {goal.describe(self.config.task is Task.POSE)}',
-                ' ({} more distinct goals since the last line)')
+                'goal', lambda: f'new goal: {goal.describe(self.config.task is Task.POSE)}'
+                f'{placed}', ' ({} more distinct goals since the last line)')
             if line is not None:
                 self.get_logger().info(line)
 
@@ -177,7 +226,8 @@ class QuatJtController(Node):
             self.get_logger().warn(line)
 
     def _on_goal_checks(self) -> None:
-        """Take the worker's answers (the Supervisor applies them); log what it says to."""
+        """Take the worker's answers (the Supervisor applies them); log; publish a new goal."""
+        self._goal_pose.update(self.regulator.goal, self._goal_anchor)
         failure, warnings = self.supervisor.take_checks()
         if failure is not None:  # once per death; the worker restarts by itself
             self.get_logger().error(f'{failure}; regulation goes on')

@@ -16,6 +16,9 @@ OK, WARN, ERROR = 0, 1, 2
 NEAR_180_ETA_E = 0.1
 # Saturated ticks above this fraction of a diagnostics window give a warning.
 SATURATION_WARN_FRACTION = 0.05
+# No state yet from a publisher the graph knows: until this long after start, it may still be
+# connecting (discovery took up to 2.8 s on a loaded 2-core VM)
+NO_STATE_CONNECTING_S = 5.0
 
 Status = tuple[int, str, list[tuple[str, str]]]
 
@@ -43,6 +46,28 @@ def graph_warnings(command_topic: str, command_publishers: int, node_name: str,
         warnings.append(f'{nodes_with_that_name} nodes are named {node_name}: parameters and '
                         'goals reach them both; give each its own name')
     return warnings
+
+
+def no_state_warning(state_topic: str, waited_s: float, publishers: int, rejected: int) -> str:
+    """
+    Say that no valid joint state has come since start: on which topic, from how many publishers.
+
+    ``publishers``: the graph's count on the resolved ``state_topic``; ``rejected``: the states
+    received and refused so far (each refusal is logged with its reason). A publisher that has
+    sent nothing for a few seconds is more than a connection still being made.
+    """
+    if not publishers:
+        detail = ('is the robot driver or simulator running, and publishing on this topic? '
+                  '(remap with -r joint_states:=<its topic>)')
+    elif rejected:
+        detail = f'{rejected} received and rejected (see the warnings logged)'
+    elif waited_s < NO_STATE_CONNECTING_S:
+        detail = 'none received yet (still connecting?)'
+    else:
+        detail = 'none received (a QoS mismatch, or a publisher that publishes nothing?)'
+    return (f'no valid joint state on {state_topic} {waited_s:.1f} s after start, {publishers} '
+            f'publisher{"" if publishers == 1 else "s"} on it: {detail}; no command is '
+            'published until one arrives')
 
 
 def loop_status(figures: dict, waiting: bool, stopped: bool, counters: Counters,

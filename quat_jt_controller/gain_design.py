@@ -4,8 +4,9 @@ Gains from the robot, by rules: the paper's open problem (docs/gain_design.md).
 Section 5 of the paper regrets "the lack of a procedure for tuning their gains", and Section 6
 leaves gain tuning open.
 
-From the URDF (kinematics, inertias, effort and velocity limits), the task, the control rate
-and the Coulomb friction estimates, :func:`design` computes K_p, K_v and Lambda (one set that
+From the URDF (kinematics, inertias, effort and velocity limits) with the drives' rotor
+inertia (the model's armature, on the diagonal of M(q)), the task, the control rate and the
+Coulomb friction estimates, :func:`design` computes K_p, K_v and Lambda (one set that
 serves both potentials, so ``potential`` can be switched live) and the extensions
 (``shaping.Shaping``): joint-limit band, goal-configuration term, cubic damping, friction
 compensation. In short:
@@ -29,19 +30,21 @@ design_gains`` under colcon) writes a parameter file in the format of config/*_c
 """
 import argparse
 from dataclasses import dataclass, field
-from math import pi, sqrt
+from math import isfinite, pi, sqrt
 from pathlib import Path
 import shlex
 import sys
 import textwrap
-from typing import Optional, Sequence
+from typing import Callable, NoReturn, Optional, Sequence
+from xml.etree import ElementTree
 
 import numpy as np
 
 from quat_jt_controller import control_law as cl
-from quat_jt_controller.model import RobotModel
+from quat_jt_controller.model import ModelError, RobotModel
 from quat_jt_controller.shaping import FULL_TURN_RAD, Shaping
-from quat_jt_runtime.joints import DEFAULT_MAX_STATE_AGE_S, DEFAULT_STATE_TIMEOUT_S
+from quat_jt_runtime.joints import check_state_rate, DEFAULT_MAX_STATE_AGE_S
+from quat_jt_runtime.joints import DEFAULT_STATE_TIMEOUT_S, STATE_RATE_RANGE_HZ
 
 TORQUE_SHARE = 0.8  # of what gravity and friction compensation leave; the rest: damping
 GUIDE_OVER_TASK = 1.2  # the goal-configuration term must overcome the task term at a stop
@@ -69,6 +72,12 @@ FRICTION_LEARNING_TIME_S = 1.0
 SAMPLES = 24  # representative regular configurations for M(q), J(q)
 SURVEY = 400  # random configurations for the largest g(q) and lever ||J_p[:, j]||
 REGULAR_SIGMA_MIN = 0.1
+# The representative configurations are looked for among at most this many random ones. If
+# fewer than SAMPLES reach REGULAR_SIGMA_MIN (a small arm: sigma_min mixes metres and
+# radians), the best ones are taken, down to REGULAR_RELATIVE x the largest sigma_min found.
+REGULAR_TRIES = 2000
+REGULAR_RELATIVE = 0.5
+SINGULAR_EVERYWHERE = 1e-6  # the largest sigma_min below this: the task is out of reach
 SHRINK = 0.8  # gains are scaled by this until the sampled loop is stable
 DELAY_MARGIN = 1  # the loop must also be stable with this many ticks more than asked for
 GAIN_MARGIN = 1.5  # ... and with the gains (stiffness and damping) this many times larger
@@ -79,6 +88,7 @@ GOAL_VELOCITY_GAIN = 1.0
 # redundant arm's q* (goal_check.posture): nearest first, the posture breaks near-ties
 POSTURE_WEIGHT = 0.1
 QO = 0.5  # |Q| on the orientation rows (Eq. 15)
+ENGINES = ('pybullet', 'mujoco')  # the simulator's engine parameter (sim_yaml)
 
 
 def _dynamics_matrix(M: np.ndarray, K: np.ndarray, D: np.ndarray, delay_ticks: int,
@@ -172,6 +182,7 @@ class Design:
     lam: tuple[float, ...]
     shaping: Shaping
     figures: dict = field(default_factory=dict)
+    armature: tuple[float, ...] = ()  # kg m^2 per joint, in M(q) of the design (the model's)
 
     def gains(self, potential: str = 'tanh') -> cl.Gains:
         """Return the K_p, K_v, Lambda of the design as validated Gains for ``potential``."""
@@ -221,7 +232,9 @@ def survey(model: RobotModel, task: cl.Task, seed: int = 0) -> dict:
     ``gravity_max`` and ``lever_max`` (the largest ||J_p[:, j]||, m) over SURVEY
     configurations within the limits; ``configurations``: SAMPLES regular ones (sigma_min of
     the task Jacobian >= REGULAR_SIGMA_MIN) within 90% of the ranges, with their task
-    Jacobians and M(q); ``inertia_min`` the smallest inertia a joint sees over all of them,
+    Jacobians and M(q), among at most REGULAR_TRIES random ones; if fewer are found, the
+    best ones down to REGULAR_RELATIVE x the largest sigma_min (``regular_sigma_min`` the
+    threshold used); ``inertia_min`` the smallest inertia a joint sees over all of them,
     ``1 / (M^-1)_jj`` (the others free to move; up to several times below M_jj on a coupled
     arm).
     """
@@ -234,18 +247,34 @@ def survey(model: RobotModel, task: cl.Task, seed: int = 0) -> dict:
         g_max = np.maximum(g_max, np.abs(model.gravity(q.tolist())))
         lever = np.maximum(lever, np.linalg.norm(np.array(J)[:3], axis=0))
         inertia_min = np.minimum(inertia_min, seen_inertia(model.mass_matrix(q.tolist())))
-    configs = []
-    while len(configs) < SAMPLES:
+    regular, others = [], []
+    for _ in range(REGULAR_TRIES):
         q = _sample(model, rng, 0.9)
         _, _, J = model.kinematics(q.tolist())
         rows = np.array(J)[3:] if task is cl.Task.ORIENTATION else np.array(J)
-        if _sigma_min(rows) < REGULAR_SIGMA_MIN:
-            continue
+        sigma = _sigma_min(rows)
+        (regular if sigma >= REGULAR_SIGMA_MIN else others).append((sigma, q, rows))
+        if len(regular) == SAMPLES:
+            break
+    threshold = REGULAR_SIGMA_MIN
+    if len(regular) < SAMPLES:
+        best = max(sigma for sigma, _, _ in regular + others)
+        if best < SINGULAR_EVERYWHERE:
+            raise ValueError(
+                f'the {task.value} task Jacobian is singular at each of {REGULAR_TRIES} random '
+                f'configurations of joints {list(model.joint_names)} (largest sigma_min '
+                f'{best:.3g}): these joints cannot move {model.tip_link!r} in every direction '
+                f'of the {task.value} task; choose another task, tip link or joints')
+        threshold = REGULAR_RELATIVE * best
+        others.sort(key=lambda c: -c[0])
+        regular += [c for c in others if c[0] >= threshold][:SAMPLES - len(regular)]
+    configs = []
+    for _, q, rows in regular:
         M = model.mass_matrix(q.tolist())
         inertia_min = np.minimum(inertia_min, seen_inertia(M))
         configs.append((q, rows, M))
     return {'gravity_max': g_max, 'lever_max': lever, 'inertia_min': inertia_min,
-            'configurations': configs}
+            'configurations': configs, 'regular_sigma_min': threshold}
 
 
 def seen_inertia(M: np.ndarray) -> np.ndarray:
@@ -401,6 +430,7 @@ def design(model: RobotModel, task: cl.Task, rate_hz: float = 1000.0,
     """
     task = cl.Task(task)
     n = model.n
+    rate_hz = check_state_rate(rate_hz, 'rate_hz')
     dt_s = 1.0 / rate_hz
     effort = np.array(model.effort_limits if effort_limits_nm is None else effort_limits_nm,
                       dtype=float)
@@ -557,10 +587,11 @@ def design(model: RobotModel, task: cl.Task, rate_hz: float = 1000.0,
         'damping_ratio': ratios, 'terminal_speed_rad_s': np.array(terminal),
         'velocity_limits_rad_s': velocity, 'friction_learning': friction_learning,
         'cruise_fraction': cruise_fraction,
+        'regular_sigma_min': data['regular_sigma_min'],
         'warnings': friction_warnings(model, friction, learning),
     }
     return Design(task, model.joint_names, model.base_link, model.tip_link, rate_hz, kp_r,
-                  kv_r, lam_r, shaping, figures)
+                  kv_r, lam_r, shaping, figures, model.armature)
 
 
 def friction_warnings(model: RobotModel, friction: np.ndarray,
@@ -602,6 +633,15 @@ def _saturation(lam: Sequence[float], pose: bool) -> str:
     return text
 
 
+def _regular_note(f: dict) -> str:
+    """Say which sigma_min the representative configurations have, if not the usual one."""
+    threshold = f.get('regular_sigma_min', REGULAR_SIGMA_MIN)
+    if threshold >= REGULAR_SIGMA_MIN:
+        return ''
+    return (f' (sigma_min(J) >= {threshold:.3g}: none of {REGULAR_TRIES} random ones reached '
+            f'{REGULAR_SIGMA_MIN:g})')
+
+
 def _float(value: float) -> str:
     """Four significant digits, always with a decimal point (ROS parameters are typed)."""
     if abs(value) < 1e-9:
@@ -640,7 +680,8 @@ def to_yaml(d: Design, potential: str = 'tanh', command: str = '',
         'The design, per joint (N m unless said):',
         f'  effort limits {_fmt(f["effort_limits_nm"])}, largest |g(q)| '
         f'{_fmt(np.round(f["gravity_max_nm"], 4))}, friction estimates '
-        f'{_fmt(f["friction_nm"])};',
+        f'{_fmt(f["friction_nm"])}, rotor inertia (armature, in M(q)) '
+        f'{_fmt(d.armature or [0.0] * len(d.joints))} kg m^2;',
         f'  at rest the regulator may learn {f["friction_learning"]:g} x the estimates more, '
         f'in {FRICTION_LEARNING_TIME_S:g} s;',
         f'  budget {TORQUE_SHARE:g} x (effort - gravity - friction - learnable friction) = '
@@ -651,7 +692,8 @@ def to_yaml(d: Design, potential: str = 'tanh', command: str = '',
         f'  sampled loop at {d.rate_hz:g} Hz with {"/".join(str(x) for x in f["delays"])} '
         f'tick(s) of delay and {max(f["delays"]) + DELAY_MARGIN}, and at {GAIN_MARGIN:g} x the '
         f'gains, per joint on the inertia it sees (1 / (M^-1)_jj, smallest '
-        f'{_fmt(f["inertia_min"])} kg m^2), linearised at {SAMPLES} regular configurations: '
+        f'{_fmt(f["inertia_min"])} kg m^2), linearised at {SAMPLES} regular configurations'
+        f'{_regular_note(f)}: '
         'worst spectral '
         f'radius {rho["tanh"]:.6f} (tanh), {rho["quadratic"]:.6f} (quadratic) < 1; median '
         f'damping ratios tanh {_fmt(zeta["tanh"])}, quadratic {_fmt(zeta["quadratic"])};',
@@ -710,6 +752,8 @@ def to_yaml(d: Design, potential: str = 'tanh', command: str = '',
         f'    posture_weight: {_float(s.posture_weight)}   # of that posture against the '
         'distance to the arm (no effect without self-motion)',
         f'    joints: [{", ".join(d.joints)}]',
+        f'    armature: {_fmt(d.armature or [0.0] * len(d.joints))}  # kg m^2, rotor inertia '
+        'per joint, in M(q) of the design',
         f'    base_link: {d.base_link}',
         f'    tip_link: {d.tip_link}',
         "    robot_description: ''        # URDF XML; '' = the bundled wrist"
@@ -718,17 +762,81 @@ def to_yaml(d: Design, potential: str = 'tanh', command: str = '',
         '-> zero torque (once)',
         f'    max_state_age: {DEFAULT_MAX_STATE_AGE_S}           # s; older, future or unstamped '
         'states are rejected; 0 = off',
+        f'    state_rate: {_float(d.rate_hz)}           # Hz, the joint_states rate designed for '
+        '(--rate)',
         f'    publish_rate_divider: {max(1, int(round(d.rate_hz / 100.0)))}     # feedback '
         'topics at 100 Hz',
     ]
     return '\n'.join(lines) + '\n'
 
 
+class _Parser(argparse.ArgumentParser):
+    """argparse with its errors on one line (the problem, then where the usage is), status 2."""
+
+    def error(self, message: str) -> NoReturn:
+        """Print ``prog: error: message`` on one line and exit with status 2."""
+        self.exit(2, f'{self.prog}: error: {message} (see {self.prog} --help)\n')
+
+
+def _number(low: float, high: float = float('inf'), low_open: bool = True,
+            integer: bool = False) -> Callable[[str], float]:
+    """Return an argparse type: a finite number in (low, high] (or [low, high])."""
+    kind = 'an integer' if integer else 'a finite number'
+    interval = f'{"(" if low_open else "["}{low:g}, {high:g}{"]" if isfinite(high) else ")"}'
+
+    def parse(text: str) -> float:
+        try:
+            value = int(text) if integer else float(text)
+        except ValueError:
+            raise argparse.ArgumentTypeError(f'{text!r} is not {kind}') from None
+        if not (isfinite(value) and (value > low if low_open else value >= low)
+                and value <= high):
+            raise argparse.ArgumentTypeError(f'{text} is not {kind} in {interval}')
+        return value
+    return parse
+
+
+def _real(text: str) -> float:
+    """Return an argparse type's float (NaN and infinities too: a range check follows)."""
+    try:
+        return float(text)
+    except ValueError:
+        raise argparse.ArgumentTypeError(f'{text!r} is not a number') from None
+
+
+def _check_per_joint(parser: argparse.ArgumentParser, model: RobotModel,
+                     args: argparse.Namespace) -> None:
+    """Refuse (status 2) a per-joint list of the wrong length, or a posture outside the limits."""
+    names = list(model.joint_names)
+    for option in ('effort_limits', 'friction', 'preferred_configuration', 'initial_positions',
+                   'sim_coulomb', 'sim_viscous'):
+        values = getattr(args, option)
+        if values is not None and len(values) != model.n:
+            parser.error(f'--{option.replace("_", "-")}: {len(values)} '
+                         f'value{"" if len(values) == 1 else "s"} for the {model.n} joints '
+                         f'{names}')
+    limits = list(zip(model.position_lower, model.position_upper))
+    for option in ('preferred_configuration', 'initial_positions'):
+        values = getattr(args, option)
+        outside = [name for name, v, (lo, hi) in zip(names, values or (), limits)
+                   if not lo <= v <= hi]
+        if outside:
+            parser.error(f'--{option.replace("_", "-")}: {values} puts {outside} outside the '
+                         f'joint limits {limits}')
+
+
 def main(argv: Optional[list] = None) -> int:
-    """``ros2 run quat_jt_controller design_gains`` / ``python -m ...gain_design``."""
+    """
+    ``ros2 run quat_jt_controller design_gains`` / ``python -m ...gain_design``.
+
+    A bad argument (a number, a file, a joint, a link, a list's length) is one line on stderr
+    and status 2, as argparse's own; gains that cannot be designed for the robot, or a file
+    that cannot be written, one line and status 1.
+    """
     from quat_jt_runtime.resources import default_urdf_xml
 
-    parser = argparse.ArgumentParser(
+    positive, non_negative = _number(0.0), _number(0.0, low_open=False)
+    parser = _Parser(
         prog='design_gains', description='Compute K_p, K_v, Lambda and the '
         'extensions of the regulator from the robot (docs/gain_design.md).')
     parser.add_argument('--urdf', type=Path, help='URDF file (default: the bundled wrist)')
@@ -740,21 +848,29 @@ def main(argv: Optional[list] = None) -> int:
     parser.add_argument('--task', choices=[t.value for t in cl.Task], default='orientation',
                         help="'orientation' (y = e, Eqs. 37/38) or 'pose' (y = [p_d - p; e], "
                              'Eqs. 24/32)')
-    parser.add_argument('--effort-limits', type=float, nargs='+',
+    parser.add_argument('--effort-limits', type=positive, nargs='+',
                         help='N m per joint (default: the URDF effort limits)')
-    parser.add_argument('--rate', type=float, default=1000.0, help='control rate, Hz')
-    parser.add_argument('--friction', type=float, nargs='+',
+    parser.add_argument('--armature', type=_real, nargs='+',
+                        help='rotor inertia the drives add about their joints, kg m^2: one '
+                        'value for every joint, or one per joint (default 0). Added to the '
+                        "diagonal of the URDF's M(q); written to the file as the controller's "
+                        'armature')
+    parser.add_argument('--rate', type=_real, default=1000.0,
+                        help='the control rate (of joint_states and commands), Hz, in '
+                        f'[{STATE_RATE_RANGE_HZ[0]:g}, {STATE_RATE_RANGE_HZ[1]:g}]; the '
+                        'sampled loop is checked at it (default 1000)')
+    parser.add_argument('--friction', type=non_negative, nargs='+',
                         help='Coulomb friction estimates, N m per joint (default: none)')
-    parser.add_argument('--friction-learning', type=float, default=FRICTION_LEARNING,
+    parser.add_argument('--friction-learning', type=non_negative, default=FRICTION_LEARNING,
                         help='how much more than the estimates the regulator may learn at '
                         f'rest, x the estimates (default {FRICTION_LEARNING:g}; 0 = none)')
-    parser.add_argument('--delays', type=int, nargs='+', default=[1],
-                        help='ticks of delay the sampled loop must be stable with')
-    parser.add_argument('--cruise-fraction', type=float, default=CRUISE_FRACTION,
+    parser.add_argument('--delays', type=_number(0.0, low_open=False, integer=True), nargs='+',
+                        default=[1], help='ticks of delay the sampled loop must be stable with')
+    parser.add_argument('--cruise-fraction', type=_number(0.0, 1.0), default=CRUISE_FRACTION,
                         help='the speed far from the goal, as a fraction of the URDF velocity '
                         'limits: a strong joint gets a goal-configuration gain that drives it '
                         f'this fast, within its budget (default {CRUISE_FRACTION:g})')
-    parser.add_argument('--preferred-configuration', type=float, nargs='+',
+    parser.add_argument('--preferred-configuration', type=_number(-float('inf')), nargs='+',
                         help="rad per joint: the posture a redundant arm's goal configuration "
                         'leans to (default: the middle of the ranges)')
     parser.add_argument('--potential', choices=[p.value for p in cl.Potential],
@@ -765,36 +881,77 @@ def main(argv: Optional[list] = None) -> int:
     sim = parser.add_argument_group(
         'simulator config', 'also write a wrist_sim_node parameter file for the same joints')
     sim.add_argument('--sim-out', type=Path, help='write it here')
-    sim.add_argument('--initial-positions', type=float, nargs='+',
+    sim.add_argument('--initial-positions', type=_number(-float('inf')), nargs='+',
                      help='rad per joint, where the robot starts at rest (default: the middle '
                      'of the ranges)')
-    sim.add_argument('--sim-coulomb', type=float, nargs='+',
+    sim.add_argument('--sim-coulomb', type=non_negative, nargs='+',
                      help='the simulated Coulomb friction, N m per joint (default: none)')
-    sim.add_argument('--sim-viscous', type=float, nargs='+',
+    sim.add_argument('--sim-viscous', type=non_negative, nargs='+',
                      help='the simulated viscous friction, N m s/rad per joint (default: none)')
+    sim.add_argument('--sim-armature', type=non_negative, nargs='+',
+                     help="the simulated rotor inertia, kg m^2 (default: --armature's)")
+    sim.add_argument('--sim-engine', choices=ENGINES, default=ENGINES[0],
+                     help=f'the physics engine of the simulator (default {ENGINES[0]})')
     args = parser.parse_args(argv)
-    urdf = args.urdf.read_text() if args.urdf else default_urdf_xml()
-    model = RobotModel(urdf, args.base_link, args.tip_link, args.joints)
-    result = design(model, cl.Task(args.task), args.rate, args.effort_limits, args.friction,
-                    tuple(args.delays), friction_learning=args.friction_learning,
-                    cruise_fraction=args.cruise_fraction,
-                    preferred_configuration_rad=args.preferred_configuration)
+    try:
+        check_state_rate(args.rate, '--rate')
+    except ValueError as exc:
+        parser.error(str(exc))
+    try:
+        urdf = args.urdf.read_text() if args.urdf else default_urdf_xml()
+    except (OSError, UnicodeDecodeError) as exc:
+        parser.error(f'--urdf {args.urdf}: {getattr(exc, "strerror", None) or exc}')
+    try:  # before the URDF parser, which prints its own lines for what is not XML
+        root = ElementTree.fromstring(urdf).tag
+    except ElementTree.ParseError as exc:
+        parser.error(f'--urdf {args.urdf}: not XML ({exc})')
+    if root != 'robot':
+        parser.error(f'--urdf {args.urdf}: not a URDF (its root element is <{root}>, not '
+                     '<robot>)')
+    try:
+        model = RobotModel(urdf, args.base_link, args.tip_link, args.joints)
+    except ModelError as exc:
+        parser.error(f'{exc} (--urdf {args.urdf or "<the bundled wrist>"})')
+    try:  # one value for every joint or one per joint, each finite and >= 0
+        if args.armature is not None:
+            model = RobotModel(urdf, args.base_link, args.tip_link, args.joints,
+                               per_joint_values(args.armature, model.n, '--armature'))
+        sim_armature = per_joint_values(args.sim_armature, model.n, '--sim-armature')
+    except (ModelError, ValueError) as exc:
+        parser.error(str(exc))
+    _check_per_joint(parser, model, args)
+    try:
+        result = design(model, cl.Task(args.task), args.rate, args.effort_limits,
+                        args.friction, tuple(args.delays),
+                        friction_learning=args.friction_learning,
+                        cruise_fraction=args.cruise_fraction,
+                        preferred_configuration_rad=args.preferred_configuration)
+        command = shlex.join(['python', '-m', 'quat_jt_controller.gain_design']
+                             + _public_argv(sys.argv[1:] if argv is None else argv))
+        text = to_yaml(result, args.potential, command, args.robot_note)
+        sim_text = (sim_yaml(model, args.rate, args.initial_positions, args.sim_coulomb,
+                             args.sim_viscous, command, args.robot_note,
+                             model.armature if sim_armature is None else sim_armature,
+                             args.sim_engine)
+                    if args.sim_out else None)  # both checked before either is written
+    except ValueError as exc:  # the robot leaves no gains that meet the design's checks
+        print(f'design_gains: error: no design: {exc}', file=sys.stderr)
+        return 1
     for warning in result.figures['warnings']:
         print(f'design_gains: WARNING: {warning}', file=sys.stderr)
-    command = shlex.join(['python', '-m', 'quat_jt_controller.gain_design']
-                         + _public_argv(sys.argv[1:] if argv is None else argv))
-    text = to_yaml(result, args.potential, command, args.robot_note)
-    sim_text = (sim_yaml(model, args.rate, args.initial_positions, args.sim_coulomb,
-                         args.sim_viscous, command, args.robot_note)
-                if args.sim_out else None)  # both checked before either is written
-    if args.out:
-        args.out.write_text(text)
-        print(f'wrote {args.out}', file=sys.stderr)
-    else:
-        sys.stdout.write(text)
-    if args.sim_out:
-        args.sim_out.write_text(sim_text)
-        print(f'wrote {args.sim_out}', file=sys.stderr)
+    try:
+        if args.out:
+            args.out.write_text(text)
+            print(f'wrote {args.out}', file=sys.stderr)
+        else:
+            sys.stdout.write(text)
+        if args.sim_out:
+            args.sim_out.write_text(sim_text)
+            print(f'wrote {args.sim_out}', file=sys.stderr)
+    except OSError as exc:
+        print(f'design_gains: error: cannot write {exc.filename}: {exc.strerror}',
+              file=sys.stderr)
+        return 1
     return 0
 
 
@@ -802,13 +959,15 @@ def sim_yaml(model: RobotModel, rate_hz: float,
              initial_positions_rad: Optional[Sequence[float]],
              coulomb_nm: Optional[Sequence[float]],
              viscous_nm_s_per_rad: Optional[Sequence[float]],
-             command: str = '', robot_description_note: str = '') -> str:
+             command: str = '', robot_description_note: str = '',
+             armature: Optional[Sequence[float]] = None, engine: str = ENGINES[0]) -> str:
     """
     Return a parameter file for wrist_sim_node in the format of config/*_sim.yaml.
 
     The joints are the design's; the others of the URDF (a gripper's fingers) are held where
     they are by the simulator. The start defaults to the middle of the ranges, the friction to
-    none. Raises ValueError on a list of the wrong length or a start outside the limits.
+    none, the rotor inertia (``armature``) to the model's. Raises ValueError on a list of the
+    wrong length or a start outside the limits.
     """
     n = model.n
     lower, upper = np.array(model.position_lower), np.array(model.position_upper)
@@ -817,10 +976,15 @@ def sim_yaml(model: RobotModel, rate_hz: float,
     coulomb = np.zeros(n) if coulomb_nm is None else np.array(coulomb_nm, float)
     viscous = (np.zeros(n) if viscous_nm_s_per_rad is None
                else np.array(viscous_nm_s_per_rad, float))
+    rotor = np.array(model.armature if armature is None else armature, float)
+    if engine not in ENGINES:
+        raise ValueError(f'engine must be one of {list(ENGINES)}, got {engine!r}')
     for name, values in (('--initial-positions', start), ('--sim-coulomb', coulomb),
-                         ('--sim-viscous', viscous)):
+                         ('--sim-viscous', viscous), ('--sim-armature', rotor)):
         if values.size != n or not np.all(np.isfinite(values)):
             raise ValueError(f'{name}: expected {n} finite values, got {values.tolist()}')
+    if np.any(rotor < 0.0):
+        raise ValueError(f'--sim-armature: values must be >= 0, got {rotor.tolist()}')
     if np.any(start < lower) or np.any(start > upper):
         raise ValueError(f'--initial-positions {start.tolist()} are outside the limits')
     _, _, J = model.kinematics(start.tolist())
@@ -849,12 +1013,28 @@ def sim_yaml(model: RobotModel, rate_hz: float,
         '    max_real_time_factor: 0.0',
         f'    viscous_friction: {_fmt(viscous)}  # N m s/rad',
         f'    coulomb_friction: {_fmt(coulomb)}  # N m (stiction level)',
+        f'    armature: {_fmt(rotor)}  # kg m^2, rotor inertia per joint (engine mujoco)',
+        f'    engine: {engine}                 # or '
+        + ' or '.join(e for e in ENGINES if e != engine),
         '    command_timeout: 0.5             # s without a valid command -> zero torque',
         '    enforce_velocity_limits: true    # the URDF velocity limits, as a drive holds them',
         '    hold_until_first_command: true   # brakes on until the first command',
         "    stats_file: ''",
     ]
     return '\n'.join(lines) + '\n'
+
+
+def per_joint_values(values: Optional[Sequence[float]], n: int,
+                     name: str) -> Optional[list[float]]:
+    """Return one value per joint: ``values`` as given, or its one value ``n`` times."""
+    if values is None:
+        return None
+    if len(values) == 1:
+        return [float(values[0])] * n
+    if len(values) != n:
+        raise ValueError(f'{name}: give one value for every joint or {n} (one per joint), got '
+                         f'{len(values)}: {list(values)}')
+    return [float(v) for v in values]
 
 
 def _public_argv(argv: Sequence[str]) -> list[str]:

@@ -232,11 +232,14 @@ def _representative(q: np.ndarray, near: np.ndarray, lower: np.ndarray,
     Move each full-turn joint by whole turns to the angle within its range nearest ``near``.
 
     An angle at least ``margin_rad`` from both limits is preferred: a full-turn joint has no
-    joint-limit band, and a q* next to its stop leaves no room for an overshoot.
+    joint-limit band, and a q* next to its stop leaves no room for an overshoot. A joint
+    without stops (URDF ``continuous``) takes the angle nearest ``near``.
     """
     out = q.copy()
     for j in range(q.size):
-        if upper[j] - lower[j] >= 2.0 * pi - 1e-6 and np.isfinite(upper[j] - lower[j]):
+        if not np.isfinite(upper[j] - lower[j]):
+            out[j] = q[j] + 2.0 * pi * np.round((near[j] - q[j]) / (2.0 * pi))
+        elif upper[j] - lower[j] >= 2.0 * pi - 1e-6:
             turns = np.round((near[j] - q[j]) / (2.0 * pi))
             best = None
             for k in (turns - 2, turns - 1, turns, turns + 1, turns + 2):

@@ -6,7 +6,19 @@ forward kinematics of a tip link in a base link, the geometric Jacobian J_G of E
 rows then angular rows, base-frame axes, tip-origin velocity), gravity torques g(q) of Eq. (1),
 and the joint position, velocity and effort limits. Joints of the URDF that are not controlled
 are locked at zero.
+
+A URDF ``continuous`` joint is a revolute joint without stops. Pinocchio gives it two
+configuration coordinates, (cos q, sin q), and one velocity; here it has one angle q like any
+other joint (unwrapped: q and q + 2 pi are the same configuration), position limits of
+-inf and +inf, and one column in J_G, g(q) and M(q).
+
+The inertia is the URDF's links plus, per joint, the rotor inertia its drive reflects (the
+``armature`` a, kg m^2 or kg): M(q) of Eq. (1) becomes M_links(q) + diag(a), in the mass matrix,
+the forward dynamics and everything designed or checked from them. A URDF rarely carries it (a
+geared drive's rotor, seen through the gear ratio r, adds r^2 I_rotor, often more than the
+link), so it is given as a model input.
 """
+from math import cos, sin
 from typing import Optional, Sequence
 
 import numpy as np
@@ -18,8 +30,8 @@ except ModuleNotFoundError as exc:  # e.g. a colcon workspace whose rosdep skipp
         'package on PyPI is another project) or ros-jazzy-pinocchio from the ROS apt '
         'repository') from exc
 
-from quat_jt_runtime.errors import QuatJtError
-from quat_jt_runtime.joints import movable_joints, select_joints
+from quat_jt_runtime.errors import checked_vector, QuatJtError
+from quat_jt_runtime.joints import fixed_joints, movable_joints, select_joints
 
 
 class ModelError(QuatJtError):
@@ -32,27 +44,36 @@ class RobotModel:
 
     ``joint_names`` gives the order of q, qdot and tau everywhere in this package; by default
     the URDF's movable joints (``joints.movable_joints``) in document order. Each controlled
-    joint must be revolute or prismatic with one coordinate (a URDF ``continuous`` joint has
-    two in Pinocchio).
+    joint is revolute, continuous or prismatic. ``base_link`` and ``tip_link`` are looked up
+    as links (Pinocchio BODY frames), so a joint of the same name does not clash. ``armature``
+    is the rotor inertia per joint, in that order (kg m^2, or kg for a prismatic joint; default
+    zeros), added to the diagonal of M(q) (Pinocchio's ``model.armature``, at each joint's
+    velocity index); ModelError names a value that is not finite and >= 0, or a length that is
+    not one per joint.
     """
 
     def __init__(self, urdf_xml: str, base_link: str, tip_link: str,
-                 joint_names: Optional[Sequence[str]] = None) -> None:
-        try:
-            full = pin.buildModelFromXML(urdf_xml)
-        except Exception as exc:  # Pinocchio raises plain RuntimeError/ValueError
-            raise ModelError(f'cannot parse the URDF: {exc}') from exc
+                 joint_names: Optional[Sequence[str]] = None,
+                 armature: Optional[Sequence[float]] = None) -> None:
         try:
             movable = movable_joints(urdf_xml)
         except ValueError as exc:
-            raise ModelError(str(exc)) from exc
+            raise ModelError(f'cannot parse the URDF: {exc}') from exc
         joint_names = select_joints(joint_names, movable, ModelError)
-        movable = [full.names[i] for i in range(1, full.njoints)]
-        locked = [full.getJointId(n) for n in movable if n not in joint_names]
-        model = (pin.buildReducedModel(full, locked, pin.neutral(full)) if locked else full)
+        # Joints not controlled are locked at zero: made fixed in the URDF itself, which is
+        # what Pinocchio's buildReducedModel computes, without its lookup of frames by name
+        # alone (it stops on a link and a joint of the same name).
+        locked = [n for n in movable if n not in joint_names]
+        try:
+            model = pin.buildModelFromXML(fixed_joints(urdf_xml, locked) if locked
+                                          else urdf_xml)
+        except Exception as exc:  # Pinocchio raises plain RuntimeError/ValueError
+            raise ModelError(f'cannot parse the URDF: {exc}') from exc
         for name in (base_link, tip_link):
-            if not model.existFrame(name):
-                raise ModelError(f'link {name!r} is not in the URDF')
+            if not model.existFrame(name, pin.BODY):
+                what = (' (it names a joint; give the link)'
+                        if model.existFrame(name, pin.JOINT) else '')
+                raise ModelError(f'link {name!r} is not in the URDF{what}')
         self.model = model
         self.data = model.createData()
         self.joint_names: tuple[str, ...] = tuple(joint_names)
@@ -61,34 +82,77 @@ class RobotModel:
         self.n = len(joint_names)
 
         joint_ids = [model.getJointId(n) for n in joint_names]
+        unbounded = []
         for name, jid in zip(joint_names, joint_ids):
-            if model.joints[jid].nq != 1 or model.joints[jid].nv != 1:
-                raise ModelError(f'joint {name!r} has {model.joints[jid].nq} coordinates; only '
-                                 'one-coordinate (revolute/prismatic) joints are supported')
-        if model.nq != self.n:
-            raise ModelError(f'model has {model.nq} coordinates for {self.n} joints')
-        # Our joint order -> Pinocchio's q/v index.
-        self._idx = [model.joints[jid].idx_q for jid in joint_ids]
+            joint = model.joints[jid]
+            if joint.nv != 1 or joint.nq not in (1, 2):
+                raise ModelError(f'joint {name!r} has {joint.nq} coordinates and {joint.nv} '
+                                 'velocities; only revolute, continuous and prismatic joints '
+                                 'are supported')
+            unbounded.append(joint.nq == 2)  # continuous: (cos q, sin q)
+        if model.nv != self.n:
+            raise ModelError(f'model has {model.nv} velocities for {self.n} joints')
+        # Our joint order -> Pinocchio's configuration index and velocity index.
+        self._iq = [model.joints[jid].idx_q for jid in joint_ids]
+        self._idx = [model.joints[jid].idx_v for jid in joint_ids]
+        self._unbounded = tuple(unbounded)
+        self.continuous: tuple[bool, ...] = self._unbounded
+        self._any_unbounded = any(unbounded)
+        self.armature: tuple[float, ...] = (
+            (0.0,) * self.n if armature is None else checked_vector(
+                'armature', armature, self.n, ModelError, lower=0.0, per_joint=True))
+        model.armature[:] = 0.0
+        for i, a in zip(self._idx, self.armature):  # velocity indices
+            model.armature[i] = a
         self._identity_order = self._idx == list(range(self.n))
-        self._base_id = model.getFrameId(base_link)
-        self._tip_id = model.getFrameId(tip_link)
+        self._identity_q = self._identity_order and not self._any_unbounded
+        self._base_id = model.getFrameId(base_link, pin.BODY)
+        self._tip_id = model.getFrameId(tip_link, pin.BODY)
         if model.frames[self._base_id].parentJoint != 0:
             raise ModelError(f'base link {base_link!r} moves with joint '
                              f'{model.names[model.frames[self._base_id].parentJoint]!r}; '
                              'it must be fixed to the URDF root')
         self._q = pin.neutral(model)
+        self._link_data = None  # link_pose's own, made when first asked
         pin.framesForwardKinematics(model, self.data, self._q)
         base = self.data.oMf[self._base_id]
         self._base_is_root = bool(np.allclose(base.homogeneous, np.eye(4)))
         self._R_root_base = base.rotation.copy()  # base orientation in the root frame
         self._p_root_base = base.translation.copy()
 
-        self.position_lower = self._per_joint(model.lowerPositionLimit)
-        self.position_upper = self._per_joint(model.upperPositionLimit)
+        inf = float('inf')
+        self.position_lower = tuple(-inf if u else float(model.lowerPositionLimit[i])
+                                    for i, u in zip(self._iq, self._unbounded))
+        self.position_upper = tuple(inf if u else float(model.upperPositionLimit[i])
+                                    for i, u in zip(self._iq, self._unbounded))
         self.velocity_limits = self._per_joint(model.velocityLimit)
         self.effort_limits = self._per_joint(model.effortLimit)
         # the URDF's <dynamics friction>, N m (0: not given); the simulator does not use it
         self.friction_nm = self._per_joint(model.friction)
+
+    def link_names(self) -> tuple[str, ...]:
+        """Return the names of the URDF's links (Pinocchio's body frames), in its order."""
+        return tuple(f.name for f in self.model.frames if f.type == pin.FrameType.BODY)
+
+    def link_pose(self, link: str, q: Sequence[float]) -> tuple[list[float], list[list[float]]]:
+        """
+        Return the position (m) and rotation of ``link`` in the base frame at ``q``.
+
+        Works on a data object of its own, so it never disturbs the tick's. Raises ModelError
+        for a name that is not a link of the URDF.
+        """
+        if link not in self.link_names():
+            raise ModelError(f'link {link!r} is not in the URDF')
+        if self._link_data is None:
+            self._link_data = self.model.createData()
+        qv = self._set_q(q).copy()
+        pin.framesForwardKinematics(self.model, self._link_data, qv)
+        frame = self._link_data.oMf[self.model.getFrameId(link, pin.FrameType.BODY)]
+        if self._base_is_root:
+            return frame.translation.tolist(), frame.rotation.tolist()
+        Rb = self._R_root_base.T
+        return ((Rb @ (frame.translation - self._p_root_base)).tolist(),
+                (Rb @ frame.rotation).tolist())
 
     def middle_of_ranges(self) -> tuple[float, ...]:
         """Return the middle of each joint's range, its limits taken within [-pi, pi] (rad)."""
@@ -96,16 +160,25 @@ class RobotModel:
                      for lo, hi in zip(self.position_lower, self.position_upper))
 
     def _per_joint(self, vec: np.ndarray) -> tuple[float, ...]:
+        """Pick one entry per joint from a Pinocchio velocity-sized vector (limits, friction)."""
         return tuple(float(vec[i]) for i in self._idx)
+
+    def configuration(self, q: Sequence[float]) -> np.ndarray:
+        """Return Pinocchio's configuration vector for the joint angles ``q`` (a copy)."""
+        return self._set_q(q).copy()
 
     def _set_q(self, q: Sequence[float]) -> np.ndarray:
         if len(q) != self.n:
             raise ValueError(f'expected {self.n} joint positions, got {len(q)}')
-        if self._identity_order:
+        if self._identity_q:
             self._q[:] = q
         else:
-            for i, qi in zip(self._idx, q):
-                self._q[i] = qi
+            for i, qi, unbounded in zip(self._iq, q, self._unbounded):
+                if unbounded:
+                    self._q[i] = cos(qi)
+                    self._q[i + 1] = sin(qi)
+                else:
+                    self._q[i] = qi
         return self._q
 
     def _reorder_columns(self, rows: list[list[float]]) -> list[list[float]]:
@@ -147,17 +220,21 @@ class RobotModel:
         return g.tolist() if self._identity_order else [float(g[i]) for i in self._idx]
 
     def mass_matrix(self, q: Sequence[float]) -> np.ndarray:
-        """M(q) of Eq. (1), in ``joint_names`` order."""
+        """M(q) of Eq. (1), the armature on its diagonal, in ``joint_names`` order."""
         M = pin.crba(self.model, self.data, self._set_q(q).copy())
         M = np.triu(M) + np.triu(M, 1).T
         return M[np.ix_(self._idx, self._idx)]
 
     def forward_dynamics(self, q: Sequence[float], qdot: Sequence[float],
                          tau: Sequence[float]) -> np.ndarray:
-        """Return qddot = M(q)^-1 (tau - C(q, qdot) qdot - g(q)), in ``joint_names`` order."""
+        """
+        Return qddot = M(q)^-1 (tau - C(q, qdot) qdot - g(q)), in ``joint_names`` order.
+
+        M(q) includes the armature (Pinocchio's ABA adds ``model.armature``).
+        """
         qv = self._set_q(q).copy()
-        v = np.zeros(self.n)
-        t = np.zeros(self.n)
+        v = np.zeros(self.model.nv)
+        t = np.zeros(self.model.nv)
         v[self._idx] = qdot
         t[self._idx] = tau
         a = pin.aba(self.model, self.data, qv, v, t)

@@ -24,17 +24,30 @@ from quat_jt_controller.regulator import Regulator
 from quat_jt_controller.shaping import describe as describe_shaping
 from quat_jt_controller.shaping import from_parameters as shaping_from_parameters
 from quat_jt_controller.shaping import MAX_POSTURE_WEIGHT, Shaping
-from quat_jt_runtime.joints import DEFAULT_MAX_STATE_AGE_S, DEFAULT_STATE_TIMEOUT_S
+from quat_jt_runtime.description import robot_description, SOURCES
+from quat_jt_runtime.errors import checked_vector
+from quat_jt_runtime.joints import check_state_rate, DEFAULT_MAX_STATE_AGE_S
+from quat_jt_runtime.joints import DEFAULT_STATE_RATE_HZ, DEFAULT_STATE_TIMEOUT_S
+from quat_jt_runtime.joints import STATE_RATE_RANGE_HZ
 from quat_jt_runtime.params import ChangeLog, declare, joint_zeros, JOINT_ZEROS_TEXT, Kind
 from quat_jt_runtime.params import LiveParameters, markdown_value, names, Spec
 from quat_jt_runtime.realtime import DEFAULT_PREWARM_LEAD_S
-from quat_jt_runtime.resources import default_urdf_xml
+from quat_jt_runtime.urdf_source import Description
 from rclpy.node import Node
 
 # Pose task (Eq. 24/32): position rows (N/m, 1/m) then the paper's orientation rows.
 DEFAULT_KP_POSITION = (200.0, 200.0, 200.0)
 DEFAULT_LAMBDA_POSITION = (100.0, 100.0, 100.0)
 
+# Declared after ``joints``, whose length is its context's ``n``.
+ARMATURE = Spec(
+    'armature', Kind.DOUBLE_ARRAY, joint_zeros,
+    'Rotor inertia each drive adds about its joint, one per joint ({n}), kg m^2 (kg for a '
+    "prismatic joint): added to the diagonal of the URDF's M(q) wherever the controller uses "
+    "the inertia (Pinocchio's model.armature). A geared drive reflects its rotor times the "
+    'square of the gear ratio, often more than the links; design_gains --armature takes the '
+    'same values.', read_only=True, constraints='{n} finite values >= 0',
+    default_text=JOINT_ZEROS_TEXT)
 STRUCTURE = (
     Spec('task', Kind.STRING, Task.ORIENTATION.value,
          "What is regulated: 'orientation' (y = e, Eqs. 37/38; the paper's wrist) or 'pose' "
@@ -48,8 +61,11 @@ STRUCTURE = (
     Spec('tip_link', Kind.STRING, 'tool0', 'The end-effector link whose pose is regulated.',
          read_only=True),
     Spec('robot_description', Kind.STRING, '',
-         'URDF XML of the robot (kinematics, gravity, effort limits); empty = the bundled '
-         'spherical wrist.', read_only=True),
+         'URDF XML of the robot (kinematics, gravity, effort limits), e.g. from a launch or '
+         'params file; or robot_description_file, or robot_description_topic; none of them = '
+         'the bundled spherical wrist.', read_only=True),
+    *SOURCES,
+    ARMATURE,
     Spec('state_timeout', Kind.DOUBLE, DEFAULT_STATE_TIMEOUT_S,
          'Seconds without a valid joint_states message after which the command is zeroed '
          '(published once) until states return.', read_only=True, bounds=(0.005, 10.0)),
@@ -58,6 +74,10 @@ STRUCTURE = (
          "node's clock, or not stamped (zero), is rejected: no command is computed from it, "
          'and it counts as no state for state_timeout. 0 = stamps are not checked (e.g. a '
          'driver without time stamps).', read_only=True, bounds=(0.0, 60.0)),
+    Spec('state_rate', Kind.DOUBLE, DEFAULT_STATE_RATE_HZ,
+         "Hz, the rate of joint_states (the plant's control rate), as design_gains --rate was "
+         'given: the time constant of the velocity estimate for states without velocities is '
+         'one period of it.', read_only=True, bounds=STATE_RATE_RANGE_HZ),
     Spec('publish_rate_divider', Kind.INT, 10,
          '~/current_pose and the error topics are published every N-th tick (N = 10: 100 Hz '
          'at a 1 kHz state rate).', read_only=True, bounds=(1, 1000)),
@@ -190,16 +210,33 @@ class StructuralConfig:
     joints: tuple[str, ...]
     base_link: str
     tip_link: str
-    robot_description: str  # the URDF in use (the bundled wrist's if none was given)
-    given_robot_description: str  # the parameter as given ('' = none)
+    description: Description  # the URDF in use and where it came from
+    armature: tuple[float, ...]  # kg m^2 per joint, finite and >= 0
     state_timeout_s: float
     max_state_age_s: float  # 0: stamps not checked
+    state_rate_hz: float
     publish_rate_divider: int
     prewarm_lead_s: float  # 0: no throwaway tick before each state
 
+    @property
+    def robot_description(self) -> str:
+        """Return the URDF in use (the bundled wrist's if none was given)."""
+        return self.description.xml
+
+    @property
+    def given_robot_description(self) -> str:
+        """Return the URDF as given to the node ('' = none: the bundled wrist)."""
+        return self.description.given
+
     @classmethod
-    def create(cls, values: Mapping[str, Any]) -> 'StructuralConfig':
-        """Build from the structural parameters; raise ValueError naming a bad value."""
+    def create(cls, values: Mapping[str, Any],
+               description: Callable[[], Description]) -> 'StructuralConfig':
+        """
+        Build from the structural parameters; raise ValueError naming a bad value.
+
+        ``description`` returns the URDF; it is called once the other values are checked (it
+        may wait for a topic).
+        """
         try:
             task = Task(values['task'])
         except ValueError:
@@ -210,23 +247,29 @@ class StructuralConfig:
             raise ValueError(f'joints must be a non-empty list of names, got {list(joints)}')
         if not values['base_link'] or not values['tip_link']:
             raise ValueError('base_link and tip_link must not be empty')
-        urdf = values['robot_description']
+        armature = checked_vector('armature', values['armature'], len(joints), ValueError,
+                                  lower=0.0, per_joint=True)
+        state_rate_hz = check_state_rate(values['state_rate'])
         return cls(task=task, joints=joints, base_link=values['base_link'],
-                   tip_link=values['tip_link'], robot_description=urdf or default_urdf_xml(),
-                   given_robot_description=urdf,
+                   tip_link=values['tip_link'], armature=armature,
+                   description=description(),
                    state_timeout_s=float(values['state_timeout']),
                    max_state_age_s=float(values['max_state_age']),
+                   state_rate_hz=state_rate_hz,
                    publish_rate_divider=int(values['publish_rate_divider']),
                    prewarm_lead_s=float(values['prewarm_lead']))
 
 
 def declare_structural(node: Node) -> StructuralConfig:
     """
-    Declare the read-only parameters and return their values.
+    Declare the read-only parameters and return their values, the URDF from its source.
 
-    Raises ValueError naming the parameter if a value is unusable.
+    A ``robot_description_topic`` is waited for here, before the model is built. Raises
+    ValueError naming the parameter if a value is unusable (DescriptionError for the URDF).
     """
-    return StructuralConfig.create(declare(node, STRUCTURE))
+    values = declare(node, tuple(s for s in STRUCTURE if s is not ARMATURE))
+    values.update(declare(node, (ARMATURE,), {'n': len(values['joints'])}))
+    return StructuralConfig.create(values, lambda: robot_description(node, values))
 
 
 def gains_context(config: StructuralConfig, effort_limits_nm: Sequence[float]) -> dict:
@@ -251,15 +294,16 @@ def declare_gains(node: Node, config: StructuralConfig, effort_limits_nm: Sequen
         on_apply)
 
 
-def describe_start(config: StructuralConfig, regulator: Regulator) -> list[str]:
+def describe_start(config: StructuralConfig, regulator: Regulator,
+                   state_topic: str = 'joint_states') -> list[str]:
     """Describe the controller at start-up: its extensions, then its task, robot and gains."""
     gains = regulator.gains
     return [f'extensions: {describe_shaping(regulator.shaping)}',
             f'{config.task.value} task, joints {list(config.joints)}, {config.base_link} -> '
             f'{config.tip_link}, potential {gains.potential.value}, kp {list(gains.kp)}, kv '
             f'{list(gains.kv)}, lambda {list(gains.lam)}, effort limits '
-            f'{list(regulator.effort_limits_nm)} N m; holding the first measured pose until a '
-            'goal arrives on ~/target_pose']
+            f'{list(regulator.effort_limits_nm)} N m; waiting for joint states on {state_topic}, '
+            'then holding the first pose measured until a goal arrives on ~/target_pose']
 
 
 def change_log(node: Node, regulator: Regulator) -> ChangeLog:

@@ -63,22 +63,6 @@ class Goal:
             raise ValueError(f'non-finite position {p}')
         return cls(q, p)
 
-    @classmethod
-    def from_request(cls, frame_id: str, base_link: str, xyzw: Sequence[float],
-                     p_desired_base: Sequence[float], task: cl.Task) -> 'Goal':
-        """
-        Validate a goal request (a PoseStamped's fields); raise ValueError saying why not.
-
-        The frame must be ``base_link`` or empty (meaning ``base_link``); as in tf2 for ROS 2,
-        a leading slash is not accepted. The orientation task ignores the position.
-        """
-        if frame_id not in ('', base_link):
-            hint = (' (tf2 frame ids have no leading slash)' if frame_id.lstrip('/') == base_link
-                    else ' (or empty)')
-            raise ValueError(f"header.frame_id is '{frame_id}', expected '{base_link}'{hint}")
-        return cls.from_xyzw(*xyzw, p_desired_base if cl.Task(task) is cl.Task.POSE
-                             else (0.0, 0.0, 0.0))
-
     def describe(self, with_position: bool = True) -> str:
         """Return the goal for a log line, in ROS order, rounded."""
         text = f'quaternion (x, y, z, w) {tuple(round(c, 4) for c in self.xyzw())}'

@@ -2,19 +2,21 @@
 What the controller reports: the feedback topics and ``/diagnostics`` (ROS marshalling).
 
 :class:`Feedback` publishes ``~/current_pose``, ``~/orientation_error`` and, for the pose task,
-``~/position_error``; :class:`Diagnostics` turns the figures of the ROS-free builders
+``~/position_error``; :class:`GoalPose` the goal in force on ``~/goal_pose``;
+:class:`Diagnostics` turns the figures of the ROS-free builders
 (``diagnostics.py``) into ``/diagnostics`` and warns of a second commander on the robot.
 """
 import time
-from typing import Callable, Sequence
+from typing import Callable, Optional, Sequence
 
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped, Vector3Stamped
 from quat_jt_controller import diagnostics
 from quat_jt_controller import quaternion as quat
 from quat_jt_controller.control_law import Task
-from quat_jt_controller.regulator import TickOutput
+from quat_jt_controller.regulator import Goal, TickOutput
 from quat_jt_controller.supervision import Supervisor
+from quat_jt_runtime.description import LATCHED_QOS
 from quat_jt_runtime.loop_stats import TickStats
 from quat_jt_runtime.messages import diagnostic_array
 from quat_jt_runtime.throttle import cause, Throttle
@@ -54,6 +56,40 @@ class Feedback:
             v = self._e_p.vector
             v.x, v.y, v.z = out.y_tilde[0], out.y_tilde[1], out.y_tilde[2]
             self._e_p_pub.publish(self._e_p)
+
+
+class GoalPose:
+    """
+    ``~/goal_pose`` (PoseStamped in ``base_link``, latched): the goal in force, for RViz.
+
+    Published when the goal changes (the first measured pose held, a goal accepted, a link
+    goal placed in the base), from a timer, never from the tick; a stream of goals is sampled
+    at that timer's rate. Transient local, so a viewer started later gets the goal in force.
+    The orientation task's goal has no position: it is drawn at ``anchor_m``, the tip's
+    position measured when the goal took force.
+    """
+
+    def __init__(self, node: Node, base_link: str, with_position: bool) -> None:
+        self._node = node
+        self._with_position = with_position
+        self._msg = PoseStamped()
+        self._msg.header.frame_id = base_link
+        self._pub = node.create_publisher(PoseStamped, '~/goal_pose', LATCHED_QOS)
+        self._published: Optional[Goal] = None
+
+    def update(self, goal: Optional[Goal], anchor_m: Optional[Sequence[float]]) -> None:
+        """Publish ``goal`` if it is not the one published last."""
+        if goal is None or goal == self._published:
+            return
+        msg = self._msg
+        msg.header.stamp = self._node.get_clock().now().to_msg()
+        position = (goal.p_desired_base if self._with_position or anchor_m is None
+                    else anchor_m)
+        msg.pose.position.x, msg.pose.position.y, msg.pose.position.z = position
+        o = msg.pose.orientation
+        o.x, o.y, o.z, o.w = goal.xyzw()
+        self._pub.publish(msg)
+        self._published = goal
 
 
 class Diagnostics:

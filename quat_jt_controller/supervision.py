@@ -8,6 +8,8 @@ tests drive them with plain numbers:
 - a stream of stamped goals: its velocity (``goal_motion``), which stops when the stream does;
 - a goal equal to the one in force is not a new goal (no log, no new check);
 - the state watchdog: after ``state_timeout`` without a valid state, zero the command once;
+- no valid state at all since start: a warning after ``NO_STATE_WARN_NS``, then one every
+  ``NO_STATE_REPEAT_NS`` while it lasts (a topic remapped wrong looks like a working node);
 - feedback every ``publish_rate_divider``-th tick, its quaternion kept in one hemisphere;
 - ``/diagnostics``: right after the next command while states flow, else at once;
 - the goal check (a worker process, ``goal_check.GoalCheckWorker``): what to ask it for a new
@@ -26,6 +28,10 @@ from quat_jt_controller.regulator import Goal, Regulator
 
 # /diagnostics wait for the next tick while states come at least this often (else: at once)
 DIAGNOSTICS_WAIT_NS = 20_000_000
+# No valid state since start: the first warning after this long (within 2 s, on the watchdog
+# timer), then one every NO_STATE_REPEAT_NS
+NO_STATE_WARN_NS = 1_800_000_000
+NO_STATE_REPEAT_NS = 10_000_000_000
 
 
 @dataclass(frozen=True)
@@ -40,8 +46,13 @@ class Supervisor:
     """The controller's decisions around :class:`Regulator`; one per node."""
 
     def __init__(self, regulator: Regulator, state_timeout_s: float,
-                 publish_rate_divider: int, checker: Optional[Any] = None) -> None:
-        """``checker``: the goal-check worker (``submit``, ``poll``, ``take_*``), None for none."""
+                 publish_rate_divider: int, checker: Optional[Any] = None,
+                 started_ns: int = 0) -> None:
+        """
+        ``checker``: the goal-check worker (``submit``, ``poll``, ``take_*``), None for none.
+
+        ``started_ns``: when the node started, for :meth:`no_state_yet`.
+        """
         self.regulator = regulator
         self.checker = checker
         self.goal_warning = ''  # the goal check's warning for the goal in force ('' = none)
@@ -56,6 +67,8 @@ class Supervisor:
         self._published_q: quat.Quaternion = (1.0, 0.0, 0.0, 0.0)
         self.diagnostics_due = False
         self._last_stamp_ns = 0
+        self.started_ns = started_ns
+        self._no_state_warn_ns = started_ns + NO_STATE_WARN_NS  # the next warning, if none yet
 
     def tick_interval_s(self, stamp_ns: int) -> float:
         """
@@ -111,6 +124,18 @@ class Supervisor:
             return None
         self.stopped = True
         return silent_ns * 1e-9
+
+    def no_state_yet(self, now_ns: int) -> Optional[float]:
+        """
+        Return the seconds since start when no valid state has come and a warning is due.
+
+        The first after ``NO_STATE_WARN_NS``, then one every ``NO_STATE_REPEAT_NS`` while no
+        valid state comes; None otherwise, and for good once one has.
+        """
+        if self.last_state_ns or now_ns < self._no_state_warn_ns:
+            return None
+        self._no_state_warn_ns = now_ns + NO_STATE_REPEAT_NS
+        return (now_ns - self.started_ns) * 1e-9
 
     def on_diagnostics_timer(self, now_ns: int) -> bool:
         """At 1 Hz: return True to publish now; else they go out after the next command."""

@@ -1,4 +1,11 @@
-"""Joints of a URDF: which can move, and choosing the controlled ones by name (one way)."""
+"""
+Joints of a URDF and of joint states.
+
+Which joints of a URDF can move, choosing the controlled ones by name (one way), and the
+controller's tick input from a joint state: the controlled joints picked by name, the stamp
+checked, continuous joints unwrapped, and the velocities estimated when a driver sends none.
+"""
+from math import exp, pi
 from typing import Optional, Sequence
 from xml.etree import ElementTree
 
@@ -18,6 +25,28 @@ def movable_joints(urdf_xml: str) -> list[str]:
     except ElementTree.ParseError as exc:
         raise ValueError(f'the URDF is not valid XML: {exc}') from exc
     return [j.get('name') for j in root.iter('joint') if j.get('type') in MOVABLE_TYPES]
+
+
+def fixed_joints(urdf_xml: str, names: Sequence[str]) -> str:
+    """
+    Return the URDF with the joints ``names`` made fixed: each locked at zero.
+
+    A joint at zero places its child link at the joint's origin, which is what a fixed joint
+    with the same origin does. Raises ValueError if the text is not XML or a name is not a
+    joint of it.
+    """
+    try:
+        root = ElementTree.fromstring(urdf_xml)
+    except ElementTree.ParseError as exc:
+        raise ValueError(f'the URDF is not valid XML: {exc}') from exc
+    wanted = set(names)
+    for joint in root.iter('joint'):
+        if joint.get('name') in wanted and joint.get('type') in MOVABLE_TYPES:
+            joint.set('type', 'fixed')
+            wanted.discard(joint.get('name'))
+    if wanted:
+        raise ValueError(f'joints {sorted(wanted)} are not movable joints of the URDF')
+    return ElementTree.tostring(root, encoding='unicode')
 
 
 def select_joints(requested: Optional[Sequence[str]], movable: Sequence[str],
@@ -77,21 +106,109 @@ class StateLayout:
         return index
 
     def extract(self, names: Sequence[str], position: Sequence[float],
-                velocity: Sequence[float]) -> tuple[list[float], list[float]]:
-        """Return (q, qdot) of the controlled joints, in ``joint_names`` order."""
+                velocity: Sequence[float],
+                velocity_required: bool = True) -> tuple[list[float], Optional[list[float]]]:
+        """
+        Return (q, qdot) of the controlled joints, in ``joint_names`` order.
+
+        With ``velocity_required`` False, a state without velocities (an empty list) gives
+        qdot None; a velocity list of another length is still refused.
+        """
         index = self._index(names)
         if isinstance(index, str):
             raise ValueError(index)
-        if len(position) != len(names) or len(velocity) != len(names):
+        if len(position) != len(names) or (len(velocity) != len(names) and (
+                velocity_required or len(velocity))):
             raise ValueError(f'{len(names)} names but {len(position)} positions and '
-                             f'{len(velocity)} velocities (positions and velocities are '
-                             'required)')
+                             f'{len(velocity)} velocities (positions are required, and '
+                             + ('velocities' if velocity_required else 'velocities, if any')
+                             + ', one per name)')
         q = [position[i] for i in index]
+        if not len(velocity):
+            total = sum(q)
+            if total - total != 0.0:
+                raise ValueError(f'non-finite position: q = {q}')
+            return q, None
         qdot = [velocity[i] for i in index]
         total = sum(q) + sum(qdot)
         if total - total != 0.0:
             raise ValueError(f'non-finite position or velocity: q = {q}, qdot = {qdot}')
         return q, qdot
+
+
+# The joint-state rates the controller and the gain design accept (Hz): ros2_control's usual
+# 100 Hz up to the 1 kHz of a torque-controlled arm
+STATE_RATE_RANGE_HZ = (100.0, 1000.0)
+DEFAULT_STATE_RATE_HZ = 1000.0
+
+
+def check_state_rate(rate_hz: float, name: str = 'state_rate') -> float:
+    """Return ``rate_hz`` as a float, or raise ValueError naming it if outside the range."""
+    low, high = STATE_RATE_RANGE_HZ
+    try:
+        rate = float(rate_hz)
+    except (TypeError, ValueError):
+        raise ValueError(f'{name} must be a number of Hz, got {rate_hz!r}') from None
+    if not low <= rate <= high:  # NaN fails too
+        raise ValueError(f'{name} {rate_hz!r} Hz is outside [{low:g}, {high:g}] Hz')
+    return rate
+
+
+def wrapped(angle: float) -> float:
+    """Return ``angle`` moved by whole turns into [-pi, pi)."""
+    return (angle + pi) % (2.0 * pi) - pi
+
+
+class VelocityEstimator:
+    """
+    Joint velocities from positions and their times, for states that carry none.
+
+    Each new position gives the finite difference ``(q_k - q_k-1) / (t_k - t_k-1)``; the
+    estimate follows it through a first-order low-pass of time constant ``T``, discretised
+    exactly for the interval ``h`` between the two states: ``v += (1 - exp(-h / T)) (d - v)``.
+    With ``T`` one period of the state rate the estimate lags the true velocity by about one
+    period (half a period of the difference, ``e^-1 / (1 - e^-1)`` = 0.58 of the filter), and
+    a position step of one count (quantisation) moves it by at most ``0.63 count / h``, then
+    decays.
+
+    The first state, and the first after a gap longer than ``max_gap_s``, give 0 and restart
+    the difference. A state whose time is not after the last one's (a repeat or an older one)
+    leaves the estimate as it is.
+    """
+
+    def __init__(self, n: int, time_constant_s: float, max_gap_s: float) -> None:
+        if not time_constant_s > 0.0 or not max_gap_s > 0.0:
+            raise ValueError(f'time_constant_s {time_constant_s} and max_gap_s {max_gap_s} '
+                             'must be > 0')
+        self.n = n
+        self.time_constant_s = float(time_constant_s)
+        self._max_gap_ns = int(max_gap_s * 1e9)
+        self._v = [0.0] * n
+        self._last_q: Optional[list[float]] = None
+        self._last_ns = 0
+
+    def reset(self) -> None:
+        """Forget the last position: the next state restarts the estimate at 0."""
+        self._last_q = None
+        self._v = [0.0] * self.n
+
+    def update(self, q: Sequence[float], t_ns: int) -> list[float]:
+        """Return the velocity estimate after the positions ``q`` measured at ``t_ns`` (a copy)."""
+        last = self._last_q
+        gap_ns = t_ns - self._last_ns
+        if last is None or gap_ns > self._max_gap_ns:
+            self._v = [0.0] * self.n
+        elif gap_ns <= 0:
+            return list(self._v)
+        else:
+            h = gap_ns * 1e-9
+            alpha = 1.0 - exp(-h / self.time_constant_s)
+            v = self._v
+            for j in range(self.n):
+                v[j] += alpha * ((q[j] - last[j]) / h - v[j])
+        self._last_q = list(q)
+        self._last_ns = t_ns
+        return list(self._v)
 
 
 # Watchdog defaults of the controller (state_timeout, max_state_age), chosen with
@@ -131,19 +248,48 @@ class StateCheck:
     A joint state's joints and stamp checked, in one call: the controller's tick input.
 
     Calling it returns (q, qdot) of the controlled joints, or raises ValueError saying why no
-    command may be computed from the state (:class:`StaleState` if it is the stamp).
+    command may be computed from the state (:class:`StaleState` if it is the stamp). Names may
+    come in any order and with other joints (a gripper's). A state without velocities (an
+    empty ``velocity``, as some drivers publish) gets them from :class:`VelocityEstimator`
+    (time constant one period of ``rate_hz``), on the states' stamps, or on the time they
+    arrived when they are not stamped; :attr:`estimating` says so of the last state. The
+    angles of the joints flagged ``continuous`` (no stops) are unwrapped: a driver that
+    reports them within (-pi, pi] gives a q that does not jump by a turn.
     """
 
-    def __init__(self, joint_names: Sequence[str], max_age_s: float) -> None:
+    def __init__(self, joint_names: Sequence[str], max_age_s: float,
+                 rate_hz: float = DEFAULT_STATE_RATE_HZ,
+                 continuous: Optional[Sequence[bool]] = None) -> None:
+        rate = check_state_rate(rate_hz)
         self._layout = StateLayout(joint_names)
         self._max_age_ns = int(max_age_s * 1e9)
+        n = len(self._layout.joint_names)
+        self._continuous = [j for j, c in enumerate(continuous or ()) if c]
+        if continuous is not None and len(continuous) != n:
+            raise ValueError(f'continuous: expected {n} flags, got {len(continuous)}')
+        self._last_q: Optional[list[float]] = None
+        # a gap of more than 10 periods restarts the estimate (a lost connection, a pause)
+        self._estimator = VelocityEstimator(n, 1.0 / rate, 10.0 / rate)
+        self.estimating = False  # the last state came without velocities
 
     def __call__(self, names: Sequence[str], position: Sequence[float],
                  velocity: Sequence[float], stamp_ns: int,
                  now_ns: int) -> tuple[list[float], list[float]]:
         """Return (q, qdot); raise ValueError (StaleState for the stamp) naming the problem."""
-        q, qdot = self._layout.extract(names, position, velocity)
+        q, qdot = self._layout.extract(names, position, velocity, velocity_required=False)
         problem = stamp_problem(stamp_ns, now_ns, self._max_age_ns)
         if problem:
             raise StaleState(problem)
+        if self._continuous:
+            last = self._last_q
+            if last is not None:
+                for j in self._continuous:
+                    q[j] = last[j] + wrapped(q[j] - last[j])
+            self._last_q = q
+        if qdot is None:
+            self.estimating = True
+            qdot = self._estimator.update(q, stamp_ns or now_ns)
+        elif self.estimating:  # velocities again: the next state without starts afresh
+            self.estimating = False
+            self._estimator.reset()
         return q, qdot

@@ -45,19 +45,21 @@ def default_urdf_xml() -> str:
 
 def bundled_urdf_hint(robot_description: str) -> str:
     """
-    Return advice to append to a joint or link error when ``robot_description`` was empty.
+    Return advice to append to a joint or link error when no robot description was given.
 
-    An empty ``robot_description`` means the bundled spherical wrist; a user who runs a node
-    for another robot (the xArm6, say) with ``ros2 run`` must pass its URDF.
+    ``robot_description`` is the URDF as given ('' = none): then the bundled spherical wrist
+    was loaded, and a user who runs a node for another robot (the xArm6, say) with ``ros2 run``
+    must pass its URDF, as a file or from robot_state_publisher's topic.
     """
     if robot_description:
         return ''
-    return ('. robot_description is empty, so the bundled spherical wrist (joint1-joint3, '
-            'base_link -> tool0) was loaded; for another robot pass its URDF, e.g. '
-            '--ros-args -p robot_description:="$(cat robot.urdf)" (the xArm6 URDF is '
+    return ('. No robot description was given, so the bundled spherical wrist (joint1-joint3, '
+            'base_link -> tool0) was loaded; for another robot pass its URDF file, e.g. '
+            '--ros-args -p robot_description_file:=/path/robot.urdf (the xArm6 URDF is '
             '<pybullet_data>/xarm/xarm6_robot.urdf; python3 -c "import pybullet_data; '
-            'print(pybullet_data.getDataPath())" prints that folder), or start it with its '
-            'launch file')
+            'print(pybullet_data.getDataPath())" prints that folder), or take it from '
+            'robot_state_publisher with -p robot_description_topic:=/robot_description, or '
+            'start the node with its launch file')
 
 
 def config_parameters(name: str) -> dict:

@@ -47,6 +47,11 @@ def install() -> StopFlag:
     return _flag
 
 
+def requested() -> bool:
+    """Return True once a stop signal came (False where no flag is installed, e.g. a test)."""
+    return _flag is not None and _flag.is_set
+
+
 def ignore_from_now_on() -> None:
     """
     Ignore SIGINT and SIGTERM for the rest of the process: call it once the node is shut down.

@@ -36,3 +36,59 @@ def random_q(model: RobotModel, rng: np.random.Generator, margin: float = 0.1) -
     lo = np.maximum(np.array(model.position_lower), -np.pi) + margin
     hi = np.minimum(np.array(model.position_upper), np.pi) - margin
     return rng.uniform(lo, hi)
+
+
+def _inertial(mass: float, x: float) -> str:
+    i = 0.01 * mass
+    return (f'<inertial><origin xyz="{x} 0 0"/><mass value="{mass}"/><inertia ixx="{i}" '
+            f'iyy="{1.5 * i}" izz="{2 * i}" ixy="0" ixz="0" iyz="0"/></inertial>')
+
+
+def small_arm_urdf(joint_types=('continuous', 'revolute', 'revolute', 'continuous',
+                                'revolute')) -> str:
+    """
+    Return a small serial arm written in the test, one joint per entry of ``joint_types``.
+
+    The axes alternate z, y, y, x, y, ... The last joint and its child link are both named
+    'tool' (a name that is a link and a joint). Revolute joints have stops at -2 and 2 rad.
+    """
+    axes = ('0 0 1', '0 1 0', '0 1 0', '1 0 0', '0 1 0', '1 0 0', '0 0 1')
+    n = len(joint_types)
+    links = ['base_link'] + [f'link{i}' for i in range(1, n)] + ['tool']
+    parts = ['<robot name="small_arm">', '<link name="base_link"/>']
+    for i, kind in enumerate(joint_types):
+        child = links[i + 1]
+        name = 'tool' if i == n - 1 else f'joint{i + 1}'
+        limits = ('lower="-2" upper="2" ' if kind == 'revolute' else '')
+        parts += [f'<link name="{child}">{_inertial(1.0 / (i + 1), 0.05)}</link>',
+                  f'<joint name="{name}" type="{kind}"><parent link="{links[i]}"/>'
+                  f'<child link="{child}"/><origin xyz="{0.2 if i else 0.0} 0 '
+                  f'{0.1 if i == 0 else 0.0}" rpy="0 0 0"/><axis xyz="{axes[i % 7]}"/>'
+                  f'<limit {limits}effort="{20.0 / (i + 1)}" velocity="3"/></joint>']
+    parts.append('</robot>')
+    return '\n'.join(parts)
+
+
+def example_robot_data_urdf(relative: str) -> Path:
+    """
+    Return a URDF of example-robot-data (skip the test if it is absent).
+
+    From the PyPI wheel (``pip install example-robot-data``: its cmeel prefix) or from a ROS
+    install (ros-jazzy-example-robot-data, found through AMENT_PREFIX_PATH).
+    """
+    import os
+    from importlib import metadata
+
+    import pytest
+    roots = [Path(p) / 'share' / 'example-robot-data' / 'robots'
+             for p in os.environ.get('AMENT_PREFIX_PATH', '').split(os.pathsep) if p]
+    try:
+        dist = metadata.distribution('example-robot-data')
+        roots.insert(0, Path(dist.locate_file('cmeel.prefix/share/example-robot-data/robots')))
+    except metadata.PackageNotFoundError:
+        pass
+    for root in roots:
+        if (root / relative).is_file():
+            return root / relative
+    pytest.skip(f'example-robot-data ({relative}) is not installed: pip install '
+                'example-robot-data')

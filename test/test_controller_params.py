@@ -13,6 +13,7 @@ from typing import Callable
 
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped
+import numpy as np
 import pytest
 from quat_jt_controller import paper
 from quat_jt_controller import quaternion as quat
@@ -22,6 +23,7 @@ from quat_jt_controller.goal_motion import MAX_GAP_S
 from quat_jt_controller.model import ModelError
 from quat_jt_controller.parameters import GAIN_PARAMETERS, SHAPING_PARAMETERS
 from quat_jt_controller.shaping import Shaping, ShapingError
+from quat_jt_controller.supervision import NO_STATE_WARN_NS
 from rcl_interfaces.msg import Log, ParameterType
 import rclpy
 from rclpy.executors import SingleThreadedExecutor
@@ -204,11 +206,22 @@ def test_the_tools_build_the_controller_the_node_runs_from_a_config(make_node, n
     assert tools.gains == node.regulator.gains
     assert tools.shaping == node.regulator.shaping
     assert tools.model.joint_names == node.regulator.model.joint_names
+    assert tools.model.armature == node.regulator.model.armature
     with pytest.raises(GainsError, match='kv'):  # the node's ceilings, here too
         controller_from_package_config(name, xml, overrides={
             'kv': [1e6] * tools.n})
     with pytest.raises(ShapingError, match='posture_weight'):  # and the node's ranges
         controller_from_package_config(name, xml, overrides={'posture_weight': 101.0})
+
+
+def test_the_armature_is_in_the_inertia_the_controller_uses(make_node):
+    """The read-only armature goes on the diagonal of the node's M(q) (the Lyapunov V)."""
+    plain = make_node().regulator.model
+    model = make_node({'armature': [0.1, 0.2, 0.3]}).regulator.model
+    q = [0.2, -0.4, 0.9]
+    assert model.armature == (0.1, 0.2, 0.3)
+    np.testing.assert_allclose(model.mass_matrix(q) - plain.mass_matrix(q),
+                               np.diag([0.1, 0.2, 0.3]), atol=1e-12)
 
 
 def test_a_config_without_gains_is_refused_by_name():
@@ -294,6 +307,11 @@ def test_pose_task_has_six_gains_and_a_position_error_topic(make_node):
     ({'task': 'position'}, ValueError, 'task must be'),
     ({'joints': ['joint1', 'jointX', 'joint3']}, ModelError, 'jointX'),
     ({'tip_link': 'nowhere'}, ModelError, 'nowhere'),
+    ({'state_rate': 50.0}, Exception, 'state_rate out of range'),
+    ({'state_rate': 2000.0}, Exception, 'state_rate out of range'),
+    ({'armature': [0.1, -1.0, 0.0]}, ValueError, r'armature\[1\] must be finite and >= 0, got -1'),
+    ({'armature': [0.1, 0.1]}, ValueError, r'armature must have 3 values \(one per joint\)'),
+    ({'armature': [0.1, float('inf'), 0.0]}, ValueError, r'armature\[1\] must be finite'),
 ])
 def test_bad_start_up_configuration_raises_a_clear_error(make_node, overrides, error, words):
     with pytest.raises(error, match=words):
@@ -319,6 +337,52 @@ def test_tick_reads_no_parameters_and_holds_the_first_pose(make_probe, monkeypat
     assert second != first
 
 
+@pytest.mark.parametrize('sim_time', [False, True])
+def test_no_joint_states_after_start_is_a_warning_naming_the_topic(context, sim_time):
+    """
+    Remapped to a topic nobody publishes: a WARN with its resolved name and 0 publishers.
+
+    On simulated time too, with no /clock (no simulator) to run it.
+    """
+    listener = rclpy.create_node('rosout_listener', context=context)
+    logs: list[tuple[int, str]] = []
+    listener.create_subscription(Log, '/rosout', lambda m: logs.append((m.level, m.msg)) if (
+        m.name == NODE_NAME) else None, 100)
+    cli = ['--ros-args', '-r', 'joint_states:=/nowhere/joint_states']
+    node = QuatJtController(context=context, cli_args=cli, parameter_overrides=[
+        Parameter('use_sim_time', value=sim_time)])
+    executor = SingleThreadedExecutor(context=context)
+    try:
+        executor.add_node(node)
+        executor.add_node(listener)
+        deadline = time.monotonic() + 10.0
+        while not any(level == Log.WARN for level, _ in logs):
+            assert time.monotonic() < deadline, 'no warning without joint states'
+            executor.spin_once(timeout_sec=0.05)
+        start = next(text for _, text in logs if 'task, joints' in text)
+        assert 'waiting for joint states on /nowhere/joint_states, then holding' in start, start
+        line = next(text for level, text in logs if level == Log.WARN)
+        assert 'no valid joint state on /nowhere/joint_states' in line, line
+        assert ', 0 publishers on it:' in line and 'remap with -r joint_states:=' in line, line
+        waited_s = float(line.split(' s after start')[0].rsplit(' ', 1)[1])
+        assert waited_s >= NO_STATE_WARN_NS * 1e-9, line  # due 1.8 s after start, not before
+        assert node.supervisor.regulator.goal is None  # nothing held, nothing commanded
+    finally:
+        executor.remove_node(listener)
+        executor.remove_node(node)
+        listener.destroy_node()
+        node.destroy_node()
+
+
+def test_a_silent_publisher_is_counted_until_the_first_state(make_probe):
+    """The probe publishes nothing on joint_states yet: 1 publisher, none received."""
+    probe = make_probe()
+    line = probe.wait_log('no valid joint state on /joint_states')
+    assert ', 1 publisher on it: none received' in line, line
+    probe.command_for(state((0.1, 0.2, 0.3)))
+    assert 's after start: holding the measured pose' in probe.wait_log('first joint state')
+
+
 def test_shuffled_and_extra_names_give_the_same_command(make_probe):
     probe = make_probe()
     probe.send_goal(goal(GOAL_XYZW))
@@ -328,6 +392,28 @@ def test_shuffled_and_extra_names_give_the_same_command(make_probe):
                                        names=('joint3', 'gripper', 'joint1', 'joint2')))
     again = probe.command_for(state(q, v))  # back to the first layout (cached)
     assert first == shuffled == again
+
+
+def test_states_without_velocities_get_them_estimated_and_say_so_once(make_probe):
+    probe = make_probe({'state_rate': 500.0})
+    probe.send_goal(goal(GOAL_XYZW))
+    t0 = time.time_ns() - 10_000_000
+    commands = []
+    for k in range(20):  # joint 2 at 0.5 rad/s, every 2 ms, stamped; no velocities
+        msg = state((0.3, 0.1, 0.04, 0.2 + 0.001 * k), v=(),
+                    names=('joint3', 'joint1', 'gripper', 'joint2'))
+        msg.header.stamp.sec, msg.header.stamp.nanosec = divmod(t0 + 2_000_000 * k,
+                                                                1_000_000_000)
+        commands.append(probe.command_for(msg))
+    probe.wait_log('joint_states carry no velocities: estimating them')
+    assert sum('carry no velocities' in m for m in probe.logs) == 1
+    assert probe.node.counters.rejected_states == 0
+    _, qdot = probe.node._last_q, probe.node._last_qdot
+    assert qdot[0] == 0.0 and qdot[2] == 0.0
+    assert 0.49 < qdot[1] < 0.5  # the estimate has settled on 0.5 rad/s
+    # the damping acts on it: the same state at rest asks for a different torque
+    at_rest = probe.command_for(state((0.1, 0.2 + 0.001 * 19, 0.3), v=(0.0, 0.0, 0.0)))
+    assert at_rest[1] != commands[-1][1]
 
 
 def test_goals_breaking_a1_or_a2_are_accepted_with_a_warning(make_probe):
@@ -350,7 +436,7 @@ def test_rejected_goal_keeps_the_previous_one(make_probe):
     probe.send_goal(goal(GOAL_XYZW))
     kept = probe.node.regulator.goal
     for bad in (goal(quat.to_xyzw(paper.Q_DESIRED_AS_PRINTED)), goal((math.nan, 0.0, 0.0, 1.0)),
-                goal((0.0, 0.0, 0.0, 1.0), frame='tool0'),
+                goal((0.0, 0.0, 0.0, 1.0), frame='world'),
                 goal((0.0, 0.0, 0.0, 1.0), frame='/base_link')):  # tf2: no leading slash
         probe.send_goal(bad)
         assert probe.node.regulator.goal is kept
@@ -358,6 +444,44 @@ def test_rejected_goal_keeps_the_previous_one(make_probe):
     probe.wait_log("header.frame_id is '/base_link', expected 'base_link' (tf2 frame ids have")
     probe.send_goal(goal(tuple(-c for c in GOAL_XYZW), frame=''))
     assert probe.node.regulator.goal is not kept
+
+
+def test_goals_in_a_link_of_the_robot_are_placed_with_the_measured_joints(make_probe):
+    """A goal in tool0 is placed in base_link at the last measured q, then held there."""
+    from quat_jt_runtime.description import LATCHED_QOS
+    probe = make_probe()
+    node = probe.node
+    probe.send_goal(goal((0.0, 0.0, 0.0, 1.0), frame='tool0'))  # no joint state yet
+    probe.wait_log("'tool0' is a link of the robot, placed with the measured joints, and no "
+                   'joint state has come yet')
+    q = (0.3, -0.4, 0.5)
+    probe.command_for(state(q))
+    p_tip, R_tip = node.regulator.model.forward_kinematics(list(q))
+    half = 0.1  # 0.2 rad about tool0's own x axis
+    probe.send_goal(goal((math.sin(half), 0.0, 0.0, math.cos(half)), frame='tool0'))
+    placed = node.regulator.goal
+    c, s = math.cos(2 * half), math.sin(2 * half)
+    want = [[sum(R_tip[i][k] * ((1.0, 0.0, 0.0), (0.0, c, -s), (0.0, s, c))[k][j]
+                 for k in range(3)) for j in range(3)] for i in range(3)]
+    got = quat.to_rotation_matrix(placed.q_desired_base)
+    assert all(abs(got[i][j] - want[i][j]) < 1e-9 for i in range(3) for j in range(3))
+    probe.wait_log('(given in tool0, placed in base_link at the measured joints)')
+    probe.command_for(state((0.0, 0.0, 0.0)))  # the robot moves on: the goal stays
+    assert node.regulator.goal == placed
+    # ~/goal_pose: latched, so a viewer that joins now still gets the goal in force
+    poses: list[PoseStamped] = []
+    probe.probe.create_subscription(PoseStamped, f'{NODE_NAME}/goal_pose', poses.append,
+                                    LATCHED_QOS)
+    probe.spin_until(lambda: poses, 'the goal on ~/goal_pose')
+    o = poses[-1].pose.orientation
+    assert poses[-1].header.frame_id == 'base_link'
+    assert (o.x, o.y, o.z, o.w) == pytest.approx(placed.xyzw(), abs=1e-12)
+    assert [poses[-1].pose.position.x, poses[-1].pose.position.y,
+            poses[-1].pose.position.z] == pytest.approx(p_tip, abs=1e-9)  # at the tip then
+    probe.send_goal(goal((0.0, 0.0, 0.0, 1.0), frame='world'))
+    probe.wait_log("header.frame_id is 'world', expected 'base_link' (or empty) or a link of "
+                   "the robot: ['link1', 'link2', 'link3', 'tool0']")
+    assert node.regulator.goal == placed
 
 
 def test_diagnostics_warn_near_180_degrees(make_probe):
@@ -477,8 +601,8 @@ def test_namespaced_node_keeps_its_config_file(context):
 
 
 def test_xarm6_joints_without_its_urdf_say_what_to_pass(make_node):
-    with pytest.raises(ModelError, match='robot_description is empty, so the bundled spherical '
-                                         'wrist'):
+    with pytest.raises(ModelError, match='No robot description was given, so the bundled '
+                                         'spherical wrist'):
         make_node({'joints': [f'joint{i}' for i in range(1, 7)], 'base_link': 'link_base',
                    'tip_link': 'link6', 'task': 'pose'})
 

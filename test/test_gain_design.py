@@ -18,6 +18,8 @@ from quat_jt_controller import control_law as cl
 from quat_jt_controller import gain_design as gd
 from quat_jt_controller import quaternion as quat
 from quat_jt_controller import shaping as sh
+from quat_jt_controller.model import RobotModel
+from quat_jt_runtime.resources import default_urdf_xml
 from robots import PANDA_JOINTS, panda_model, PANDA_URDF, random_q, wrist_model, xarm6_model
 import yaml
 
@@ -236,5 +238,123 @@ def test_a_bad_simulator_argument_writes_neither_file(tmp_path):
                              *PANDA_ARGS, '--out', str(out), '--sim-out', str(sim_out),
                              '--sim-coulomb', '0.1'], capture_output=True, text=True,
                             timeout=120)
-    assert result.returncode != 0 and '--sim-coulomb: expected 7' in result.stderr
+    assert result.returncode == 2 and result.stderr == (
+        f'design_gains: error: --sim-coulomb: 1 value for the 7 joints {list(PANDA_JOINTS)} '
+        '(see design_gains --help)\n')
     assert not out.exists() and not sim_out.exists()
+
+
+def run_main(argv, capsys) -> tuple[int, list[str]]:
+    """Run the command's main() in this process; return its status and stderr lines."""
+    try:
+        status = gd.main(argv)
+    except SystemExit as exc:
+        status = exc.code
+    return status, capsys.readouterr().err.splitlines()
+
+
+@pytest.mark.parametrize('argv, status, words', [
+    (['--urdf', 'no/such.urdf'], 2, '--urdf no/such.urdf: No such file or directory'),
+    (['--urdf', '.'], 2, '--urdf .: Is a directory'),
+    (['--urdf', 'setup.py'], 2, '--urdf setup.py: not XML'),
+    (['--urdf', 'package.xml'], 2, 'not a URDF (its root element is <package>'),
+    (['--joints', 'joint1', 'jointX', 'joint3'], 2, "joints ['jointX'] are not movable"),
+    (['--tip-link', 'nowhere'], 2, "link 'nowhere' is not in the URDF"),
+    (['--effort-limits', '50', '30'], 2, "--effort-limits: 2 values for the 3 joints ['joint1'"),
+    (['--friction', '1'], 2, '--friction: 1 value for the 3 joints'),
+    (['--preferred-configuration', '0', '9', '0'], 2, "puts ['joint2'] outside the joint"),
+    (['--rate', 'fast'], 2, "argument --rate: 'fast' is not a number"),
+    (['--rate', '0'], 2, '--rate 0.0 Hz is outside [100, 1000] Hz'),
+    (['--effort-limits', 'nan', '1', '1'], 2, 'argument --effort-limits: nan is not a finite'),
+    (['--delays', '-1'], 2, 'argument --delays: -1 is not an integer in [0, inf)'),
+    (['--cruise-fraction', '1.5'], 2, 'argument --cruise-fraction: 1.5 is not a finite number '
+     'in (0, 1]'),
+    (['--task', 'position'], 2, "argument --task: invalid choice: 'position'"),
+    (['--effort-limits', '0.1', '0.1', '0.1'], 1, 'no design: no torque left for the '
+     "potential on joints ['joint2']"),
+    (['--out', 'no/such/folder/x.yaml'], 1, 'cannot write no/such/folder/x.yaml: No such file'),
+])
+def test_a_bad_input_is_one_line_naming_it(argv, status, words, capsys, monkeypatch):
+    """Usage errors: status 2, as argparse's own; a robot the rules cannot serve: 1."""
+    monkeypatch.chdir(REPO)
+    code, lines = run_main(argv, capsys)
+    assert code == status and len(lines) == 1, (code, lines)
+    assert lines[0].startswith('design_gains: error: ') and words in lines[0], lines
+
+
+def test_the_command_line_gives_one_line_and_status_2_for_a_missing_urdf(tmp_path):
+    result = subprocess.run([sys.executable, '-m', 'quat_jt_controller.gain_design', '--urdf',
+                             str(tmp_path / 'robot.urdf')], capture_output=True, text=True,
+                            timeout=120)
+    assert result.returncode == 2 and result.stdout == ''
+    assert result.stderr == (f'design_gains: error: --urdf {tmp_path / "robot.urdf"}: No such '
+                             'file or directory (see design_gains --help)\n')
+
+
+def test_a_design_at_100_hz_is_stable_where_the_1_khz_one_is_not():
+    """The sampled loop at the rate given: the 1 kHz gains with 10 ms ticks diverge."""
+    model = wrist_model()
+    task = cl.Task.ORIENTATION
+    configs = gd.survey(model, task)['configurations']
+
+    def worst(d):
+        return max(gd.linearized_spectral_radius(model, q, d.gains('tanh'), 1, 0.01, M, task,
+                                                 d.shaping) for q, _, M in configs)
+    slow = gd.design(model, task, rate_hz=100.0)
+    assert slow.rate_hz == 100.0 and 'state_rate: 100.0' in gd.to_yaml(slow)
+    assert worst(slow) < 1.0 < worst(gd.design(model, task, rate_hz=1000.0))
+
+
+@pytest.mark.parametrize('rate', [50.0, 2000.0, float('nan')])
+def test_a_rate_outside_100_to_1000_hz_is_refused_by_value(rate):
+    with pytest.raises(ValueError, match=f'rate_hz {rate!r} Hz is outside'):
+        gd.design(wrist_model(), cl.Task.ORIENTATION, rate_hz=rate)
+    result = subprocess.run([sys.executable, '-m', 'quat_jt_controller.gain_design', '--rate',
+                             str(rate)], capture_output=True, text=True, timeout=120)
+    assert result.returncode == 2 and f'--rate {rate!r} Hz is outside' in result.stderr
+    assert 'Traceback' not in result.stderr
+
+
+def test_rotor_inertia_enters_the_design_through_the_inertia():
+    """With armature, each joint sees more inertia, so K_v grows (the same damping ratio)."""
+    plain = gd.design(wrist_model(), cl.Task.ORIENTATION, friction_nm=(1.8, 0.72, 0.45))
+    armature = (0.2, 0.2, 0.2)
+    rotor_model = RobotModel(default_urdf_xml(), 'base_link', 'tool0', armature=armature)
+    rotor = gd.design(rotor_model, cl.Task.ORIENTATION, friction_nm=(1.8, 0.72, 0.45))
+    # the inertia each joint sees is the links' plus at least its rotor
+    assert np.all(rotor.figures['inertia_min']
+                  >= plain.figures['inertia_min'] + 0.99 * np.array(armature))
+    assert all(b > a for a, b in zip(plain.kv, rotor.kv))  # more inertia, more damping
+    assert rotor.armature == armature and plain.armature == (0.0, 0.0, 0.0)
+    assert max(rotor.figures['spectral_radius'].values()) < 1.0
+    assert params_of(gd.to_yaml(rotor))['armature'] == list(armature)
+    assert params_of(gd.to_yaml(plain))['armature'] == [0.0, 0.0, 0.0]
+
+
+def test_the_command_takes_one_armature_for_all_joints_or_one_per_joint(tmp_path):
+    def run(*args):
+        return subprocess.run([sys.executable, '-m', 'quat_jt_controller.gain_design', *args],
+                              capture_output=True, text=True, timeout=120)
+
+    one, each = run('--armature', '0.1'), run('--armature', '0.1', '0.1', '0.1')
+    assert one.returncode == 0 and each.returncode == 0, one.stderr + each.stderr
+    assert params_of(one.stdout)['armature'] == [0.1, 0.1, 0.1]
+    assert params_of(one.stdout)['kv'] == params_of(each.stdout)['kv']
+    wrong = run('--armature', '0.1', '0.2')
+    assert wrong.returncode == 2
+    assert '--armature: give one value for every joint or 3 (one per joint), got 2' in (
+        wrong.stderr)
+    negative = run('--armature', '-0.1')
+    assert negative.returncode == 2 and 'armature[0] must be finite and >= 0, got -0.1' in (
+        negative.stderr)
+    sim_out = tmp_path / 's.yaml'
+    both = run('--armature', '0.1', '--sim-out', str(sim_out), '--sim-engine', 'mujoco',
+               '--out', str(tmp_path / 'c.yaml'))
+    assert both.returncode == 0, both.stderr
+    sim = params_of(sim_out.read_text())  # the simulated rotor defaults to the designed one
+    assert sim['armature'] == [0.1, 0.1, 0.1] and sim['engine'] == 'mujoco'
+
+
+def test_the_simulator_engines_are_the_ones_the_tool_writes():
+    from wrist_sim.simulator import ENGINES
+    assert gd.ENGINES == ENGINES

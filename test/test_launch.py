@@ -3,8 +3,10 @@ The launch files, run against recording stand-ins of launch/launch_ros (not on P
 
 Every demo: the two nodes with the package's config files, the launch arguments, the nodes'
 names (the xArm6's simulator has its own), and ``on_exit`` shutting the whole launch down when
-either node exits (so a simulator that cannot open its window does not leave a controller
-running alone).
+either node exits on its own (so a simulator that cannot open its window does not leave a
+controller running alone), but adding nothing, and logging nothing, once a shutdown is under
+way (Ctrl-C). ``rviz:=true`` starts robot_state_publisher with the robot's URDF and RViz with
+the shipped config, whose displays read the topics the nodes publish, with their QoS.
 """
 import ast
 import importlib.util
@@ -14,11 +16,14 @@ import types
 
 import pytest
 from robots import PANDA_URDF, XARM6_URDF
+import yaml
 
 pytestmark = pytest.mark.unit
 
 REPO = Path(__file__).resolve().parent.parent
 COMPOSED = {'wrist_demo.launch.py'}  # launch files with composed:=true
+WRIST_URDF = REPO / 'urdf' / 'spherical_wrist.urdf'
+RVIZ = REPO / 'rviz' / 'quat_jt.rviz'
 DEMOS = {
     'wrist_demo.launch.py': ('wrist_sim', 'wrist_sim.yaml', 'wrist_controller.yaml', None),
     'xarm6_demo.launch.py': ('xarm6_sim', 'xarm6_sim.yaml', 'xarm6_controller.yaml',
@@ -46,11 +51,23 @@ class UnlessRecorder(Recorder):
     """Stands in for launch.conditions.UnlessCondition."""
 
 
+class NotRecorder(Recorder):
+    """Stands in for launch.substitutions.NotSubstitution."""
+
+
+class Context:
+    """Stands in for launch.LaunchContext, shutting down or not."""
+
+    def __init__(self, is_shutdown: bool) -> None:
+        self.is_shutdown = is_shutdown
+
+
 def describe(monkeypatch, launch_file: str):
     stand_ins = {
         'launch': {'LaunchDescription': Recorder},
         'launch.actions': {'DeclareLaunchArgument': Recorder, 'Shutdown': ShutdownRecorder},
-        'launch.substitutions': {'LaunchConfiguration': Recorder},
+        'launch.substitutions': {'LaunchConfiguration': Recorder,
+                                 'NotSubstitution': NotRecorder},
         'launch.conditions': {'IfCondition': IfRecorder, 'UnlessCondition': UnlessRecorder},
         'launch_ros': {},
         'launch_ros.actions': {'Node': Recorder},
@@ -84,6 +101,7 @@ def test_launch_description(monkeypatch, launch_file):
     actions = describe(monkeypatch, launch_file)
     nodes = {a.kwargs['executable']: a.kwargs for a in actions if 'executable' in a.kwargs}
     composed = nodes.pop('composed', None)
+    nodes.pop('rviz2'), nodes.pop('robot_state_publisher')  # rviz:=true, below
     assert (composed is not None) == (launch_file in COMPOSED)
     assert set(nodes) == {'controller_node', 'wrist_sim_node'}
     if composed is not None:  # composed:=true runs one process instead of the two
@@ -93,7 +111,7 @@ def test_launch_description(monkeypatch, launch_file):
         assert 'name' not in composed  # a name would rename both nodes to one
         files = [Path(f) for f in composed['parameters'][:2]]
         assert files == [REPO / 'config' / sim_config, REPO / 'config' / controller_config]
-        assert isinstance(composed['on_exit'], ShutdownRecorder)
+        assert exit_shuts_down(composed['on_exit'])
     assert nodes['controller_node']['name'] == 'quat_jt_controller'
     assert nodes['wrist_sim_node']['name'] == sim_name
     for exe, config in (('controller_node', controller_config),
@@ -103,13 +121,12 @@ def test_launch_description(monkeypatch, launch_file):
         if urdf is not None:
             assert overrides['robot_description'] == urdf.read_text()
         # Either node exiting ends the launch.
-        assert isinstance(nodes[exe]['on_exit'], ShutdownRecorder)
-        assert nodes[exe]['on_exit'].kwargs['reason']
+        assert exit_shuts_down(nodes[exe]['on_exit'])
     assert nodes['controller_node']['parameters'][1]['potential'].kwargs == {'value_type': str}
     assert nodes['wrist_sim_node']['parameters'][1]['use_gui'].kwargs == {'value_type': bool}
     defaults = {a.args[0]: a.kwargs['default_value'] for a in actions
                 if 'default_value' in a.kwargs}
-    assert defaults == {'potential': 'tanh', 'use_gui': 'false', 'namespace': '',
+    assert defaults == {'potential': 'tanh', 'use_gui': 'false', 'namespace': '', 'rviz': 'false',
                         **({'composed': 'false'} if composed is not None else {})}
     # Every process in the launch's namespace, with its simulated clock there too.
     for node in [*nodes.values(), *([composed] if composed is not None else [])]:
@@ -117,4 +134,62 @@ def test_launch_description(monkeypatch, launch_file):
         assert node['remappings'] == [('/clock', 'clock')]
     choices = {a.args[0]: a.kwargs['choices'] for a in actions if 'choices' in a.kwargs}
     assert choices['potential'] == ['tanh', 'quadratic'] and choices['use_gui'] == [
-        'true', 'false']
+        'true', 'false'] and choices['rviz'] == ['true', 'false']
+
+
+def exit_shuts_down(on_exit) -> bool:
+    """Tell whether ``on_exit`` shuts the launch down once, with a reason, and not again."""
+    first = on_exit('a ProcessExited', Context(is_shutdown=False))
+    again = on_exit('a ProcessExited', Context(is_shutdown=True))  # Ctrl-C, or after a first
+    return (again is None and len(first) == 1 and isinstance(first[0], ShutdownRecorder)
+            and bool(first[0].kwargs['reason']))
+
+
+@pytest.mark.parametrize('launch_file', sorted(DEMOS))
+def test_rviz_starts_robot_state_publisher_and_rviz_with_the_shipped_config(
+        monkeypatch, launch_file):
+    """rviz:=true: the URDF to robot_state_publisher, RViz on the robot's base link."""
+    urdf = DEMOS[launch_file][3] or WRIST_URDF
+    config = yaml.safe_load((REPO / 'config' / DEMOS[launch_file][2]).read_text())
+    base_link = config['/**']['ros__parameters']['base_link']
+    actions = describe(monkeypatch, launch_file)
+    nodes = {a.kwargs['executable']: a.kwargs for a in actions if 'executable' in a.kwargs}
+    rsp, rviz = nodes['robot_state_publisher'], nodes['rviz2']
+    for node in (rsp, rviz):  # only with rviz:=true, in the launch's namespace
+        assert isinstance(node['condition'], IfRecorder)
+        assert node['condition'].args[0].args == ('rviz',)
+        assert node['namespace'].args == ('namespace',)
+        assert 'on_exit' not in node  # closing RViz does not stop the robot
+    description = rsp['parameters'][0]['robot_description']
+    assert description.args == (urdf.read_text(),) and description.kwargs == {
+        'value_type': str}
+    assert rviz['arguments'] == ['-d', str(RVIZ), '-f', base_link]
+    # robot_state_publisher publishes robot_description then: the simulator does not
+    for exe in ('wrist_sim_node', 'composed'):
+        if exe in nodes:
+            published = [p for p in nodes[exe]['parameters'] if isinstance(p, dict)][-1][
+                'publish_robot_description']
+            assert published.kwargs == {'value_type': bool}
+            assert isinstance(published.args[0], NotRecorder)
+            assert published.args[0].args[0].args == ('rviz',)
+    # RViz reads the namespace's own topics
+    assert ('/quat_jt_controller/goal_pose', 'quat_jt_controller/goal_pose') in rviz[
+        'remappings']
+
+
+def test_the_rviz_config_shows_the_robot_the_goal_and_the_measured_pose():
+    """The displays read the topics the nodes publish, with a QoS that matches theirs."""
+    config = yaml.safe_load(RVIZ.read_text())
+    displays = {d['Class'].split('/')[-1] + ':' + d['Name']: d
+                for d in config['Visualization Manager']['Displays']}
+    robot = next(d for key, d in displays.items() if key.startswith('RobotModel:'))
+    assert robot['Description Source'] == 'Topic'
+    assert robot['Description Topic']['Value'] == '/robot_description'
+    assert robot['Description Topic']['Durability Policy'] == 'Transient Local'
+    poses = {d['Topic']['Value']: d['Topic'] for key, d in displays.items()
+             if key.startswith('Pose:')}
+    assert poses['/quat_jt_controller/goal_pose']['Durability Policy'] == 'Transient Local'
+    assert poses['/quat_jt_controller/current_pose']['Durability Policy'] == 'Volatile'
+    assert all(topic['Reliability Policy'] == 'Reliable' for topic in poses.values())
+    from quat_jt_bringup.launch_parts import RVIZ_TOPICS
+    assert set(RVIZ_TOPICS) == {'/robot_description', *poses}

@@ -18,7 +18,7 @@ ROS = ('rclpy', 'rcl_interfaces', 'sensor_msgs', 'geometry_msgs', 'std_msgs', 's
        'diagnostic_msgs', 'rosgraph_msgs', 'builtin_interfaces')
 # The modules that marshal for ROS; everything else in the packages is ROS-free.
 ROS_MODULES = {
-    'quat_jt_runtime': {'params', 'lifecycle', 'messages', 'prewarm_timer'},
+    'quat_jt_runtime': {'params', 'lifecycle', 'messages', 'prewarm_timer', 'description'},
     'quat_jt_controller': {'controller_node', 'parameters', 'reports'},
     'wrist_sim': {'sim_node', 'parameters'},
     'quat_jt_bringup': {'parameter_docs'},

@@ -147,3 +147,48 @@ def test_model_errors_are_clear(kwargs, match):
 def test_bad_urdf_is_a_model_error():
     with pytest.raises(ModelError, match='cannot parse'):
         RobotModel('<robot name="x"><link name="a"/', 'a', 'a')
+
+
+def test_armature_adds_to_the_diagonal_of_the_inertia_in_the_callers_order():
+    """M(q) = M_links(q) + diag(a), and the forward dynamics are Pinocchio's ABA with it."""
+    xml = default_urdf_xml()
+    plain = RobotModel(xml, 'base_link', 'tool0')
+    armature = (0.1, 0.25, 0.05)  # joints 1, 2, 3
+    rotor = RobotModel(xml, 'base_link', 'tool0', armature=armature)
+    perm = RobotModel(xml, 'base_link', 'tool0', joint_names=['joint3', 'joint1', 'joint2'],
+                      armature=[armature[i] for i in (2, 0, 1)])
+    assert rotor.armature == armature
+    assert plain.armature == (0.0, 0.0, 0.0)
+    rng = np.random.default_rng(3)
+    for _ in range(5):
+        q = random_q(plain, rng)
+        M0 = plain.mass_matrix(q)
+        np.testing.assert_allclose(rotor.mass_matrix(q), M0 + np.diag(armature), atol=1e-12)
+        order = [2, 0, 1]
+        np.testing.assert_allclose(perm.mass_matrix(np.asarray(q)[order]),
+                                   (M0 + np.diag(armature))[np.ix_(order, order)], atol=1e-12)
+        qdot = rng.uniform(-1.0, 1.0, 3)
+        tau = rng.uniform(-5.0, 5.0, 3)
+        # qddot = (M0 + A)^-1 (tau - h), h = C qdot + g from the plain model's dynamics
+        h = -M0 @ plain.forward_dynamics(q, qdot, np.zeros(3))
+        np.testing.assert_allclose(rotor.forward_dynamics(q, qdot, tau),
+                                   np.linalg.solve(M0 + np.diag(armature), tau - h),
+                                   atol=1e-10)
+    full = pin.buildModelFromXML(xml)  # the same through Pinocchio directly
+    full.armature[:] = armature
+    data = full.createData()
+    q = np.array([0.3, -0.7, 1.2])
+    np.testing.assert_allclose(rotor.forward_dynamics(q, [0.2, 0.0, -0.4], [1.0, 2.0, 3.0]),
+                               pin.aba(full, data, q, np.array([0.2, 0.0, -0.4]),
+                                       np.array([1.0, 2.0, 3.0])), atol=1e-10)
+
+
+@pytest.mark.parametrize('armature, match', [
+    ([0.1, -0.2, 0.0], r'armature\[1\] must be finite and >= 0, got -0.2'),
+    ([0.1, float('nan'), 0.0], r'armature\[1\] must be finite and >= 0, got nan'),
+    ([0.1, 0.2], r'armature must have 3 values \(one per joint\), got 2'),
+    (['a', 0.2, 0.1], 'armature must be a list of numbers'),
+])
+def test_a_bad_armature_is_refused_naming_the_value(armature, match):
+    with pytest.raises(ModelError, match=match):
+        RobotModel(default_urdf_xml(), 'base_link', 'tool0', armature=armature)

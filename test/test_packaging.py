@@ -42,6 +42,7 @@ def test_install_tree_has_index_marker_executables_and_data(colcon_install):
     assert repo_configs and repo_launch, 'the repo ships config and launch files'
     assert sorted(p.name for p in (share / 'config').glob('*.yaml')) == repo_configs
     assert sorted(p.name for p in (share / 'launch').glob('*.launch.py')) == repo_launch
+    assert (share / 'rviz' / 'quat_jt.rviz').is_file()  # the launch files' rviz:=true
 
 
 def test_installed_package_finds_its_data_through_the_ament_prefix(colcon_install, tmp_path):

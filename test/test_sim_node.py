@@ -156,11 +156,137 @@ def test_the_panda_loads_from_its_config_with_its_meshes_missing(context, capfd)
 
 
 @pytest.mark.node
+def test_the_xarm6_says_once_which_links_pybullet_gives_no_inertia(context, capfd):
+    """Its link2 and link3 tensors are not physical: one WARN, none of PyBullet's six lines."""
+    from quat_jt_runtime.resources import share_path
+    from robots import XARM6_URDF
+    from wrist_sim.sim_node import WristSimNode
+    node = WristSimNode(context=context, cli_args=[
+        '--ros-args', '--params-file', str(share_path('config/xarm6_sim.yaml'))],
+        parameter_overrides=[Parameter('robot_description', value=XARM6_URDF.read_text())])
+    try:
+        out, err = capfd.readouterr()
+        assert err.count('PyBullet simulates link2, link3 without rotational inertia') == 1
+        assert 'Bad inertia' not in out + err
+    finally:
+        node.destroy_node()
+
+
+@pytest.mark.node
+def test_a_start_up_error_gives_the_urdf_advice_only_when_it_is_about_the_robot(
+        context, monkeypatch):
+    monkeypatch.delenv('DISPLAY', raising=False)
+    with pytest.raises(SimulatorError) as no_window:
+        _make_node(context, use_gui=True)
+    assert 'DISPLAY is not set' in str(no_window.value)
+    assert 'robot_description' not in str(no_window.value)
+    with pytest.raises(SimulatorError, match="'nope'.*No robot description was given, so the "
+                                             'bundled spherical wrist'):
+        _make_node(context, joints=['joint1', 'nope'])
+
+
+@pytest.mark.node
 def test_bad_startup_parameters_are_refused(context):
     with pytest.raises(SimulatorError):
         _make_node(context, viscous_friction=[0.1, 0.2])
     with pytest.raises(SimulatorError):
         _make_node(context, joints=['joint1', 'nope'])
+
+
+@pytest.mark.node
+def test_no_command_since_start_is_a_warning_naming_the_topic(context, monkeypatch):
+    """No controller: the start-up line says the joints are held; then a WARN, 0 publishers."""
+    from rcl_interfaces.msg import Log
+    from wrist_sim import sim_node
+    monkeypatch.setattr(sim_node, 'NO_COMMAND_WARN_S', 0.5)  # the table's 5 s, shortened
+    listener = rclpy.create_node('rosout_listener', context=context)
+    logs: list[tuple[int, str]] = []
+    listener.create_subscription(Log, '/rosout', lambda m: logs.append((m.level, m.msg)) if (
+        m.name == sim_node.NODE_NAME) else None, 100)
+    node = sim_node.WristSimNode(context=context, cli_args=[
+        '--ros-args', '-r', 'effort_controller/commands:=/nowhere/commands'],
+        parameter_overrides=[Parameter('initial_positions', value=[0.0, 0.6, 0.0])])
+    executor = EventsExecutor(context=context)
+    try:
+        executor.add_node(listener)
+        executor.add_node(node)
+        deadline = time.monotonic() + 15.0
+        node.run(executor, lambda: time.monotonic() < deadline and not any(
+            level == Log.WARN for level, _ in logs))
+        start = next(text for _, text in logs if 'simulating joints' in text)
+        assert 'joints held at rest until the first command on /nowhere/commands' in start
+        warning = next((text for level, text in logs if level == Log.WARN), None)
+        assert warning is not None, logs
+        assert warning.startswith('no command on /nowhere/commands '), warning
+        assert '(0 publishers matched; is a controller running' in warning, warning
+        assert node.sim.q_rad.tolist() == [0.0, 0.6, 0.0]  # held against gravity
+    finally:
+        executor.remove_node(node)
+        executor.remove_node(listener)
+        node.destroy_node()
+        listener.destroy_node()
+
+
+@pytest.mark.node
+def test_the_engine_and_armature_are_read_once_and_an_unsimulated_armature_is_said(
+        context, capfd):
+    """Engine mujoco simulates the armature; pybullet keeps it and says, once, it cannot."""
+    pytest.importorskip('mujoco')
+    node = _make_node(context, engine='mujoco', armature=[0.1, 0.2, 0.3])
+    try:
+        assert node.sim.engine == 'mujoco' and node.sim.supports_armature
+        np.testing.assert_array_equal(node.sim.armature, [0.1, 0.2, 0.3])
+        assert not node.set_parameters([Parameter('engine', value='pybullet')])[0].successful
+        assert 'NOT simulated' not in capfd.readouterr().err
+    finally:
+        node.destroy_node()
+    node = _make_node(context, armature=[0.1, 0.2, 0.3])
+    try:
+        assert node.sim.engine == 'pybullet' and not node.sim.supports_armature
+        err = capfd.readouterr().err
+        assert err.count('NOT simulated') == 1, err
+        assert "armature [0.1, 0.2, 0.3] kg m^2 is NOT simulated: engine 'pybullet'" in err
+        assert "use engine 'mujoco'" in err
+    finally:
+        node.destroy_node()
+
+
+@pytest.mark.node
+@pytest.mark.parametrize('config', ['wrist_sim.yaml', 'xarm6_sim.yaml', 'panda_sim.yaml'])
+def test_the_robots_of_the_configs_run_in_mujoco(context, config):
+    """Each config's robot, friction and start in engine mujoco: a few steps, finite."""
+    pytest.importorskip('mujoco')
+    from quat_jt_runtime.resources import share_path
+    from robots import PANDA_URDF, XARM6_URDF
+    urdf = {'xarm6_sim.yaml': XARM6_URDF, 'panda_sim.yaml': PANDA_URDF}.get(config)
+    from wrist_sim.sim_node import WristSimNode
+    node = WristSimNode(context=context, cli_args=[
+        '--ros-args', '--params-file', str(share_path(f'config/{config}'))],
+        parameter_overrides=[Parameter('engine', value='mujoco')] + (
+            [Parameter('robot_description', value=urdf.read_text())] if urdf else []))
+    try:
+        assert node.sim.engine == 'mujoco'
+        start = list(node.get_parameter('initial_positions').value)
+        np.testing.assert_allclose(node.sim.q_rad, start)
+        np.testing.assert_allclose(node.sim.friction[1],
+                                   node.get_parameter('coulomb_friction').value)
+        for _ in range(20):
+            node.sim.step(np.zeros(node.sim.n))
+        assert np.all(np.isfinite(node.sim.q_rad)) and node.sim.step_count == 20
+    finally:
+        node.destroy_node()
+
+
+@pytest.mark.node
+@pytest.mark.parametrize('overrides, words', [
+    ({'engine': 'ode'}, r"engine must be one of \['pybullet', 'mujoco'\], got 'ode'"),
+    ({'armature': [0.1, -0.2, 0.0]}, r'armature: values must be >= 0, got \[0.1, -0.2, 0.0\]'),
+    ({'armature': [0.1, 0.2]}, r'armature: expected 3 values \(one per joint\), got 2'),
+    ({'armature': [0.1, math.nan, 0.0]}, 'armature: values must be finite'),
+])
+def test_a_bad_engine_or_armature_is_refused_by_name(context, overrides, words):
+    with pytest.raises(SimulatorError, match=words):
+        _make_node(context, **overrides)
 
 
 # -- over DDS: the node in its own process ---------------------------------------------------
@@ -445,3 +571,30 @@ def test_start_up_prints_only_the_nodes_own_lines(sim, probe):
     text = sim.log()
     assert '[wrist_sim]: simulating joints' in text, text[-2000:]
     assert 'build time' not in text and 'argv[0]=' not in text, text[:2000]
+
+
+@pytest.mark.dds
+def test_the_mujoco_engine_publishes_joint_states_and_takes_efforts(tmp_path):
+    """Engine mujoco behind the same topics: states at rate, a command moves the joints."""
+    pytest.importorskip('mujoco')
+    s = SimProcess(tmp_path, {'engine': 'mujoco', 'initial_positions': INITIAL,
+                              'coulomb_friction': COULOMB, 'armature': [0.05, 0.05, 0.05]})
+    p = Probe(s.context)
+    try:
+        assert p.spin_until(lambda: len(p.msgs) > 100, 30.0), s.log()
+        assert p.names == JOINTS
+        np.testing.assert_allclose(p.latest()[2], INITIAL, atol=1e-6)  # held before a command
+        moved = _stream_until(p, [2.0, 0.0, -1.5], lambda: (
+            p.latest()[2][0] - INITIAL[0] > 0.01 and p.latest()[2][2] - INITIAL[2] < -0.01))
+        _, _, q, qdot, effort = p.latest()
+        assert moved, f'{INITIAL} -> {q}\n{s.log()}'
+        assert qdot[0] > 0.0 and qdot[2] < 0.0, qdot
+        assert abs(q[1] - INITIAL[1]) < 1e-3, 'joint 2 held by stiction'
+        np.testing.assert_allclose(effort, [2.0, 0.0, -1.5])
+        _stream_until(p, [80.0, 0.0, -80.0], lambda: p.latest()[4][0] != 2.0)
+        np.testing.assert_allclose(p.latest()[4], [50.0, 0.0, -20.0])  # the effort limits
+        assert 'in mujoco at 1000 Hz, armature [0.05, 0.05, 0.05]' in s.log()
+        assert 'NOT simulated' not in s.log()
+    finally:
+        p.destroy()
+        assert s.close() == 0, s.log()

@@ -6,7 +6,8 @@ import pybullet_data
 import pytest
 from quat_jt_controller.model import RobotModel
 from quat_jt_runtime.resources import default_urdf_xml
-from wrist_sim.simulator import resolve_meshes, SimulatorError, WristSimulator
+from wrist_sim.simulator import resolve_meshes, SimulatorError, take_zero_inertia_warnings
+from wrist_sim.simulator import WristSimulator, zero_inertia_note
 
 pytestmark = pytest.mark.unit
 
@@ -280,6 +281,33 @@ def test_loads_the_xarm6_with_package_meshes():
         assert s.n == 6
         s.step(np.zeros(6))
         assert np.all(np.isfinite(s.q_rad))
+
+
+@pytest.mark.skipif(not XARM.is_file(), reason='pybullet_data has no xArm6')
+def test_links_pybullet_gives_no_inertia_are_named_once_and_its_warnings_kept_out(capfd):
+    """The xArm6's link2 and link3 tensors break the triangle inequality: PyBullet zeroes them."""
+    with WristSimulator(XARM.read_text()) as s:
+        assert s.zero_inertia_links == ('link2', 'link3')
+        c, body = s._engine._client, s._engine._body
+        names = {c.getJointInfo(body, j)[12].decode(): j for j in range(c.getNumJoints(body))}
+        for link in ('link2', 'link3'):  # what the note says is what PyBullet simulates
+            assert c.getDynamicsInfo(body, names[link])[2] == (0.0, 0.0, 0.0), link
+        assert c.getDynamicsInfo(body, names['link4'])[2] != (0.0, 0.0, 0.0)
+    out, err = capfd.readouterr()
+    assert 'inertia' not in out + err, out + err
+    note = zero_inertia_note(('link2', 'link3'))
+    assert note.startswith('PyBullet simulates link2, link3 without rotational inertia')
+    with WristSimulator(default_urdf_xml()) as wrist:  # valid tensors: nothing to say
+        assert wrist.zero_inertia_links == ()
+
+
+def test_only_the_zero_inertia_warnings_are_taken_out_of_the_loaders_output():
+    header = 'b3Warning[examples/Importers/ImportURDFDemo/BulletUrdfImporter.cpp,467]:\n'
+    text = (header + 'Bad inertia tensor properties, setting inertia to zero for link: a\n'
+            'something else\n' + header
+            + 'Bad inertia tensor properties, setting inertia to zero for link: b\n'
+            + header + 'Bad inertia tensor properties, setting inertia to zero for link: a\n')
+    assert take_zero_inertia_warnings(text) == (('a', 'b'), 'something else\n')
 
 
 def test_hold_passes_time_with_the_joints_at_rest(urdf):

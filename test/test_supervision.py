@@ -3,10 +3,12 @@ import math
 
 import pytest
 from quat_jt_controller import control_law as cl
+from quat_jt_controller import diagnostics
 from quat_jt_controller import paper
 from quat_jt_controller import quaternion as quat
 from quat_jt_controller.regulator import Goal, Regulator
-from quat_jt_controller.supervision import DIAGNOSTICS_WAIT_NS, Supervisor
+from quat_jt_controller.supervision import (
+    DIAGNOSTICS_WAIT_NS, NO_STATE_REPEAT_NS, NO_STATE_WARN_NS, Supervisor)
 from robots import wrist_model
 
 pytestmark = pytest.mark.unit
@@ -45,6 +47,37 @@ def test_the_watchdog_trips_once_and_states_coming_back_say_so():
     assert sup.stopped and sup.on_silence(800 * MS) is None  # once
     resumed, _, _ = sup.after_tick(900 * MS)
     assert resumed and not sup.stopped
+
+
+def test_no_state_since_start_warns_soon_then_slowly_and_never_after_a_state():
+    gains = cl.Gains.create('tanh', paper.KP, paper.KV, paper.LAMBDA, cl.Task.ORIENTATION, 3)
+    start = 5_000 * MS
+    sup = Supervisor(Regulator(wrist_model(), cl.Task.ORIENTATION, gains), 0.5, 3,
+                     started_ns=start)
+    assert NO_STATE_WARN_NS < 2_000 * MS < NO_STATE_REPEAT_NS
+    assert sup.no_state_yet(start + NO_STATE_WARN_NS - MS) is None
+    first = start + NO_STATE_WARN_NS
+    assert sup.no_state_yet(first) == pytest.approx(NO_STATE_WARN_NS * 1e-9)
+    assert sup.no_state_yet(first + 50 * MS) is None  # throttled
+    again = first + NO_STATE_REPEAT_NS
+    assert sup.no_state_yet(again - MS) is None
+    assert sup.no_state_yet(again) == pytest.approx((again - start) * 1e-9)
+    sup.before_tick([0.0, 0.5, 0.0], again + MS)
+    sup.after_tick(again + MS)
+    assert sup.no_state_yet(again + 3 * NO_STATE_REPEAT_NS) is None  # states have come
+
+
+def test_the_no_state_warning_says_what_is_known():
+    none = diagnostics.no_state_warning('/arm/joint_states', 1.8, 0, 0)
+    assert none.startswith('no valid joint state on /arm/joint_states 1.8 s after start, '
+                           '0 publishers on it: is the robot driver or simulator running')
+    assert 'remap with -r joint_states:=' in none
+    connecting = diagnostics.no_state_warning('/joint_states', 1.8, 1, 0)
+    assert '1 publisher on it: none received yet (still connecting?)' in connecting
+    silent = diagnostics.no_state_warning('/joint_states', 11.8, 1, 0)
+    assert '1 publisher on it: none received (a QoS mismatch' in silent
+    refused = diagnostics.no_state_warning('/joint_states', 1.8, 2, 40)
+    assert '2 publishers on it: 40 received and rejected' in refused
 
 
 def test_feedback_every_nth_tick_and_diagnostics_after_the_next_command():

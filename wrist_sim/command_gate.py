@@ -53,6 +53,11 @@ class CommandGate:
         self._reset_unpublished = False  # after reset(), until the reset state is published
 
     @property
+    def commanded(self) -> bool:
+        """Tell whether any valid command has arrived since start-up."""
+        return self._seq > 0
+
+    @property
     def answered(self) -> bool:
         """Tell whether a valid command has arrived since the last published state."""
         return self._seq != self._seq_at_publish

@@ -12,27 +12,43 @@ the immutable :class:`~wrist_sim.config.SimConfig` (validated by ``SimConfig.cre
 from dataclasses import dataclass
 from typing import Callable, Optional
 
+from quat_jt_runtime.description import robot_description, SOURCES
 from quat_jt_runtime.joints import movable_joints
 from quat_jt_runtime.params import ChangeLog, declare, joint_zeros, JOINT_ZEROS_TEXT, Kind
 from quat_jt_runtime.params import LiveParameters, names, REALTIME, Realtime, realtime_from
 from quat_jt_runtime.params import Spec
-from quat_jt_runtime.resources import default_urdf_xml
+from quat_jt_runtime.urdf_source import Description, DescriptionError, Source
 from rclpy.node import Node
 from wrist_sim.config import SimConfig
-from wrist_sim.simulator import SimulatorError
+from wrist_sim.simulator import ENGINES, per_joint, SimulatorError
 
 
 ROBOT_DESCRIPTION = Spec('robot_description', Kind.STRING, '',
-                         'URDF as an XML string; empty = the bundled spherical wrist',
-                         read_only=True)
+                         'URDF as an XML string, e.g. from a launch or params file; or '
+                         'robot_description_file, or robot_description_topic; none of them = '
+                         'the bundled spherical wrist', read_only=True)
+ENGINE = Spec('engine', Kind.STRING, ENGINES[0],
+              "the physics engine: 'pybullet' (the default) or 'mujoco' (the mujoco package, "
+              'the same URDF compiled by MuJoCo; it simulates the armature, and has no '
+              'window). docs/ros.md compares them', read_only=True,
+              constraints=' or '.join(f"'{e}'" for e in ENGINES))
+# Declared after ``joints``, whose length is its context's ``n``.
+ARMATURE = Spec('armature', Kind.DOUBLE_ARRAY, joint_zeros,
+                'rotor inertia per joint, kg m^2 (>= 0), added to the diagonal of M(q) by '
+                "engine 'mujoco'; PyBullet has no joint armature, so with engine 'pybullet' a "
+                'non-zero value is not simulated and the node warns once',
+                read_only=True, constraints='{n} finite values >= 0',
+                default_text=JOINT_ZEROS_TEXT)
 JOINTS = Spec('joints', Kind.STRING_ARRAY, lambda context: list(context['movable']),
               'joints to drive, in command/state order; default the URDF movable joints',
               read_only=True, default_text="the URDF's movable joints")
+DESCRIPTION = (ROBOT_DESCRIPTION, *SOURCES)
 STRUCTURE = (
-    ROBOT_DESCRIPTION, JOINTS,
+    *DESCRIPTION, JOINTS, ENGINE, ARMATURE,
     Spec('rate_hz', Kind.INT, 1000, 'steps per second; the time step is 1 / rate_hz',
          read_only=True, bounds=(1, 20000)),
-    Spec('use_gui', Kind.BOOL, False, 'open the PyBullet window', read_only=True),
+    Spec('use_gui', Kind.BOOL, False, "open the PyBullet window (engine 'pybullet' only)",
+         read_only=True),
     Spec('publish_clock', Kind.BOOL, False,
          'publish /clock with the simulation time and step in lockstep with the commands '
          'instead of in real time', read_only=True),
@@ -46,6 +62,11 @@ STRUCTURE = (
     Spec('enforce_velocity_limits', Kind.BOOL, True,
          'hold each joint at its URDF velocity limit, as a drive would; off, a joint past it '
          'is only reported', read_only=True),
+    Spec('publish_robot_description', Kind.BOOL, True,
+         'publish the URDF in use on robot_description (std_msgs/String, transient local, as '
+         'robot_state_publisher does), for RViz and a controller with robot_description_topic; '
+         'off where a robot_state_publisher publishes that topic (the launch files with '
+         'rviz:=true). Not when the URDF came from robot_description_topic', read_only=True),
     Spec('stats_file', Kind.STRING, '',
          'if set, timing statistics are written there as JSON at shutdown', read_only=True),
     Spec('stats_window_steps', Kind.INT, 30000,
@@ -77,22 +98,43 @@ LIVE_PARAMETERS = names(LIVE)
 DOCS_CONTEXT = {'n': 'n', 'movable': ()}
 
 
+def armature_note(structure: 'SimStructure', simulated: bool) -> str:
+    """Say that the armature asked for is not simulated ('' if it is, or if it is zero)."""
+    if simulated or not any(structure.armature):
+        return ''
+    return (f'armature {list(structure.armature)} kg m^2 is NOT simulated: engine '
+            f"'{structure.engine}' has no joint armature, so the plant's inertia is the URDF's "
+            "alone; use engine 'mujoco' to simulate the rotor inertia")
+
+
 @dataclass(frozen=True)
 class SimStructure:
     """The read-only parameters, read once at start-up."""
 
-    urdf_xml: str  # the URDF in use (the bundled wrist's if none was given)
-    given_urdf: str  # robot_description as given ('' = none)
+    description: Description  # the URDF in use and where it came from
     joints: tuple[str, ...]
+    engine: str  # one of wrist_sim.simulator.ENGINES
+    armature: tuple[float, ...]  # kg m^2 per joint, finite and >= 0
     rate_hz: int
     use_gui: bool
     publish_clock: bool
     clock_divider: int
     hold_until_first_command: bool
     enforce_velocity_limits: bool
+    publish_robot_description: bool  # and the URDF did not come from a topic
     stats_file: str
     stats_window_steps: int
     realtime: Realtime  # cpu_affinity, thread_priority (off in lockstep and with the window)
+
+    @property
+    def urdf_xml(self) -> str:
+        """Return the URDF in use (the bundled wrist's if none was given)."""
+        return self.description.xml
+
+    @property
+    def given_urdf(self) -> str:
+        """Return the URDF as given ('' = none: the bundled wrist)."""
+        return self.description.given
 
     @property
     def dt_ns(self) -> int:
@@ -102,15 +144,24 @@ class SimStructure:
 
 def declare_structure(node: Node) -> SimStructure:
     """Declare the read-only parameters and return them; raise SimulatorError if unusable."""
-    given = declare(node, (ROBOT_DESCRIPTION,))['robot_description']
-    urdf = given or default_urdf_xml()
+    try:
+        description = robot_description(node, declare(node, DESCRIPTION))
+    except DescriptionError as exc:
+        raise SimulatorError(str(exc)) from None
+    urdf = description.xml
     try:
         movable = movable_joints(urdf)
     except ValueError as exc:
         raise SimulatorError(f'robot_description: {exc}') from None
     if not movable:
         raise SimulatorError('the URDF has no movable joints')
-    values = declare(node, STRUCTURE[1:] + REALTIME, {'movable': movable})
+    rest = tuple(s for s in STRUCTURE[len(DESCRIPTION):] if s is not ARMATURE)
+    values = declare(node, rest + REALTIME, {'movable': movable})
+    values.update(declare(node, (ARMATURE,), {'n': len(values['joints'])}))
+    if values['engine'] not in ENGINES:
+        raise SimulatorError(f"engine must be one of {list(ENGINES)}, got {values['engine']!r}")
+    armature = per_joint('armature', values['armature'], len(values['joints']),
+                         nonnegative=True)
     # Applied by lifecycle.run_node; no deadlines in lockstep, and the window renders in a
     # thread of its own: normal scheduling there.
     off = 'lockstep' if values['publish_clock'] else 'the PyBullet window' if values[
@@ -120,12 +171,15 @@ def declare_structure(node: Node) -> SimStructure:
     except ValueError as exc:
         raise SimulatorError(str(exc)) from None
     return SimStructure(
-        urdf_xml=urdf, given_urdf=given, joints=tuple(values['joints']),
+        description=description, joints=tuple(values['joints']),
+        engine=values['engine'], armature=armature,
         rate_hz=int(values['rate_hz']), use_gui=bool(values['use_gui']),
         publish_clock=bool(values['publish_clock']),
         clock_divider=int(values['clock_divider']),
         hold_until_first_command=bool(values['hold_until_first_command']),
         enforce_velocity_limits=bool(values['enforce_velocity_limits']),
+        publish_robot_description=bool(values['publish_robot_description'])
+        and description.source is not Source.TOPIC,
         stats_file=values['stats_file'], stats_window_steps=int(values['stats_window_steps']),
         realtime=settings)
 

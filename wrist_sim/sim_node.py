@@ -3,14 +3,16 @@
 
 A thin rclpy layer, with the interface of a ros2_control robot driven by a
 JointGroupEffortController, over the ROS-free parts: the physics
-(:class:`wrist_sim.simulator.WristSimulator`), the command path
+(:class:`wrist_sim.simulator.WristSimulator`, in PyBullet or MuJoCo: ``engine``), the command path
 (:class:`wrist_sim.command_gate.CommandGate`: validation, watchdog, hold until the first
 command, the reset gate) and the stepping loops (``wrist_sim.pacing``: real-time deadlines, or
 lockstep with ``/clock``). It publishes ``joint_states`` after every step (effort = the motor
 torque applied, clamped to the URDF limits, friction not included), takes
 ``effort_controller/commands`` (one torque in N m per joint, in ``joints`` order; bad ones are
 refused with a throttled warning and the last good one stays), and serves ``~/reset`` (back to
-``initial_positions`` at rest). Timing figures are kept in ``node.stats``, logged at shutdown
+``initial_positions`` at rest). It publishes the URDF in use on ``robot_description``
+(transient local, ``publish_robot_description``), so RViz and robot_state_publisher's users
+see the robot. Timing figures are kept in ``node.stats``, logged at shutdown
 and written as JSON to ``stats_file`` if set. The parameters are the table of
 ``wrist_sim/parameters.py``; docs/ros.md tells the rest.
 """
@@ -20,6 +22,7 @@ from typing import Any, Callable, Optional
 
 from quat_jt_runtime import lifecycle
 from quat_jt_runtime import realtime
+from quat_jt_runtime.description import publish_description
 from quat_jt_runtime.loop_stats import LoopStats, write_summary
 from quat_jt_runtime.params import history_qos
 from quat_jt_runtime.resources import bundled_urdf_hint
@@ -33,11 +36,16 @@ from std_srvs.srv import Trigger
 from wrist_sim import pacing
 from wrist_sim.command_gate import CommandGate, RESUMED, TRIPPED
 from wrist_sim.config import SimConfig
-from wrist_sim.parameters import change_log, declare_live, declare_structure
-from wrist_sim.simulator import at_limit, missing_meshes_note, SimulatorError, WristSimulator
+from wrist_sim.parameters import armature_note, change_log, declare_live, declare_structure
+from wrist_sim.simulator import at_limit, missing_meshes_note, NoDisplayError, SimulatorError
+from wrist_sim.simulator import WristSimulator, zero_inertia_note
 
 NODE_NAME = 'wrist_sim'
 THROTTLE_S = 1.0
+# No command since start: a warning after this long, then one every NO_COMMAND_REPEAT_S. Later
+# than the controller's (a simulator waiting for its controller to start is normal at first).
+NO_COMMAND_WARN_S = 5.0
+NO_COMMAND_REPEAT_S = 10.0
 
 
 class WristSimNode(Node):
@@ -45,6 +53,15 @@ class WristSimNode(Node):
 
     def __init__(self, **kwargs: Any) -> None:
         super().__init__(NODE_NAME, **kwargs)
+        try:
+            self._start()
+        except BaseException:
+            # A node that cannot start gives its handles back at once (its /rosout logger
+            # too, which a later node of the same name in this process would not get).
+            Node.destroy_node(self)
+            raise
+
+    def _start(self) -> None:
         p = self.structure = declare_structure(self)
         self.realtime = p.realtime  # applied by lifecycle.run_node
         self.live = declare_live(self, len(p.joints), on_apply=self._apply_config)
@@ -56,11 +73,19 @@ class WristSimNode(Node):
                 p.urdf_xml, p.joints, dt_s=self.dt_ns * 1e-9, use_gui=p.use_gui,
                 viscous_nm_s_per_rad=c.viscous_nm_s_per_rad, coulomb_nm=c.coulomb_nm,
                 initial_positions_rad=c.initial_positions_rad,
-                enforce_velocity_limits=p.enforce_velocity_limits)
+                enforce_velocity_limits=p.enforce_velocity_limits, engine=p.engine,
+                armature=p.armature)
+        except NoDisplayError:  # nothing to do with the robot: no advice on its URDF
+            raise
         except SimulatorError as exc:
             raise SimulatorError(f'{exc}{bundled_urdf_hint(p.given_urdf)}') from None
         if self.sim.missing_meshes:
             self.get_logger().warning(missing_meshes_note(self.sim.missing_meshes))
+        if self.sim.zero_inertia_links:
+            self.get_logger().warning(zero_inertia_note(self.sim.zero_inertia_links))
+        unsimulated = armature_note(p, self.sim.supports_armature)
+        if unsimulated:
+            self.get_logger().warning(unsimulated)
         self._effort_limits = self.sim.effort_limits_nm.tolist()
         self._velocity_limits = self.sim.velocity_limits_rad_s.tolist()
         self._at_velocity_limit = [0.999 * v for v in self._velocity_limits]
@@ -88,10 +113,24 @@ class WristSimNode(Node):
             Float64MultiArray, 'effort_controller/commands', self._on_command, 10,
             event_callbacks=SubscriptionEventCallbacks(matched=self._on_command_matched))
         self.reset_srv = self.create_service(Trigger, '~/reset', self._on_reset)
+        self._hold = p.hold_until_first_command
+        self._no_command_warn_s = float('inf')  # set when the loop starts (run)
+        # the URDF for RViz, robot_state_publisher's users and a controller that reads the topic
+        self.description_pub = (publish_description(self, p.urdf_xml)
+                                if p.publish_robot_description else None)
         self.get_logger().info(
-            f'simulating joints {list(self.sim.joint_names)} at {p.rate_hz} Hz, '
+            f'simulating joints {list(self.sim.joint_names)} in {self.sim.engine} at '
+            f'{p.rate_hz} Hz, armature {list(p.armature)} kg m^2, '
             f'effort limits {self.sim.effort_limits_nm.tolist()} N m, '
-            + ('lockstep with /clock' if self.publish_clock else 'real time'))
+            + ('lockstep with /clock' if self.publish_clock else 'real time')
+            + f'; {self._before_first_command()} until the first command on '
+            f'{self.cmd_sub.topic_name}'
+            + f'; URDF from {p.description.describe()}'
+            + (f', published on {self.description_pub.topic_name}'
+               if self.description_pub is not None else ''))
+
+    def _before_first_command(self) -> str:
+        return 'joints held at rest' if self._hold else 'zero torque'
 
     def _apply_config(self, config: SimConfig) -> None:  # its friction, if it changed
         friction = [list(config.viscous_nm_s_per_rad), list(config.coulomb_nm)]
@@ -177,8 +216,22 @@ class WristSimNode(Node):
         return self.live.current
 
     def every_second(self, line: str) -> None:
-        """Log the loop's figures (debug); warn of a second controller on the command topic."""
+        """
+        Log the loop's figures (debug); warn of a second controller on the command topic.
+
+        Warn, slowly throttled, while no command has come since start, with the publishers
+        matched on the command topic (counted from matched events, not the graph).
+        """
         self.get_logger().debug(line)
+        now_s = time.perf_counter()
+        if not self.gate.commanded and now_s >= self._no_command_warn_s:
+            self._no_command_warn_s = now_s + NO_COMMAND_REPEAT_S
+            n = self._command_publishers
+            self.get_logger().warning(
+                f'no command on {self.cmd_sub.topic_name} {now_s - self.stats.start_s:.1f} s '
+                f'after start ({n} publisher{"" if n == 1 else "s"} matched; is a controller '
+                f'running and publishing there?): {self._before_first_command()} until one '
+                'arrives')
         if self._command_publishers > 1:
             self.get_logger().warning(
                 f'{self._command_publishers} publishers on {self.cmd_sub.topic_name}: more than '
@@ -221,6 +274,7 @@ class WristSimNode(Node):
         ok = realtime.RunCheck(keep_running, self.context.ok)
         self.publish_state()  # the initial state, so a controller can answer it
         self.stats.start_s = time.perf_counter()
+        self._no_command_warn_s = self.stats.start_s + NO_COMMAND_WARN_S
         if self.publish_clock:
             pacing.run_lockstep(self, executor, self.dt_ns * 1e-9, ok)
         else:

@@ -1,0 +1,95 @@
+"""Joint states as drivers send them: no velocities, names in any order, wrapped angles."""
+import math
+
+import numpy as np
+import pytest
+
+from quat_jt_runtime.joints import check_state_rate, StateCheck, VelocityEstimator, wrapped
+
+pytestmark = pytest.mark.unit
+
+NOW_NS = 50_000_000_000
+
+
+def test_the_estimate_follows_a_sine_with_the_lag_of_its_filter():
+    """At 500 Hz, q = sin(w t): the estimate is w cos(w t) delayed by 1.08 periods."""
+    rate, w = 500.0, 2.0 * math.pi * 2.0  # a 2 Hz motion
+    h = 1.0 / rate
+    est = VelocityEstimator(1, time_constant_s=h, max_gap_s=10 * h)
+    errors = []
+    for k in range(1000):
+        t = k * h
+        v = est.update([math.sin(w * t)], int(round(t * 1e9)))[0]
+        if k > 50:
+            # half a period of the difference, e^-1 / (1 - e^-1) = 0.58 of the filter
+            lagged = w * math.cos(w * (t - 1.082 * h))
+            errors.append(abs(v - lagged))
+    assert max(errors) < 0.01 * w, max(errors)  # within 1% of the peak speed
+
+
+def test_the_estimate_of_a_ramp_settles_on_its_slope_and_rejects_quantisation_noise():
+    rate = 1000.0
+    est = VelocityEstimator(2, 1.0 / rate, 10.0 / rate)
+    rng = np.random.default_rng(0)
+    count = 2.0 * math.pi / 2 ** 16  # a 16-bit encoder
+    out = []
+    for k in range(2000):
+        q = [0.3 * k / rate, -0.1]
+        q = [count * round(x / count) + count * rng.integers(-1, 2) for x in q]
+        out.append(est.update(q, k * 1_000_000))
+    out = np.array(out[1000:])
+    assert abs(out[:, 0].mean() - 0.3) < 1e-3
+    raw_noise = count * rate  # one count over one period
+    assert out[:, 0].std() < raw_noise and out[:, 1].std() < raw_noise
+
+
+def test_a_repeated_or_older_stamp_changes_nothing_and_a_gap_restarts():
+    est = VelocityEstimator(1, 0.001, 0.01)
+    assert est.update([0.0], 1_000_000) == [0.0]  # the first state: no difference yet
+    v = est.update([0.001], 2_000_000)[0]
+    assert v == pytest.approx(1.0 * (1.0 - math.exp(-1.0)))
+    assert est.update([0.5], 2_000_000) == [v]  # the same stamp again
+    assert est.update([0.5], 1_500_000) == [v]  # an older one
+    assert est.update([0.2], 100_000_000) == [0.0]  # 98 ms later: restart at 0
+    assert est.update([0.201], 101_000_000)[0] > 0.0
+
+
+def test_the_state_check_estimates_velocities_when_a_driver_sends_none():
+    check = StateCheck(('a', 'b'), max_age_s=0.5, rate_hz=100.0)
+    q, qdot = check(['b', 'gripper', 'a'], [2.0, 0.0, 1.0], [], NOW_NS - 10_000_000, NOW_NS)
+    assert (q, qdot) == ([1.0, 2.0], [0.0, 0.0]) and check.estimating
+    q, qdot = check(['b', 'gripper', 'a'], [2.01, 0.0, 1.0], [], NOW_NS, NOW_NS)
+    assert qdot[0] == 0.0 and qdot[1] == pytest.approx(1.0 * (1.0 - math.exp(-1.0)))
+    q, qdot = check(['a', 'b'], [1.0, 2.0], [0.5, 0.25], NOW_NS, NOW_NS)  # velocities again
+    assert qdot == [0.5, 0.25] and not check.estimating
+    with pytest.raises(ValueError, match='2 names but 2 positions and 1 velocities'):
+        check(['a', 'b'], [1.0, 2.0], [0.5], NOW_NS, NOW_NS)
+    with pytest.raises(ValueError, match='non-finite position'):
+        check(['a', 'b'], [1.0, math.nan], [], NOW_NS, NOW_NS)
+
+
+def test_unstamped_states_without_velocities_use_their_arrival_time():
+    check = StateCheck(('a',), max_age_s=0.0, rate_hz=1000.0)
+    check(['a'], [0.0], [], 0, NOW_NS)
+    _, qdot = check(['a'], [0.001], [], 0, NOW_NS + 1_000_000)
+    assert qdot[0] == pytest.approx(1.0 - math.exp(-1.0))
+
+
+def test_continuous_joints_are_unwrapped():
+    check = StateCheck(('c', 'r'), max_age_s=0.5, rate_hz=1000.0, continuous=(True, False))
+    angles = [3.1, 3.14, -3.12, -3.08, 3.1]  # the driver wraps joint c into (-pi, pi]
+    seen = [check(['c', 'r'], [a, 0.0], [], NOW_NS + k * 1_000_000, NOW_NS + k * 1_000_000)
+            for k, a in enumerate(angles)]
+    q = [s[0][0] for s in seen]
+    np.testing.assert_allclose(np.diff(q), [0.04, 2 * math.pi - 6.26, 0.04, 6.18 - 2 * math.pi],
+                               atol=1e-12)
+    assert all(abs(s[1][0]) < 110.0 for s in seen)  # the steps' speeds; a turn: 6283 rad/s
+    assert wrapped(3 * math.pi) == pytest.approx(-math.pi)
+
+
+@pytest.mark.parametrize('bad', [50.0, 1e4, math.nan, 'fast'])
+def test_a_rate_outside_its_range_is_refused_by_value(bad):
+    with pytest.raises(ValueError, match=f'state_rate.*{bad!r}'):
+        check_state_rate(bad)
+    with pytest.raises(ValueError, match='state_rate'):
+        StateCheck(('a',), 0.5, rate_hz=bad)

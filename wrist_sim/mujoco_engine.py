@@ -1,0 +1,200 @@
+"""
+The MuJoCo engine of the simulator: the same URDF compiled by MuJoCo (``pip install mujoco``).
+
+MuJoCo reads URDF itself (``MjModel.from_xml_string``). Before it does, the URDF is changed
+only where the simulator's plant requires it:
+
+- the ``<visual>`` and ``<collision>`` shapes are removed (no contacts, as in the PyBullet
+  engine, and no mesh files to find: the dynamics need only the ``<inertial>`` elements);
+- the movable joints that are not driven become fixed, at zero (the "locked" joints of the
+  model);
+- a ``<mujoco><compiler .../></mujoco>`` extension: ``fusestatic="false"`` keeps every link
+  a body of its own (MuJoCo's fusion of links joined by fixed joints weighs their inertias by
+  mass and so loses the rotational inertia of a link of mass 0, which the Panda's panda_link8
+  has and Pinocchio keeps); ``balanceinertia="true"`` lets MuJoCo compile a physically
+  impossible inertia tensor (principal moments that break the triangle inequality, as xArm6's
+  link2 and link3 in pybullet_data have) by raising its smallest moments until it is
+  possible, where Pinocchio keeps the tensor and PyBullet drops the link's rotational inertia.
+  Valid tensors (the bundled wrist's, the Panda's) are untouched.
+
+Then, per driven joint (MuJoCo's DOF fields, set after compiling, so the URDF's ``<dynamics
+damping friction>`` are replaced by the simulator's parameters, as in the PyBullet engine):
+
+- ``dof_armature``: the rotor inertia, on the diagonal of M(q) (``supports_armature``);
+- ``dof_damping``: the viscous friction ``b``, integrated implicitly by MuJoCo's Euler
+  integrator (stable for any ``b``);
+- ``dof_frictionloss``: the Coulomb level with stiction, a constraint the solver bounds by the
+  level. It is made as stiff as the step allows (``solreffriction`` time constant 2 dt,
+  impedance 0.9999), so a joint held by it creeps at about 3e-6 rad/s under a load just below
+  the level (PyBullet's velocity motor: none); the joint ranges get the same stiffness.
+
+The step is MuJoCo's semi-implicit Euler at ``dt_s`` (the integrator the gain design's
+sampled-loop check assumes), gravity -9.81 m/s^2 along z, the motor torque applied as
+``qfrc_applied``. With ``enforce_velocity_limits`` each driven joint's speed is clamped to its
+URDF velocity limit after the step and the position integrated with the clamped speed
+(``q_k+1 = q_k + dt v_k+1``), the effect of PyBullet's ``maxJointVelocity``. The effort limits
+are the simulator's clamp, the same for both engines. There is no window: ``use_gui`` is
+PyBullet's.
+"""
+from typing import Any, Optional, Sequence
+import xml.etree.ElementTree as ET
+
+import numpy as np
+from quat_jt_runtime.joints import movable_joints, MOVABLE_TYPES, select_joints
+from wrist_sim.engine import Engine, GRAVITY_MPS2, SimulatorError
+
+FRICTION_IMPEDANCE = 0.9999  # MuJoCo's largest: the stiffest constraint (least creep)
+CONSTRAINT_TIME_STEPS = 2.0  # solref time constant, in steps: MuJoCo's smallest stable
+
+
+def _import_mujoco() -> Any:
+    try:
+        import mujoco
+    except ImportError as exc:
+        raise SimulatorError(
+            f"engine 'mujoco' needs the mujoco package ({exc}): pip install mujoco (the "
+            "package's 'mujoco' extra), or use engine 'pybullet'") from None
+    return mujoco
+
+
+def mujoco_urdf(urdf_xml: str, driven: Sequence[str]) -> str:
+    """
+    Return the URDF as MuJoCo is to compile it (see the module docstring).
+
+    The shapes go, the movable joints not in ``driven`` become fixed, and the compiler
+    extension asks for ``balanceinertia``. Raises SimulatorError if the text is not XML.
+    """
+    try:
+        root = ET.fromstring(urdf_xml)
+    except ET.ParseError as exc:
+        raise SimulatorError(f'the URDF is not valid XML: {exc}') from exc
+    for link in root.iter('link'):
+        for shape in [e for e in link if e.tag in ('visual', 'collision')]:
+            link.remove(shape)
+    for joint in root.iter('joint'):
+        if joint.get('type') in MOVABLE_TYPES and joint.get('name') not in driven:
+            joint.set('type', 'fixed')
+    extension = root.find('mujoco')
+    if extension is None:
+        extension = ET.SubElement(root, 'mujoco')
+    compiler = extension.find('compiler')
+    if compiler is None:
+        compiler = ET.SubElement(extension, 'compiler')
+    compiler.set('balanceinertia', 'true')
+    compiler.set('discardvisual', 'true')
+    compiler.set('fusestatic', 'false')
+    return ET.tostring(root, encoding='unicode')
+
+
+def _urdf_limits(urdf_xml: str, names: Sequence[str]) -> dict[str, tuple[float, ...]]:
+    """Return (lower, upper, effort, velocity) of each named joint's URDF ``<limit>``."""
+    out = {}
+    for joint in ET.fromstring(urdf_xml).findall('joint'):  # not a <transmission>'s joints
+        name = joint.get('name')
+        if name not in names:
+            continue
+        limit = joint.find('limit')
+        get = (lambda key: float(limit.get(key, 0.0))) if limit is not None else (
+            lambda key: 0.0)
+        if joint.get('type') == 'continuous':
+            lower, upper = -np.inf, np.inf
+        else:
+            lower, upper = get('lower'), get('upper')
+        out[name] = (lower, upper, get('effort'), get('velocity'))
+    return out
+
+
+class MuJoCoEngine(Engine):
+    """The URDF compiled by MuJoCo (see the module docstring); headless."""
+
+    name = 'mujoco'
+    supports_armature = True
+
+    def __init__(self, urdf_xml: str, joint_names: Optional[Sequence[str]], dt_s: float,
+                 enforce_velocity_limits: bool = True) -> None:
+        mujoco = self._mujoco = _import_mujoco()
+        try:
+            movable = movable_joints(urdf_xml)
+        except ValueError as exc:
+            raise SimulatorError(str(exc)) from exc
+        names = select_joints(joint_names, movable, SimulatorError)
+        try:
+            model = mujoco.MjModel.from_xml_string(mujoco_urdf(urdf_xml, names))
+        except ValueError as exc:  # MuJoCo's compile errors
+            raise SimulatorError(f'MuJoCo cannot compile the URDF: {exc}') from exc
+        self.joint_names = tuple(names)
+        self.missing_meshes: list[str] = []  # no shapes: no mesh is looked for
+        model.opt.timestep = float(dt_s)
+        model.opt.gravity[:] = (0.0, 0.0, -GRAVITY_MPS2)
+        model.opt.integrator = mujoco.mjtIntegrator.mjINT_EULER
+        jids = [mujoco.mj_name2id(model, mujoco.mjtObj.mjOBJ_JOINT, n) for n in names]
+        if any(j < 0 for j in jids) or model.nv != self.n:
+            raise SimulatorError(f'MuJoCo compiled {model.nv} degrees of freedom for the joints '
+                                 f'{list(names)}')
+        self._qadr = np.array([model.jnt_qposadr[j] for j in jids])
+        self._dadr = np.array([model.jnt_dofadr[j] for j in jids])
+        limits = _urdf_limits(urdf_xml, names)
+        lower, upper, effort, velocity = (np.array(v, dtype=float)
+                                          for v in zip(*(limits[n] for n in names)))
+        self.position_lower, self.position_upper = lower, upper
+        # URDF effort or velocity 0 (or absent) means "no limit given", as in PyBullet.
+        self.effort_limits_nm = np.where(effort > 0.0, effort, np.inf)
+        self.velocity_limits_rad_s = np.where(velocity > 0.0, velocity, np.inf)
+        self.enforces_velocity_limits = bool(enforce_velocity_limits)
+        self._clamped = (np.isfinite(self.velocity_limits_rad_s)
+                         if enforce_velocity_limits else np.zeros(self.n, dtype=bool))
+        stiff = (CONSTRAINT_TIME_STEPS * dt_s, 1.0)
+        model.dof_solref[:] = stiff  # the friction-loss constraints
+        model.dof_solimp[:, :2] = FRICTION_IMPEDANCE
+        model.jnt_solref[:] = stiff  # the joint ranges (stops)
+        model.dof_damping[:] = 0.0
+        model.dof_frictionloss[:] = 0.0
+        model.dof_armature[:] = 0.0
+        self._model = model
+        self._data = mujoco.MjData(model)
+        self.q = np.zeros(self.n)
+        self.qdot = np.zeros(self.n)
+        self._dt = float(dt_s)
+        self._read()
+
+    def set_friction(self, viscous_nm_s_per_rad: np.ndarray, coulomb_nm: np.ndarray) -> None:
+        """Viscous as the DOF damping (implicit), Coulomb as the DOF friction loss."""
+        self._model.dof_damping[self._dadr] = viscous_nm_s_per_rad
+        self._model.dof_frictionloss[self._dadr] = coulomb_nm
+
+    def set_armature(self, armature: np.ndarray) -> None:
+        """Set the rotor inertia as the DOF armature, on the diagonal of M(q)."""
+        self._model.dof_armature[self._dadr] = armature
+
+    def step(self, tau_nm: np.ndarray) -> None:
+        """One Euler step under the motor torque; the speeds clamped at their limits."""
+        data = self._data
+        data.qfrc_applied[self._dadr] = tau_nm
+        self._mujoco.mj_step(self._model, data)
+        if self._clamped.any():
+            v = data.qvel[self._dadr]
+            limit = self.velocity_limits_rad_s
+            fast = self._clamped & (np.abs(v) > limit)
+            if fast.any():
+                clamped = np.clip(v, -limit, limit)
+                # q_k+1 = q_k + dt v_k+1: integrate the clamped speed instead
+                data.qpos[self._qadr[fast]] += self._dt * (clamped[fast] - v[fast])
+                data.qvel[self._dadr[fast]] = clamped[fast]
+        self._read()
+
+    def _read(self) -> None:
+        np.take(self._data.qpos, self._qadr, out=self.q)
+        np.take(self._data.qvel, self._dadr, out=self.qdot)
+
+    def reset(self, q_rad: np.ndarray, qdot_rad_s: np.ndarray) -> None:
+        """Set the joints' positions and velocities; forces and warm starts cleared."""
+        data = self._data
+        data.qpos[self._qadr] = q_rad
+        data.qvel[self._dadr] = qdot_rad_s
+        data.qacc_warmstart[:] = 0.0
+        data.qfrc_applied[:] = 0.0
+        self._mujoco.mj_forward(self._model, data)
+        self._read()
+
+    def close(self) -> None:
+        """Nothing to release (the model and data are freed with this object)."""
