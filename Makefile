@@ -12,7 +12,7 @@ venv: $(STAMP)
 $(STAMP): setup.py setup.cfg
 	$(PYTHON) -m venv $(VENV)
 	$(PY) -m pip install --quiet --upgrade pip
-	$(PY) -m pip install --quiet -e '.[core,ros,demo,test,mujoco]'
+	$(PY) -m pip install --quiet -e '.[core,sim,ros,demo,test,mujoco]'
 	touch $(STAMP)
 
 # The whole test suite (what CI runs).

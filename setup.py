@@ -26,8 +26,11 @@ setup(
     # Under colcon, dependencies come from package.xml (rosdep); under pip, from the extras.
     install_requires=['setuptools'],
     extras_require={
-        # The ROS-free core: kinematics, dynamics and the control laws.
-        'core': ['numpy>=1.24', 'pin>=2.7', 'pybullet>=3.2.5'],
+        # The ROS-free core: kinematics, dynamics and the control laws; with 'ros', all a real
+        # robot needs (controller_node, design_gains). No simulator.
+        'core': ['numpy>=1.24', 'pin>=2.7'],
+        # The simulator (wrist_sim_node, the composed process, the experiments): PyBullet.
+        'sim': ['pybullet>=3.2.5'],
         # rclpy and messages from the ROS 2 Jazzy wheels on PyPI (no ROS install needed).
         'ros': ['ros-jazzy-rclpy[fastrtps]', 'ros-jazzy-common-interfaces'],
         # The simulator's second physics engine (wrist_sim_node engine:=mujoco).

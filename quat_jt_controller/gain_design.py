@@ -1042,7 +1042,7 @@ def _public_argv(argv: Sequence[str]) -> list[str]:
     try:
         import pybullet_data
         folder = pybullet_data.getDataPath()
-    except ImportError:  # pragma: no cover - pybullet is in the core extra
+    except ImportError:  # a controller-only install has no simulator
         folder = None
     return [a.replace(folder, '<pybullet_data>') if folder else a for a in argv]
 

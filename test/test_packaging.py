@@ -69,3 +69,34 @@ def test_the_experiments_are_not_installed(colcon_install):
     importing = [p.name for p in site.glob('*/*.py')
                  if re.search(r'^\s*(from|import) experiments\b', p.read_text(), re.M)]
     assert not importing, importing  # the arrows point one way
+
+
+def test_the_core_extra_installs_no_simulator():
+    """``pip install .[core,ros]`` is all a real robot needs: no PyBullet, no MuJoCo."""
+    from importlib.metadata import requires
+    core = [r for r in requires('quat_jt_controller') or []
+            if re.search(r'extra\s*==\s*[\'"]core[\'"]', r)]
+    assert core, 'the core extra is empty'
+    assert not [r for r in core if r.startswith(('pybullet', 'mujoco'))], core
+
+
+# The controller and the gain design with the simulators made unimportable, as on a machine
+# where only the core and ros extras are installed.
+WITHOUT_SIMULATORS = """
+import sys
+for name in ('pybullet', 'pybullet_data', 'mujoco', 'wrist_sim'):
+    sys.modules[name] = None  # any import of it raises ImportError
+from quat_jt_controller import controller_node  # noqa: F401 - the node's whole import tree
+from quat_jt_controller.gain_design import main
+sys.exit(main(sys.argv[1:]))
+"""
+
+
+def test_controller_node_and_design_gains_run_without_a_simulator(tmp_path):
+    out = tmp_path / 'wrist_controller.yaml'
+    result = subprocess.run(
+        [sys.executable, '-c', WITHOUT_SIMULATORS, '--task', 'orientation', '--out', str(out)],
+        cwd=tmp_path, env={**os.environ, 'PYTHONPATH': str(REPO)}, capture_output=True,
+        text=True, timeout=300)
+    assert result.returncode == 0, result.stdout + result.stderr
+    assert 'kp:' in out.read_text()
