@@ -3,7 +3,8 @@ The control tick, written once: joint state in, clamped joint torque out (Eq. 22
 
     tau = J^T Q(eta_e, e)^T grad U_a(y_tilde) - K_v qdot + g(q),  clamped to the effort limits
 
-With the extensions of ``gains.shaping`` (``shaping.py``, docs/lyapunov.md) it is
+With the extensions (the :class:`~quat_jt_controller.shaping.Shaping` snapshot, ``shaping.py``,
+docs/lyapunov.md) it is
 
     tau = J^T Q^T grad U_a - grad U_lim(q) - K_v qdot + g(q) + tau_fc,  clamped
 

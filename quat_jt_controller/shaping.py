@@ -104,7 +104,7 @@ def _per_joint(name: str, values: Optional[Sequence[float]], n: int,
 @dataclass(frozen=True)
 class Shaping:
     """
-    The extensions, validated and immutable; part of the Gains snapshot.
+    The extensions, validated and immutable: a snapshot of their own beside the Gains.
 
     Units: ``joint_limit_margin_rad`` rad (band width inside each limit), ``joint_limit_gain``
     N m/rad per joint (stiffness in the band; 0 = no limit term for that joint),

@@ -5,20 +5,17 @@ ROS-free (an executor is any object with ``spin_once(timeout_sec)``). The settin
 real-time deployment of a 1 kHz loop sets (ros2_control's controller_manager has a
 ``cpu_affinity`` parameter for the same reason):
 
-* **CPU affinity.** A node pinned to a CPU of its own keeps its caches warm between ticks. On
-  the 2-core test machine, pinning the simulator and the controller to different CPUs halved
-  the controller's compute time in the loop in a quiet second, but missed more ticks than not
-  pinning in most runs (docs/ros.md, 'Real-time settings'; docs/benchmark.md). Every thread of the
-  process is pinned (the DDS threads too); threads started later inherit it. Child processes
-  started before (the controller's goal-check worker) are not.
+* **CPU affinity.** A node pinned to a CPU of its own keeps its caches warm between ticks;
+  on a machine with few cores it can also miss more ticks than not pinning, so it is off by
+  default (measured both ways in docs/benchmark.md). Every thread of the process is pinned
+  (the DDS threads too); threads started later inherit it. Child processes started before
+  (the controller's goal-check worker) are not.
 * **Thread priority.** Every thread of a node's process (the DDS threads too) runs in
   ``SCHED_FIFO`` at the node's ``thread_priority`` (50 by default, as ros2_control's
   controller_manager), so no ordinary process can preempt the loop or a DDS thread that holds
-  a lock the loop needs. On the test machine, with a short-lived ROS process started every 10 s
-  beside the nodes, the simulator's largest period per minute fell from 8.2-13.4 ms to
-  2.0-3.9 ms (docs/benchmark.md, 'A CLI process every 10 s'). A child process started through
-  :func:`start_at_normal_scheduling` (the goal-check worker) starts with normal scheduling,
-  so it never competes with the loop.
+  a lock the loop needs (the soaks beside other processes: docs/benchmark.md). A child process
+  started through :func:`start_at_normal_scheduling` (the goal-check worker) starts with
+  normal scheduling, so it never competes with the loop.
 * **Timer slack.** Linux lets a sleeping thread wake up to 50 us late (the default slack) so
   that wake-ups can be merged. The simulator's real-time loop sleeps until just before each
   tick and busy-waits the rest; with 1 ns of slack its sleeps end closer to the tick, so the
@@ -26,10 +23,9 @@ real-time deployment of a 1 kHz loop sets (ros2_control's controller_manager has
 * **Waiting for an answer** (:func:`answer_deadline`, :func:`await_answer`): the simulator's
   rules, shared with the benchmark's minimal pair so that the two compare one to one.
 * **Prewarm** (:class:`Prewarm`): the controller runs a throwaway tick shortly before each
-  state is due, so that the real tick finds its code and data in the caches and its CPU awake.
-  On the test machine (docs/ros.md, 'Real-time settings'): not pinned, the compute time in the loop
-  went from about 43 us to about 25 us and the state-to-command latency p50 dropped by about
-  40 us; pinned, the missed ticks fell by about half; for about 5 points more CPU.
+  state is due, so that the real tick finds its code and data in the caches and its CPU awake,
+  for one more wake-up per state (what it buys and costs, measured with the benchmark's
+  ``--prewarm-pairs``: docs/ros.md, 'Prewarm', and docs/benchmark.md).
 * :class:`RunCheck`: the nodes' "keep running?" check, cheap enough to ask after every event.
 """
 import ctypes
