@@ -177,7 +177,7 @@ def plot(r: SequenceRun, model: RobotModel, path: Path, potential: str) -> None:
     matplotlib.use('Agg')
     import matplotlib.pyplot as plt
 
-    from experiments.paper_experiment import plot_angles
+    from experiments.plots import plot_angles
 
     fig, axes = plt.subplots(4, 1, figsize=(10, 13), sharex=True)
     axes[0].semilogy(r.t_s, 1e3 * r.position_error_m, color='tab:red')

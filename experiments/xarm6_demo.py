@@ -115,7 +115,7 @@ def plot(runs: list[PoseRun], model: RobotModel, path: Path) -> None:
     matplotlib.use('Agg')
     import matplotlib.pyplot as plt
 
-    from experiments.paper_experiment import plot_angles, plot_torques
+    from experiments.plots import plot_angles, plot_torques
 
     fig, axes = plt.subplots(3, 2, figsize=(11, 12.6), squeeze=False)
     colors = {'quadratic': 'tab:blue', 'tanh': 'tab:red'}
