@@ -55,17 +55,19 @@ class Pair(ProcessHarnessMixin):
         self.executor.add_node(self.node)
         self.states: list[JointState] = []
         self.commands: list[tuple[float, list[float]]] = []
-        self.node.create_subscription(JointState, 'joint_states', self._on_state, 100)
+        # Deep queues: on a loaded host this process may take its samples a second late, and
+        # a sample dropped here (the one state at q(0) = 0 after a reset, say) is a false fail.
+        self.node.create_subscription(JointState, 'joint_states', self._on_state, 1000)
         self.node.create_subscription(Float64MultiArray, 'effort_controller/commands',
                                       lambda m: self.commands.append(
-                                          (time.monotonic(), list(m.data))), 100)
+                                          (time.monotonic(), list(m.data))), 1000)
         self.goal_pub = self.node.create_publisher(
             PoseStamped, 'quat_jt_controller/target_pose', 100)
         self.reset = self.node.create_client(Trigger, 'wrist_sim/reset')
 
     def _on_state(self, msg: JointState) -> None:
         self.states.append(msg)
-        del self.states[:-200]
+        del self.states[:-5000]  # the last 5 s
 
     def start(self, executable: str, log_name: str = '', **params) -> subprocess.Popen:
         name = log_name or executable
