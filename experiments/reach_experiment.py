@@ -34,6 +34,25 @@ friction. The sign changes of each joint's control torque without gravity, ``tau
 counted over the case's last second: more than one on a joint and the case ends in a limit
 cycle.
 
+The cases run in parallel on local processes (``--workers``, default one per CPU) or, given
+``--ray-address``, on a Ray cluster (``experiments.runners``); seeded, they give the same
+outcomes whichever runner ran them.
+
+Any arm from its URDF plus what a user knows, instead of ``--robot`` (docs/reach.md, "Any arm"):
+
+    python -m experiments.reach_experiment (--urdf FILE | --example-robot NAME)
+        [--base-link L] [--tip-link L] [--task pose|orientation] [--rate HZ]
+        [--condition ideal armature armature-wrong friction no-velocities]
+        [--engine mujoco|pybullet] [--armature A] [--armature-told-scale S]
+        [--friction-fraction F] [--cases N] [--potential tanh]
+
+The gains are ``gain_design.design`` on the URDF with the armature the condition tells it and
+the rate; the plant is the same URDF in ``--engine`` with the condition's rotor inertia and
+untold Coulomb friction, its velocities not clamped (a peak past a URDF velocity limit is
+reported as ``|qdot|/limit``), or its states given without velocities (estimated by
+``quat_jt_runtime.joints.VelocityEstimator``, as the node does). A markdown table ends the
+output: reached, stops touched, velocity limits exceeded, limit cycles, time to goal.
+
 ``--dds K`` also runs the first K cases of each robot over DDS with the real nodes
 (``local_ros``, lockstep paced at real time, so that the goal-check worker answers in the same
 time as on a robot; the goal 2 s after the start): the verdict from the last joint state after

@@ -11,7 +11,11 @@ order of the jobs, so a seeded experiment gives the same figures whichever runne
 """
 from concurrent.futures import ProcessPoolExecutor
 import os
+from pathlib import Path
 from typing import Callable, Optional, Sequence
+
+
+SOURCE_TREE = Path(__file__).resolve().parents[1]  # the directory holding experiments/
 
 
 class RunnerError(RuntimeError):
@@ -65,10 +69,9 @@ def _run_ray(function: Callable, jobs: list, address: str,
                           "package's 'campaign' extra), or run without --ray-address (local "
                           'processes)') from None
     if not ray.is_initialized():
-        # the workers import this package's modules: ship the working directory if it is it
-        ray.init(address=address, runtime_env={'working_dir': os.getcwd()}
-                 if os.path.isdir(os.path.join(os.getcwd(), 'experiments')) else None,
-                 log_to_driver=False)
+        # the workers import this package's modules: ship the source tree they come from
+        ray.init(address=address, log_to_driver=False, runtime_env={
+            'working_dir': str(SOURCE_TREE), 'excludes': ['.git', '__pycache__', 'results/']})
     remote = ray.remote(function)
     refs = [remote.remote(job) for job in jobs]
     results = []

@@ -6,7 +6,7 @@ other here, or on local processes); Ray is imported only when asked and its abse
 error; the chain of an arm is found from its URDF alone.
 """
 import dataclasses
-import importlib.util
+import sys
 
 from experiments import arms
 from experiments import reach_experiment as rx
@@ -33,12 +33,12 @@ def test_run_all_keeps_the_order_of_the_jobs(workers):
 
 
 @pytest.mark.unit
-def test_bad_worker_count_and_missing_ray_are_clear_errors():
+def test_bad_worker_count_and_missing_ray_are_clear_errors(monkeypatch):
     with pytest.raises(runners.RunnerError, match='workers must be >= 1, got 0'):
         runners.run_all(_square, [1, 2], workers=0)
-    if importlib.util.find_spec('ray') is None:
-        with pytest.raises(runners.RunnerError, match='pip install ray'):
-            runners.run_all(_square, [1], ray_address='auto')
+    monkeypatch.setitem(sys.modules, 'ray', None)  # as if not installed
+    with pytest.raises(runners.RunnerError, match="--ray-address 'auto' needs Ray"):
+        runners.run_all(_square, [1], ray_address='auto')
 
 
 @pytest.mark.unit
@@ -66,6 +66,19 @@ def test_local_processes_give_the_outcomes_of_a_serial_run():
         np.testing.assert_array_equal(a.q_final, b.q_final)
         assert (a.reached, a.orientation_error, a.speed_ratio) == (
             b.reached, b.orientation_error, b.speed_ratio)
+
+
+@pytest.mark.e2e
+def test_a_local_ray_cluster_gives_the_outcomes_of_a_serial_run():
+    ray = pytest.importorskip('ray')
+    robot = _short(rx.ROBOTS['wrist'])
+    serial = rx.run_robot(robot, 'tanh', 2, seed=3, progress=None, workers=1)
+    try:
+        on_ray = rx.run_robot(robot, 'tanh', 2, seed=3, progress=None, ray_address='local')
+    finally:
+        ray.shutdown()
+    for a, b in zip(serial, on_ray, strict=True):
+        np.testing.assert_array_equal(a.q_final, b.q_final)
 
 
 @pytest.mark.e2e
