@@ -826,6 +826,7 @@ def main_arm(parser: argparse.ArgumentParser, args) -> int:
                                outcomes, time.monotonic() - t0))
             print(text[-1], flush=True)
             rows.append(table_row(robot, cond, outcomes))
+            print(rows[-1], flush=True)
     print('\n' + '\n'.join(text) + '\n\n' + TABLE_HEADER + '\n' + '\n'.join(rows))
     return 0
 
