@@ -71,6 +71,7 @@ import tempfile
 import time
 from typing import Optional
 
+from experiments import arms
 from experiments import runners
 import numpy as np
 from quat_jt_controller import control_law as cl
@@ -116,8 +117,6 @@ class Robot:
     joints: tuple = ()
 
 
-EXAMPLE_ROBOT_NAMES = ('ur3', 'ur5', 'ur10', 'panda', 'so100', 'so101', 'talos_left_arm', 'z1',
-                       'xarm7')  # experiments.arms.EXAMPLE_ROBOTS
 ROBOTS = {
     'wrist': Robot('wrist', 'wrist_controller.yaml', 'wrist_sim.yaml',
                    cl.Task.ORIENTATION, 0.9, 4.0, 0.005, math.inf),
@@ -624,7 +623,6 @@ def arm_robot(name: str, urdf_path: str, base_link: Optional[str], tip_link: Opt
     goals' task rows of J keep sigma_min at least a quarter of its median over the arm's
     sampled configurations (a rule for any arm, where a fixed bound in mixed units is not).
     """
-    from experiments import arms
     urdf = Path(urdf_path).read_text()
     base, tip, joints = arms.arm_links(urdf, base_link, tip_link)
     model = RobotModel(urdf, base, tip, joints)
@@ -741,7 +739,7 @@ def main(argv: Optional[list] = None) -> int:
     source = arm.add_mutually_exclusive_group()
     source.add_argument('--urdf', type=Path, help='the URDF file of the arm')
     source.add_argument('--example-robot', help='an example-robot-data arm (one of '
-                        f'{", ".join(EXAMPLE_ROBOT_NAMES)})')
+                        f'{", ".join(arms.EXAMPLE_ROBOTS)})')
     arm.add_argument('--base-link', help="default: the URDF's root link")
     arm.add_argument('--tip-link', help='default: the child of the last revolute joint of the '
                      'longest chain')
@@ -758,6 +756,8 @@ def main(argv: Optional[list] = None) -> int:
     arm.add_argument('--friction-fraction', type=float, default=0.01,
                      help="'friction': untold Coulomb friction, x each effort limit")
     args = parser.parse_args(argv)
+    if args.workers is not None and args.workers < 1:
+        parser.error(f'--workers must be >= 1, got {args.workers}')
     if args.urdf or args.example_robot:
         return main_arm(parser, args)
     overrides = {}
@@ -798,7 +798,6 @@ def main(argv: Optional[list] = None) -> int:
 
 def main_arm(parser: argparse.ArgumentParser, args) -> int:
     """Run the conditions on one arm from its URDF (``--urdf`` or ``--example-robot``)."""
-    from experiments import arms
     try:
         path = args.urdf or arms.example_robot_urdf(args.example_robot)
         if not Path(path).is_file():
