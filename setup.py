@@ -35,6 +35,9 @@ setup(
         'ros': ['ros-jazzy-rclpy[fastrtps]', 'ros-jazzy-common-interfaces'],
         # The simulator's second physics engine (wrist_sim_node engine:=mujoco).
         'mujoco': ['mujoco>=3.1'],
+        # The reach campaign: the development arms' URDFs, the plant, and (optionally) a Ray
+        # cluster to run the cases on (experiments/reach_experiment.py --ray-address).
+        'campaign': ['example-robot-data', 'mujoco>=3.1', 'ray>=2.9'],
         # Experiment recording, figures and animations (GIFs through Pillow).
         'demo': ['matplotlib>=3.7', 'mcap>=1.1', 'mcap-ros2-support>=0.5', 'Pillow>=9.1',
                  'pyyaml'],

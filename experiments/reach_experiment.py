@@ -34,6 +34,25 @@ friction. The sign changes of each joint's control torque without gravity, ``tau
 counted over the case's last second: more than one on a joint and the case ends in a limit
 cycle.
 
+The cases run in parallel on local processes (``--workers``, default one per CPU) or, given
+``--ray-address``, on a Ray cluster (``experiments.runners``); seeded, they give the same
+outcomes whichever runner ran them.
+
+Any arm from its URDF plus what a user knows, instead of ``--robot`` (docs/reach.md, "Any arm"):
+
+    python -m experiments.reach_experiment (--urdf FILE | --example-robot NAME)
+        [--base-link L] [--tip-link L] [--task pose|orientation] [--rate HZ]
+        [--condition ideal armature armature-wrong friction no-velocities]
+        [--engine mujoco|pybullet] [--armature A] [--armature-told-scale S]
+        [--friction-fraction F] [--cases N] [--potential tanh]
+
+The gains are ``gain_design.design`` on the URDF with the armature the condition tells it and
+the rate; the plant is the same URDF in ``--engine`` with the condition's rotor inertia and
+untold Coulomb friction, its velocities not clamped (a peak past a URDF velocity limit is
+reported as ``|qdot|/limit``), or its states given without velocities (estimated by
+``quat_jt_runtime.joints.VelocityEstimator``, as the node does). A markdown table ends the
+output: reached, stops touched, velocity limits exceeded, limit cycles, time to goal.
+
 ``--dds K`` also runs the first K cases of each robot over DDS with the real nodes
 (``local_ros``, lockstep paced at real time, so that the goal-check worker answers in the same
 time as on a robot; the goal 2 s after the start): the verdict from the last joint state after
@@ -42,6 +61,7 @@ the case's duration.
 import argparse
 import dataclasses
 from dataclasses import dataclass
+import functools
 import math
 import os
 from pathlib import Path
@@ -51,8 +71,9 @@ import tempfile
 import time
 from typing import Optional
 
+from experiments import arms
+from experiments import runners
 import numpy as np
-
 from quat_jt_controller import control_law as cl
 from quat_jt_controller import quaternion as quat
 from quat_jt_controller import shaping as sh
@@ -89,6 +110,11 @@ class Robot:
     # and the limit cycles are measured over the last second of the hold
     hold_s: float = 0.0
     goal_sigma_min: float = 0.1  # pose task: the goal's sigma_min(J_G) at least this
+    # an arm from its URDF (--urdf, --example-robot): no configs, the design from the URDF
+    urdf_path: str = ''
+    base_link: str = ''
+    tip_link: str = ''
+    joints: tuple = ()
 
 
 ROBOTS = {
@@ -103,6 +129,8 @@ ROBOTS = {
 
 def robot_urdf(robot: Robot) -> str:
     """Return the URDF XML of ``robot`` (the xArm6's ships inside pybullet_data)."""
+    if robot.urdf_path:
+        return Path(robot.urdf_path).read_text()
     if robot.name == 'wrist':
         return default_urdf_xml()
     import pybullet_data
@@ -128,6 +156,13 @@ def cases(model: RobotModel, robot: Robot, count: int, seed: int) -> list:
     out = []
     while len(out) < count:
         q0, qg = rng.uniform(lo, hi), rng.uniform(lo, hi)
+        if robot.urdf_path:  # any arm: the goal's task rows away from a singularity
+            _, _, J = model.kinematics(qg.tolist())
+            rows = np.array(J)[3:] if robot.task is cl.Task.ORIENTATION else np.array(J)
+            if np.linalg.svd(rows, compute_uv=False)[-1] < robot.goal_sigma_min:
+                continue
+            out.append((q0, qg))
+            continue
         if robot.task is cl.Task.ORIENTATION and abs(qg[1]) < 0.3:
             continue
         if robot.task is cl.Task.POSE:
@@ -163,12 +198,56 @@ class Outcome:
     final_speed_rad_s: float = math.nan  # the fastest joint over the run's last second
     from_q_star_rad: float = math.nan  # max_j |q_j - q*_j| at the end (nan: no q*)
     cause: str = ''
+    speed_ratio: float = math.nan  # max over joints and time of |qdot_j| / velocity limit_j
+
+
+class PositionsOnly:
+    """
+    A simulator whose states carry no velocities: the controller gets them estimated.
+
+    As the node does for such joint states (``quat_jt_runtime.joints.JointStateReader``): a
+    ``VelocityEstimator`` of time constant one period, restarted after ten periods without a
+    state, fed each state's positions and time.
+    """
+
+    def __init__(self, sim) -> None:
+        from quat_jt_runtime.joints import VelocityEstimator
+        self.sim, self.n, self.dt_s = sim, sim.n, sim.dt_s
+        self._estimator = VelocityEstimator(sim.n, sim.dt_s, 10.0 * sim.dt_s)
+        self._k = 0
+        self._v = np.array(self._estimator.update(sim.q_rad.tolist(), 0))
+
+    @property
+    def q_rad(self) -> np.ndarray:
+        """Return the joint positions, as the plant's."""
+        return self.sim.q_rad
+
+    @property
+    def qdot_rad_s(self) -> np.ndarray:
+        """Return the velocities estimated from the positions (not the plant's)."""
+        return self._v
+
+    def step(self, tau):
+        """Step the plant, then estimate the velocities from the new positions."""
+        applied = self.sim.step(tau)
+        self._k += 1
+        self._v = np.array(self._estimator.update(
+            self.sim.q_rad.tolist(), int(round(self._k * self.dt_s * 1e9))))
+        return applied
 
 
 def run_case(robot: Robot, model: RobotModel, gains: cl.Gains, shaping: sh.Shaping,
              sim_params: dict, index: int, q0: np.ndarray, qg: np.ndarray,
-             delay_ticks: int = 1, q_star_after_s: float = Q_STAR_AFTER_S) -> Outcome:
-    """Run one case on the PyBullet core; classify it."""
+             delay_ticks: int = 1, q_star_after_s: float = Q_STAR_AFTER_S,
+             engine: str = 'pybullet', sim_armature=None, no_velocities: bool = False,
+             dt_s: float = 1e-3) -> Outcome:
+    """
+    Run one case on the simulator core (``engine``); classify it.
+
+    ``sim_armature`` is the plant's rotor inertia (kg m^2 per joint; the model's may differ),
+    ``no_velocities`` gives the controller estimated velocities (``PositionsOnly``), ``dt_s``
+    the plant's step and the control period.
+    """
     from wrist_sim.simulator import WristSimulator
 
     p_d, R_d = model.forward_kinematics(qg.tolist())
@@ -184,9 +263,11 @@ def run_case(robot: Robot, model: RobotModel, gains: cl.Gains, shaping: sh.Shapi
                              viscous_nm_s_per_rad=sim_params.get('viscous_friction'),
                              coulomb_nm=sim_params.get('coulomb_friction'),
                              enforce_velocity_limits=sim_params.get('enforce_velocity_limits',
-                                                                    True))
+                                                                    True),
+                             engine=engine, armature=sim_armature, dt_s=dt_s)
+    plant = PositionsOnly(sim) if no_velocities else sim
     try:
-        held = run_sampled(loop, sim, robot.duration_s + robot.hold_s, delay_ticks, q_star,
+        held = run_sampled(loop, plant, robot.duration_s + robot.hold_s, delay_ticks, q_star,
                            q_star_after_s)
     finally:
         sim.close()
@@ -197,7 +278,10 @@ def run_case(robot: Robot, model: RobotModel, gains: cl.Gains, shaping: sh.Shapi
     reached = (run.all_finite and orientation < robot.orientation_tol
                and position < robot.position_tol_m)
     dt_s = run.t_s[1] - run.t_s[0]
-    speed = float(np.abs(np.diff(held.q_rad, axis=0)).max() / dt_s)
+    qdot = np.abs(np.diff(held.q_rad, axis=0)) / dt_s
+    speed = float(qdot.max())
+    limits = np.array([v if math.isfinite(v) and v > 0.0 else math.inf
+                       for v in model.velocity_limits])
     settle_tol = (robot.position_tol_m if math.isfinite(robot.position_tol_m) else math.inf)
     settled_s = run.settled_at_s(settle_tol, robot.orientation_tol)
     last = held.q_rad[int(np.searchsorted(held.t_s, held.t_s[-1] - 1.0)):]
@@ -206,7 +290,8 @@ def run_case(robot: Robot, model: RobotModel, gains: cl.Gains, shaping: sh.Shapi
                       q0, qg, held.q_rad[-1].copy(),
                       final_speed_rad_s=float(np.abs(np.diff(last, axis=0)).max() / dt_s),
                       from_q_star_rad=(math.nan if q_star is None else
-                                       float(np.abs(held.q_rad[-1] - q_star).max())))
+                                       float(np.abs(held.q_rad[-1] - q_star).max())),
+                      speed_ratio=float((qdot / limits).max()))
     if not reached:
         outcome.cause = classify(model, loop, shaping, q_star, run)
     if outcome.flips_per_s > LIMIT_CYCLE_FLIPS_PER_S:
@@ -346,23 +431,75 @@ class Plant:
         return sim_params, shaping
 
 
+@dataclass(frozen=True)
+class CaseJob:
+    """One case, picklable: what a worker process (or a Ray task) needs to run it."""
+
+    robot: Robot
+    model_spec: tuple  # (urdf_xml, base_link, tip_link, joint_names, armature): the model
+    gains: cl.Gains
+    shaping: sh.Shaping
+    sim_params: dict
+    index: int
+    q_start: np.ndarray
+    q_goal: np.ndarray
+    delay_ticks: int = 1
+    engine: str = 'pybullet'
+    sim_armature: Optional[tuple] = None
+    no_velocities: bool = False
+    dt_s: float = 1e-3
+
+
+@functools.lru_cache(maxsize=8)
+def _model(urdf_xml: str, base_link: str, tip_link: str, joints: tuple,
+           armature: tuple) -> RobotModel:
+    return RobotModel(urdf_xml, base_link, tip_link, list(joints), list(armature))
+
+
+def model_spec(model: RobotModel, urdf_xml: str) -> tuple:
+    """Return what rebuilds ``model`` in a worker (``CaseJob.model_spec``)."""
+    return (urdf_xml, model.base_link, model.tip_link, tuple(model.joint_names),
+            tuple(model.armature))
+
+
+def run_job(job: CaseJob) -> Outcome:
+    """Run one ``CaseJob`` (in whichever process the runner chose)."""
+    return run_case(job.robot, _model(*job.model_spec), job.gains, job.shaping, job.sim_params,
+                    job.index, job.q_start, job.q_goal, job.delay_ticks, engine=job.engine,
+                    sim_armature=job.sim_armature, no_velocities=job.no_velocities,
+                    dt_s=job.dt_s)
+
+
+def run_jobs(jobs: list, label: str, progress=print, workers: Optional[int] = None,
+             ray_address: Optional[str] = None) -> list:
+    """Run ``jobs`` on the runner asked for (``experiments.runners``); their outcomes, in order."""
+    outcomes: list = []
+
+    def report_progress(done: int, total: int) -> None:
+        if progress and done % 25 == 0:
+            progress(f'  [{label}] {done}/{total} cases', flush=True)
+    outcomes = runners.run_all(run_job, jobs, workers, ray_address, report_progress)
+    return outcomes
+
+
 def run_robot(robot: Robot, potential: str, count: int, seed: int, delay_ticks: int = 1,
               progress=print, without: Optional[str] = None,
-              plant: Plant = Plant(), overrides: Optional[dict] = None) -> list:
-    """Run ``count`` cases of ``robot`` with ``potential``; return their outcomes."""
+              plant: Plant = Plant(), overrides: Optional[dict] = None,
+              workers: Optional[int] = None, ray_address: Optional[str] = None) -> list:
+    """
+    Run ``count`` cases of ``robot`` with ``potential``; return their outcomes.
+
+    The cases run on local processes (``workers``, default one per CPU; 1: here, one after
+    the other) or on the Ray cluster at ``ray_address``: the same outcomes whichever.
+    """
     model, gains, shaping = load_controller(robot, potential, overrides)
     if without:
         shaping = dataclasses.replace(shaping, **ABLATIONS[without])
     sim_params, shaping = plant.apply(model, config_parameters(robot.sim_config), shaping)
-    outcomes = []
-    for i, (q0, qg) in enumerate(cases(model, robot, count, seed)):
-        outcomes.append(run_case(robot, model, gains, shaping, sim_params, i, q0, qg,
-                                 delay_ticks))
-        if progress and (i + 1) % 25 == 0:
-            done = sum(o.reached for o in outcomes)
-            progress(f'  [{robot.name} {potential}] {i + 1}/{count} cases, {done} reached',
-                     flush=True)
-    return outcomes
+    spec = model_spec(model, robot_urdf(robot))
+    jobs = [CaseJob(robot, spec, gains, shaping, sim_params, i, q0, qg, delay_ticks)
+            for i, (q0, qg) in enumerate(cases(model, robot, count, seed))]
+    return run_jobs(jobs, f'{robot.name} {potential}', progress, workers, ray_address)
 
 
 def run_dds(robot: Robot, count: int, seed: int, progress=print) -> str:
@@ -440,6 +577,124 @@ def run_dds(robot: Robot, count: int, seed: int, progress=print) -> str:
     return '\n'.join(lines)
 
 
+CONDITIONS = ('ideal', 'armature', 'armature-wrong', 'friction', 'no-velocities')
+
+
+@dataclass(frozen=True)
+class Condition:
+    """A plant of an arm from its URDF and what its controller is told of it."""
+
+    name: str
+    plant_armature: float = 0.0  # kg m^2 per joint, simulated
+    told_armature: float = 0.0  # kg m^2 per joint, given to the design and the controller
+    coulomb_effort_fraction: float = 0.0  # simulated Coulomb friction, x the effort limits
+    no_velocities: bool = False
+
+    def describe(self) -> str:
+        """Return the condition in words, for the table."""
+        return {
+            'ideal': 'ideal plant',
+            'armature': f'rotor inertia {self.plant_armature:g} kg m^2, given',
+            'armature-wrong': f'rotor inertia {self.plant_armature:g} kg m^2, given as '
+                              f'{self.told_armature:g}',
+            'friction': f'untold Coulomb friction {self.coulomb_effort_fraction:g} x effort',
+            'no-velocities': 'states without velocities (estimated)',
+        }[self.name]
+
+
+def condition(name: str, armature: float = 0.1, told_scale: float = 0.5,
+              friction_fraction: float = 0.01) -> Condition:
+    """Return the condition ``name`` (``CONDITIONS``) with these plant figures."""
+    return {
+        'ideal': Condition('ideal'),
+        'armature': Condition('armature', armature, armature),
+        'armature-wrong': Condition('armature-wrong', armature, told_scale * armature),
+        'friction': Condition('friction', coulomb_effort_fraction=friction_fraction),
+        'no-velocities': Condition('no-velocities', no_velocities=True),
+    }[name]
+
+
+def arm_robot(name: str, urdf_path: str, base_link: Optional[str], tip_link: Optional[str],
+              task: cl.Task, fraction: float = 0.8, duration_s: float = 5.0) -> Robot:
+    """
+    Return the ``Robot`` of an arm from its URDF alone (``experiments.arms`` for the chain).
+
+    The targets are the issue's for any arm: ||e|| < 0.01 and, for a pose task, < 1 mm. The
+    goals' task rows of J keep sigma_min at least a quarter of its median over the arm's
+    sampled configurations (a rule for any arm, where a fixed bound in mixed units is not).
+    """
+    urdf = Path(urdf_path).read_text()
+    base, tip, joints = arms.arm_links(urdf, base_link, tip_link)
+    model = RobotModel(urdf, base, tip, joints)
+    rng = np.random.default_rng(0)
+    lower, upper = np.array(model.position_lower), np.array(model.position_upper)
+    mid, half = 0.5 * (lower + upper), 0.5 * (upper - lower)
+    sigmas = []
+    for _ in range(200):
+        _, _, J = model.kinematics(rng.uniform(mid - fraction * half, mid + fraction * half)
+                                   .tolist())
+        rows = np.array(J)[3:] if task is cl.Task.ORIENTATION else np.array(J)
+        sigmas.append(np.linalg.svd(rows, compute_uv=False)[-1])
+    return Robot(name, '', '', task, fraction, duration_s, 0.01,
+                 1e-3 if task is cl.Task.POSE else math.inf,
+                 goal_sigma_min=0.25 * float(np.median(sigmas)), urdf_path=str(urdf_path),
+                 base_link=base, tip_link=tip, joints=tuple(joints))
+
+
+@functools.lru_cache(maxsize=16)
+def arm_design(robot: Robot, told_armature: float, rate_hz: float):
+    """Return ``(model, design)``: ``design_gains``' Python API on the URDF + the armature."""
+    from quat_jt_controller import gain_design
+    urdf = robot_urdf(robot)
+    model = RobotModel(urdf, robot.base_link, robot.tip_link, list(robot.joints),
+                       [told_armature] * len(robot.joints))
+    return model, gain_design.design(model, robot.task, rate_hz)
+
+
+def run_arm(robot: Robot, cond: Condition, potential: str, count: int, seed: int,
+            rate_hz: float = 1000.0, engine: str = 'mujoco', progress=print,
+            workers: Optional[int] = None, ray_address: Optional[str] = None) -> list:
+    """
+    Run ``count`` cases of an arm from its URDF in condition ``cond``; their outcomes.
+
+    The gains are ``design_gains``' from the URDF, the told armature and the rate; the plant
+    is ``engine``'s, without the velocity clamp (a speed past the URDF limit is measured, not
+    hidden), with ``cond``'s rotor inertia and Coulomb friction; the control period is
+    1 / ``rate_hz``.
+    """
+    model, d = arm_design(robot, cond.told_armature, float(rate_hz))
+    gains, shaping = d.gains(potential), d.shaping
+    n = model.n
+    sim_params = {'viscous_friction': [0.0] * n,
+                  'coulomb_friction': [cond.coulomb_effort_fraction * e
+                                       for e in model.effort_limits],
+                  'enforce_velocity_limits': False}
+    spec = model_spec(model, robot_urdf(robot))
+    jobs = [CaseJob(robot, spec, gains, shaping, sim_params, i, q0, qg, 1, engine,
+                    (cond.plant_armature,) * n, cond.no_velocities, 1.0 / rate_hz)
+            for i, (q0, qg) in enumerate(cases(model, robot, count, seed))]
+    return run_jobs(jobs, f'{robot.name} {cond.name}', progress, workers, ray_address)
+
+
+def table_row(robot: Robot, cond: Condition, outcomes: list) -> str:
+    """Return the markdown table row of one arm and condition (TABLE_HEADER's columns)."""
+    n = len(outcomes)
+    ok = sum(o.reached for o in outcomes)
+    ratios = np.array([o.speed_ratio for o in outcomes])
+    settled = np.array([o.settled_s for o in outcomes if o.reached])
+    cycles = sum(o.flips_per_s > LIMIT_CYCLE_FLIPS_PER_S for o in outcomes)
+    times = (f'{np.percentile(settled, 10):.2f} / {np.median(settled):.2f} / '
+             f'{np.percentile(settled, 90):.2f} / {settled.max():.2f}' if settled.size else '-')
+    return (f'| {robot.name} | {cond.describe()} | {ok}/{n} | '
+            f'{sum(o.touched for o in outcomes)} | {int(np.sum(ratios > 1.0))} '
+            f'(max {np.nanmax(ratios):.2f}) | {cycles} | {times} |')
+
+
+TABLE_HEADER = (r'| arm | condition | reached | stop touched | velocity limit exceeded (peak '
+                r'\|qdot\|/limit) | limit cycles | time to goal s: 10% / median / 90% / max |' '\n'
+                '|---|---|---|---|---|---|---|')
+
+
 def main(argv: Optional[list] = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split('\n')[1])
     parser.add_argument('--robot', nargs='+', choices=list(ROBOTS), default=list(ROBOTS))
@@ -472,7 +727,39 @@ def main(argv: Optional[list] = None) -> int:
     parser.add_argument('--param', action='append', default=[], metavar='NAME:=VALUE',
                         help='override a controller parameter of the config, ros2-style '
                         "(VALUE in YAML, e.g. 'configuration_gain:=[0, 0, 0]')")
+    parser.add_argument('--workers', type=int,
+                        help='local processes to run the cases on (default: one per CPU; 1: '
+                        'one after the other, here)')
+    parser.add_argument('--ray-address',
+                        help="run the cases on this Ray cluster (e.g. 'auto'; pip install ray, "
+                        "the package's 'campaign' extra) instead of local processes")
+    arm = parser.add_argument_group(
+        'any arm', 'an arm from its URDF alone, instead of --robot: the gains from '
+        "design_gains' Python API, the plant from the same URDF")
+    source = arm.add_mutually_exclusive_group()
+    source.add_argument('--urdf', type=Path, help='the URDF file of the arm')
+    source.add_argument('--example-robot', help='an example-robot-data arm (one of '
+                        f'{", ".join(arms.EXAMPLE_ROBOTS)})')
+    arm.add_argument('--base-link', help="default: the URDF's root link")
+    arm.add_argument('--tip-link', help='default: the child of the last revolute joint of the '
+                     'longest chain')
+    arm.add_argument('--task', choices=[t.value for t in cl.Task], default='pose')
+    arm.add_argument('--condition', nargs='+', choices=CONDITIONS, default=list(CONDITIONS))
+    arm.add_argument('--rate', type=float, default=1000.0,
+                     help='control and state rate, Hz (the design checks it; default 1000)')
+    arm.add_argument('--engine', choices=['mujoco', 'pybullet'], default='mujoco',
+                     help='the plant (default mujoco; pybullet simulates no armature)')
+    arm.add_argument('--armature', type=float, default=0.1,
+                     help='the rotor inertia of the armature conditions, kg m^2 per joint')
+    arm.add_argument('--armature-told-scale', type=float, default=0.5,
+                     help="'armature-wrong': the design is told this x the rotor inertia")
+    arm.add_argument('--friction-fraction', type=float, default=0.01,
+                     help="'friction': untold Coulomb friction, x each effort limit")
     args = parser.parse_args(argv)
+    if args.workers is not None and args.workers < 1:
+        parser.error(f'--workers must be >= 1, got {args.workers}')
+    if args.urdf or args.example_robot:
+        return main_arm(parser, args)
     overrides = {}
     for item in args.param:
         name, sep, value = item.partition(':=')
@@ -493,7 +780,8 @@ def main(argv: Optional[list] = None) -> int:
             t0 = time.monotonic()
             outcomes = run_robot(robot, potential, args.cases or default_cases[name],
                                  args.seed, args.delay, without=args.without, plant=plant,
-                                 overrides=overrides)
+                                 overrides=overrides, workers=args.workers,
+                                 ray_address=args.ray_address)
             label = ', '.join(x for x in (
                 potential, f'without {args.without}' if args.without else '',
                 f'within {robot.fraction:g} of the ranges', plant.describe(),
@@ -505,6 +793,40 @@ def main(argv: Optional[list] = None) -> int:
         text.append(f'{name} over DDS (nodes in lockstep, tanh, config/'
                     f'{robot.controller_config}):\n' + run_dds(robot, args.dds, args.seed))
     print('\n' + '\n'.join(text))
+    return 0
+
+
+def main_arm(parser: argparse.ArgumentParser, args) -> int:
+    """Run the conditions on one arm from its URDF (``--urdf`` or ``--example-robot``)."""
+    try:
+        path = args.urdf or arms.example_robot_urdf(args.example_robot)
+        if not Path(path).is_file():
+            raise ValueError(f'--urdf {path}: no such file')
+        for name, value in (('--armature', args.armature), ('--rate', args.rate),
+                            ('--armature-told-scale', args.armature_told_scale),
+                            ('--friction-fraction', args.friction_fraction)):
+            if not (math.isfinite(value) and value >= 0.0):
+                raise ValueError(f'{name} must be finite and >= 0, got {value}')
+        robot = arm_robot(args.example_robot or Path(path).stem, str(path), args.base_link,
+                          args.tip_link, cl.Task(args.task),
+                          args.fraction if args.fraction is not None else 0.8,
+                          args.duration if args.duration is not None else 5.0)
+    except (ValueError, OSError) as exc:
+        parser.error(str(exc))
+    rows, text = [], []
+    for name in args.condition:
+        cond = condition(name, args.armature, args.armature_told_scale, args.friction_fraction)
+        for potential in args.potential:
+            t0 = time.monotonic()
+            outcomes = run_arm(robot, cond, potential, args.cases or 20, args.seed, args.rate,
+                               args.engine, workers=args.workers,
+                               ray_address=args.ray_address)
+            text.append(report(robot, f'{potential}, {cond.describe()}, {args.engine}',
+                               outcomes, time.monotonic() - t0))
+            print(text[-1], flush=True)
+            rows.append(table_row(robot, cond, outcomes))
+            print(rows[-1], flush=True)
+    print('\n' + '\n'.join(text) + '\n\n' + TABLE_HEADER + '\n' + '\n'.join(rows))
     return 0
 
 

@@ -1,0 +1,99 @@
+"""
+The reach campaign's infrastructure: its runners, and any arm from its URDF.
+
+The cases of an experiment give the same outcomes whichever runner ran them (one after the
+other here, or on local processes); Ray is imported only when asked and its absence is a clear
+error; the chain of an arm is found from its URDF alone.
+"""
+import dataclasses
+import sys
+
+from experiments import arms
+from experiments import reach_experiment as rx
+from experiments import runners
+import numpy as np
+import pytest
+from quat_jt_controller import control_law as cl
+
+from robots import small_arm_urdf
+
+
+def _square(x: int) -> int:
+    return x * x
+
+
+@pytest.mark.unit
+@pytest.mark.parametrize('workers', [1, 2])
+def test_run_all_keeps_the_order_of_the_jobs(workers):
+    seen = []
+    assert runners.run_all(_square, range(7), workers,
+                           progress=lambda d, t: seen.append((d, t))) == [
+        x * x for x in range(7)]
+    assert seen[-1] == (7, 7)
+
+
+@pytest.mark.unit
+def test_bad_worker_count_and_missing_ray_are_clear_errors(monkeypatch):
+    with pytest.raises(runners.RunnerError, match='workers must be >= 1, got 0'):
+        runners.run_all(_square, [1, 2], workers=0)
+    monkeypatch.setitem(sys.modules, 'ray', None)  # as if not installed
+    with pytest.raises(runners.RunnerError, match="--ray-address 'auto' needs Ray"):
+        runners.run_all(_square, [1], ray_address='auto')
+
+
+@pytest.mark.unit
+def test_the_chain_of_an_arm_is_found_from_its_urdf():
+    urdf = small_arm_urdf(('continuous', 'revolute', 'revolute', 'revolute'))
+    assert arms.default_links(urdf) == ('base_link', 'tool')
+    assert arms.arm_links(urdf) == ('base_link', 'tool', ['joint1', 'joint2', 'joint3', 'tool'])
+    assert arms.arm_links(urdf, tip_link='link2')[2] == ['joint1', 'joint2']
+    with pytest.raises(ValueError, match="'base_link' is not below link 'link2'"):
+        arms.chain_joints(urdf, 'link2', 'base_link')
+    with pytest.raises(ValueError, match="unknown example robot 'nao'"):
+        arms.example_robot_urdf('nao')
+
+
+def _short(robot: rx.Robot) -> rx.Robot:
+    return dataclasses.replace(robot, duration_s=0.3)
+
+
+@pytest.mark.e2e
+def test_local_processes_give_the_outcomes_of_a_serial_run():
+    robot = _short(rx.ROBOTS['wrist'])
+    serial = rx.run_robot(robot, 'tanh', 2, seed=3, progress=None, workers=1)
+    parallel = rx.run_robot(robot, 'tanh', 2, seed=3, progress=None, workers=2)
+    for a, b in zip(serial, parallel, strict=True):
+        np.testing.assert_array_equal(a.q_final, b.q_final)
+        assert (a.reached, a.orientation_error, a.speed_ratio) == (
+            b.reached, b.orientation_error, b.speed_ratio)
+
+
+@pytest.mark.e2e
+def test_a_local_ray_cluster_gives_the_outcomes_of_a_serial_run():
+    ray = pytest.importorskip('ray')
+    robot = _short(rx.ROBOTS['wrist'])
+    serial = rx.run_robot(robot, 'tanh', 2, seed=3, progress=None, workers=1)
+    try:
+        on_ray = rx.run_robot(robot, 'tanh', 2, seed=3, progress=None, ray_address='local')
+    finally:
+        ray.shutdown()
+    for a, b in zip(serial, on_ray, strict=True):
+        np.testing.assert_array_equal(a.q_final, b.q_final)
+
+
+@pytest.mark.e2e
+@pytest.mark.parametrize('name', ['armature-wrong', 'no-velocities'])
+def test_an_arm_from_its_urdf_runs_the_same_serial_or_parallel(tmp_path, name):
+    """The design from the URDF, a MuJoCo plant with the condition's rotor inertia or states."""
+    pytest.importorskip('mujoco')
+    path = tmp_path / 'arm.urdf'
+    path.write_text(small_arm_urdf(('revolute',) * 4))
+    robot = _short(rx.arm_robot('small', str(path), None, None, cl.Task.ORIENTATION))
+    cond = rx.condition(name, armature=0.01)
+    runs = [rx.run_arm(robot, cond, 'tanh', 2, seed=1, progress=None, workers=w)
+            for w in (1, 2)]
+    for a, b in zip(*runs, strict=True):
+        np.testing.assert_array_equal(a.q_final, b.q_final)
+        assert np.isfinite(a.q_final).all() and a.speed_ratio >= 0.0
+    row = rx.table_row(robot, cond, runs[0])
+    assert row.startswith(f'| small | {cond.describe()} | ') and '/2 |' in row
