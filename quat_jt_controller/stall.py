@@ -4,10 +4,11 @@ Stall detection for /diagnostics: at rest, away from the goal, and why.
 The regulator's Lyapunov function only decreases (docs/lyapunov.md), so the robot can come to
 rest before the goal: against a joint limit, where the potential's torque is below the
 friction (estimated, or with no estimate below a plausible level), near a singular
-configuration, or near a 180-degree orientation error (where the paper's torque fades). :class:`StallDetector` is fed every tick with the tick's output
-(``TickOutput``) and q/qdot, but evaluates only every ``period_s`` (10 Hz: no SVD per tick). If
-the joints are at rest and the error is above tolerance for more than ``hold_s`` it reports a
-WARN naming the likely causes. ROS-free.
+configuration, or near a 180-degree orientation error (where the paper's torque fades).
+:class:`StallDetector` is fed every tick with the tick's output (``TickOutput``) and q/qdot,
+but evaluates only every ``period_s`` (10 Hz: no SVD per tick). If the joints are at rest and
+the error is above tolerance for more than ``hold_s`` it reports a WARN naming the likely
+causes. ROS-free.
 """
 from math import isfinite, nan
 from typing import Optional, Sequence
