@@ -68,8 +68,8 @@ FRICTION_POSITION_BAND_M = 0.0005
 # At rest the regulator may learn this much more than the estimate (x the estimate), in
 # FRICTION_LEARNING_TIME_S: a friction up to (1 + this) x the estimate is still broken
 FRICTION_LEARNING = 2.0
-# ... and at least this share of the joint's effort limit, estimate or not: a friction nobody
-# measured (estimate 0) up to this much is still broken (docs/lyapunov.md, section 4)
+# ... and with no estimate (0) this share of the joint's effort limit: a friction nobody
+# measured up to this much is still broken (docs/lyapunov.md, section 4)
 FRICTION_EFFORT_SHARE = 0.03
 FRICTION_LEARNING_TIME_S = 1.0
 # A joint that accelerates faster than this on its effort limit and the inertia it sees, with
@@ -428,8 +428,9 @@ def design(model: RobotModel, task: cl.Task, rate_hz: float = 1000.0,
     ``effort_limits_nm`` default the URDF's; ``friction_nm`` are the Coulomb estimates per
     joint (default zeros: no friction compensation); ``delays`` the ticks of delay the
     sampled loop must be stable with; ``friction_learning`` how much more than the estimate
-    (x the estimate) the regulator may learn at rest, and ``friction_effort_share`` at least
-    that share of each effort limit, estimate or not; ``cruise_fraction`` of the velocity
+    (x the estimate) the regulator may learn at rest, and on a joint without an estimate
+    ``friction_effort_share`` of its effort limit (at most what its damping balances at the
+    cruising speed); ``cruise_fraction`` of the velocity
     limits the speed far from the goal that the goal-configuration gain is raised towards and
     the cubic damping holds (``_cruising_guide``); ``preferred_configuration_rad`` the
     posture a redundant arm's q* leans to (default: the middle of the ranges). Raises
@@ -464,7 +465,9 @@ def design(model: RobotModel, task: cl.Task, rate_hz: float = 1000.0,
     if not np.isfinite(friction_effort_share) or not 0.0 <= friction_effort_share < 0.5:
         raise ValueError('friction_effort_share must be in [0, 0.5), got '
                          f'{friction_effort_share}')
-    learning = np.maximum(friction_learning * friction, friction_effort_share * effort)
+    # a joint with an estimate learns relative to it; one without, a share of its effort
+    learning = np.where(friction > 0.0, friction_learning * friction,
+                        friction_effort_share * effort)
     budget = TORQUE_SHARE * (effort - data['gravity_max'] - friction - learning)
     if np.any(budget <= 0.0):
         raise ValueError(f'no torque left for the potential on joints '
@@ -577,10 +580,13 @@ def design(model: RobotModel, task: cl.Task, rate_hz: float = 1000.0,
             f = v * (1.0 + (v / damping_speed[j]) ** 2 if damping_speed[j] > 0 else 1.0)
             lo_v, hi_v = (v, hi_v) if f < push[j] / kv[j] else (lo_v, v)
         terminal.append(0.5 * (lo_v + hi_v))
+    # The effort share of what may be learned is held to what the joint's damping balances at
+    # its cruising speed: a fully learned over-compensation alone drives it no faster.
+    learning_limit = np.where(friction > 0.0, learning, np.minimum(learning, kv * cruise))
     shaping = Shaping.create(
         n, joint_limit_margin=margin, joint_limit_gain=limit_gain.round(3).tolist(),
         friction_compensation=friction.tolist(), friction_velocity=FRICTION_VELOCITY_RAD_S,
-        friction_learning_limit=learning.tolist(),
+        friction_learning_limit=learning_limit.tolist(),
         friction_learning_time=FRICTION_LEARNING_TIME_S,
         friction_error_band=FRICTION_ERROR_BAND,
         friction_position_band=FRICTION_POSITION_BAND_M,
@@ -609,7 +615,7 @@ def design(model: RobotModel, task: cl.Task, rate_hz: float = 1000.0,
         'velocity_limits_rad_s': velocity, 'friction_learning': friction_learning,
         'cruise_fraction': cruise_fraction,
         'regular_sigma_min': data['regular_sigma_min'],
-        'warnings': (friction_warnings(model, friction, learning)
+        'warnings': (friction_warnings(model, friction, learning_limit)
                      + inertia_warnings(model, effort, inertia)),
         'time_to_goal_s': time_to_goal_s(np.array(terminal), configs, np.array(kp_r),
                                          np.array(kv_r), np.array(lam_r), extra, dt_s),
@@ -747,8 +753,9 @@ def to_yaml(d: Design, potential: str = 'tanh', command: str = '',
         f'{_fmt(f["friction_nm"])}, rotor inertia (armature, in M(q)) '
         f'{_fmt(d.armature or [0.0] * len(d.joints))} kg m^2;',
         f'  at rest the regulator may learn {f["friction_learning"]:g} x the estimates more, '
-        f'and at least {f.get("friction_effort_share", 0.0):g} x the effort limits (a friction '
-        f'nobody measured), in {FRICTION_LEARNING_TIME_S:g} s;',
+        f'and without an estimate {f.get("friction_effort_share", 0.0):g} x the effort limit (a '
+        'friction nobody measured; at most k_v x the cruising speed), in '
+        f'{FRICTION_LEARNING_TIME_S:g} s;',
         f'  budget {TORQUE_SHARE:g} x (effort - gravity - friction - learnable friction) = '
         f'{_fmt(f["budget_nm"])}, of which the task potential may ask at most (a-priori '
         f'bound of the tanh law) {_fmt(f["task_bound_nm"])} and the goal-configuration term '
@@ -933,9 +940,9 @@ def main(argv: Optional[list] = None) -> int:
                         f'rest, x the estimates (default {FRICTION_LEARNING:g}; 0 = none)')
     parser.add_argument('--friction-effort-share', type=_number(0.0, 0.5, low_open=False),
                         default=FRICTION_EFFORT_SHARE,
-                        help='the least the regulator may learn at rest, estimate or not, as a '
-                        'share of each effort limit: a friction nobody measured (default '
-                        f'{FRICTION_EFFORT_SHARE:g}; 0 = only --friction-learning)')
+                        help='what the regulator may learn at rest on a joint without a '
+                        'friction estimate, as a share of its effort limit: a friction nobody '
+                        f'measured (default {FRICTION_EFFORT_SHARE:g}; 0 = none)')
     parser.add_argument('--delays', type=_number(0.0, low_open=False, integer=True), nargs='+',
                         default=[1], help='ticks of delay the sampled loop must be stable with')
     parser.add_argument('--cruise-fraction', type=_number(0.0, 1.0), default=CRUISE_FRACTION,
