@@ -50,6 +50,7 @@ CONDITIONS = {  # name: (armature told x the true one, true armature, friction s
     'armature told': (1.0, 0.1, 0.01),
     'armature +50%': (1.5, 0.1, 0.01),
     'armature -50%': (0.5, 0.1, 0.01),
+    'ideal': (1.0, 0.0, 0.0),  # the plant is the URDF: no rotor inertia, no friction
 }
 
 
@@ -60,7 +61,8 @@ def run_arm(arm: str, condition: str, goals: int, duration_s: float, seed: int) 
     told, true_armature, share = CONDITIONS[condition]
     plain = RobotModel(urdf, base, tip, joints)
     n = plain.n
-    model = RobotModel(urdf, base, tip, joints, [told * true_armature] * n)
+    model = (RobotModel(urdf, base, tip, joints, [told * true_armature] * n) if true_armature
+             else plain)
     t0 = time.time()
     d = design(model, cl.Task(task))
     design_s = time.time() - t0
@@ -106,7 +108,7 @@ def main(argv=None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split('\n')[1])
     parser.add_argument('--arms', nargs='+', default=['wrist', 'ur5', 'panda'],
                         choices=sorted(ARMS))
-    parser.add_argument('--conditions', nargs='+', default=list(CONDITIONS),
+    parser.add_argument('--conditions', nargs='+', default=list(CONDITIONS)[:3],
                         choices=list(CONDITIONS))
     parser.add_argument('--goals', type=int, default=20)
     parser.add_argument('--duration', type=float, default=5.0)
