@@ -429,8 +429,8 @@ def design(model: RobotModel, task: cl.Task, rate_hz: float = 1000.0,
     joint (default zeros: no friction compensation); ``delays`` the ticks of delay the
     sampled loop must be stable with; ``friction_learning`` how much more than the estimate
     (x the estimate) the regulator may learn at rest, and on a joint without an estimate
-    ``friction_effort_share`` of its effort limit (at most what its damping balances at
-    2 v_eps); ``cruise_fraction`` of the velocity
+    ``friction_effort_share`` of its effort limit (at most what its damping balances at the
+    cruising speed); ``cruise_fraction`` of the velocity
     limits the speed far from the goal that the goal-configuration gain is raised towards and
     the cubic damping holds (``_cruising_guide``); ``preferred_configuration_rad`` the
     posture a redundant arm's q* leans to (default: the middle of the ranges). Raises
@@ -581,10 +581,8 @@ def design(model: RobotModel, task: cl.Task, rate_hz: float = 1000.0,
             lo_v, hi_v = (v, hi_v) if f < push[j] / kv[j] else (lo_v, v)
         terminal.append(0.5 * (lo_v + hi_v))
     # The effort share of what may be learned is held to what the joint's damping balances at
-    # twice v_eps, the speed below which it learns: a fully learned over-compensation alone
-    # drives the joint no faster than a creep (docs/gain_design.md, section 1).
-    learning_limit = np.where(friction > 0.0, learning,
-                              np.minimum(learning, kv * 2.0 * FRICTION_VELOCITY_RAD_S))
+    # its cruising speed: a fully learned over-compensation alone drives it no faster.
+    learning_limit = np.where(friction > 0.0, learning, np.minimum(learning, kv * cruise))
     shaping = Shaping.create(
         n, joint_limit_margin=margin, joint_limit_gain=limit_gain.round(3).tolist(),
         friction_compensation=friction.tolist(), friction_velocity=FRICTION_VELOCITY_RAD_S,
@@ -756,7 +754,7 @@ def to_yaml(d: Design, potential: str = 'tanh', command: str = '',
         f'{_fmt(d.armature or [0.0] * len(d.joints))} kg m^2;',
         f'  at rest the regulator may learn {f["friction_learning"]:g} x the estimates more, '
         f'and without an estimate {f.get("friction_effort_share", 0.0):g} x the effort limit (a '
-        'friction nobody measured; at most k_v x 2 v_eps), in '
+        'friction nobody measured; at most k_v x the cruising speed), in '
         f'{FRICTION_LEARNING_TIME_S:g} s;',
         f'  budget {TORQUE_SHARE:g} x (effort - gravity - friction - learnable friction) = '
         f'{_fmt(f["budget_nm"])}, of which the task potential may ask at most (a-priori '
