@@ -68,7 +68,14 @@ FRICTION_POSITION_BAND_M = 0.0005
 # At rest the regulator may learn this much more than the estimate (x the estimate), in
 # FRICTION_LEARNING_TIME_S: a friction up to (1 + this) x the estimate is still broken
 FRICTION_LEARNING = 2.0
+# ... and with no estimate (0) this share of the joint's effort limit: a friction nobody
+# measured up to this much is still broken (docs/lyapunov.md, section 4)
+FRICTION_EFFORT_SHARE = 0.03
 FRICTION_LEARNING_TIME_S = 1.0
+# A joint that accelerates faster than this on its effort limit and the inertia it sees, with
+# no armature given, is taken for a URDF without its drive's rotor inertia (a warning)
+PLAUSIBLE_ACCELERATION_RAD_S2 = 5000.0
+SUGGESTED_ARMATURE = 0.1  # kg m^2, what a geared drive of a ~1 m arm reflects, as an example
 SAMPLES = 24  # representative regular configurations for M(q), J(q)
 SURVEY = 400  # random configurations for the largest g(q) and lever ||J_p[:, j]||
 REGULAR_SIGMA_MIN = 0.1
@@ -413,14 +420,17 @@ def design(model: RobotModel, task: cl.Task, rate_hz: float = 1000.0,
            friction_nm: Optional[Sequence[float]] = None, delays: Sequence[int] = (1,),
            seed: int = 0, friction_learning: float = FRICTION_LEARNING,
            cruise_fraction: float = CRUISE_FRACTION,
-           preferred_configuration_rad: Optional[Sequence[float]] = None) -> Design:
+           preferred_configuration_rad: Optional[Sequence[float]] = None,
+           friction_effort_share: float = FRICTION_EFFORT_SHARE) -> Design:
     """
     Compute gains and extensions for ``model`` and ``task`` (docs/gain_design.md).
 
     ``effort_limits_nm`` default the URDF's; ``friction_nm`` are the Coulomb estimates per
     joint (default zeros: no friction compensation); ``delays`` the ticks of delay the
     sampled loop must be stable with; ``friction_learning`` how much more than the estimate
-    (x the estimate) the regulator may learn at rest; ``cruise_fraction`` of the velocity
+    (x the estimate) the regulator may learn at rest, and on a joint without an estimate
+    ``friction_effort_share`` of its effort limit (at most what its damping balances at the
+    cruising speed); ``cruise_fraction`` of the velocity
     limits the speed far from the goal that the goal-configuration gain is raised towards and
     the cubic damping holds (``_cruising_guide``); ``preferred_configuration_rad`` the
     posture a redundant arm's q* leans to (default: the middle of the ranges). Raises
@@ -452,7 +462,12 @@ def design(model: RobotModel, task: cl.Task, rate_hz: float = 1000.0,
                              f'{list(zip(model.position_lower, model.position_upper))}')
     if not np.isfinite(friction_learning) or friction_learning < 0.0:
         raise ValueError(f'friction_learning must be finite and >= 0, got {friction_learning}')
-    learning = friction_learning * friction
+    if not np.isfinite(friction_effort_share) or not 0.0 <= friction_effort_share < 0.5:
+        raise ValueError('friction_effort_share must be in [0, 0.5), got '
+                         f'{friction_effort_share}')
+    # a joint with an estimate learns relative to it; one without, a share of its effort
+    learning = np.where(friction > 0.0, friction_learning * friction,
+                        friction_effort_share * effort)
     budget = TORQUE_SHARE * (effort - data['gravity_max'] - friction - learning)
     if np.any(budget <= 0.0):
         raise ValueError(f'no torque left for the potential on joints '
@@ -497,9 +512,11 @@ def design(model: RobotModel, task: cl.Task, rate_hz: float = 1000.0,
     # damping ratio below DAMPING_RATIO_MIN; a joint whose own mass-spring-damper (smallest
     # inertia) is unstable gets a smaller goal-configuration gain.
     cruise = cruise_fraction * velocity
-    for _ in range(80):
+    guide_cap = np.full(n, np.inf)  # per joint: lowered where the capped damping is too weak
+    for _ in range(200):
         bound = task_torque_bound(lever, kp, task)
-        guide = _cruising_guide(configs, kp, lam, bound, push_max, cruise, b_max)
+        guide = np.minimum(_cruising_guide(configs, kp, lam, bound, push_max, cruise, b_max),
+                           np.maximum(guide_cap, GUIDE_OVER_TASK * bound))
         kv = np.minimum(_damping(configs, kp, lam, guide / GUIDE_RAMP_RAD), b_max)
         for j in range(n):
             while _joint_stable(inertia[j], guide[j] / GUIDE_RAMP_RAD, kv[j], delays,
@@ -511,6 +528,13 @@ def design(model: RobotModel, task: cl.Task, rate_hz: float = 1000.0,
         zeta = _median_damping_ratio(configs, kp * lam, kv, extra)
         if max(rho.values()) < 1.0 and zeta.min() >= DAMPING_RATIO_MIN:
             break
+        # A joint whose damping the loop caps, under-damped because of its own
+        # goal-configuration stiffness: lower that joint's term, not every task row.
+        own = ((zeta < DAMPING_RATIO_MIN) & (kv >= b_max * (1.0 - 1e-9))
+               & (guide > GUIDE_OVER_TASK * bound * (1.0 + 1e-9)))
+        if max(rho.values()) < 1.0 and own.any():
+            guide_cap = np.where(own, guide * SHRINK, guide_cap)
+            continue
         if lam.min() > 1.0:
             lam = np.maximum(lam * SHRINK, 1.0)
         else:
@@ -556,10 +580,13 @@ def design(model: RobotModel, task: cl.Task, rate_hz: float = 1000.0,
             f = v * (1.0 + (v / damping_speed[j]) ** 2 if damping_speed[j] > 0 else 1.0)
             lo_v, hi_v = (v, hi_v) if f < push[j] / kv[j] else (lo_v, v)
         terminal.append(0.5 * (lo_v + hi_v))
+    # The effort share of what may be learned is held to what the joint's damping balances at
+    # its cruising speed: a fully learned over-compensation alone drives it no faster.
+    learning_limit = np.where(friction > 0.0, learning, np.minimum(learning, kv * cruise))
     shaping = Shaping.create(
         n, joint_limit_margin=margin, joint_limit_gain=limit_gain.round(3).tolist(),
         friction_compensation=friction.tolist(), friction_velocity=FRICTION_VELOCITY_RAD_S,
-        friction_learning_limit=learning.tolist(),
+        friction_learning_limit=learning_limit.tolist(),
         friction_learning_time=FRICTION_LEARNING_TIME_S,
         friction_error_band=FRICTION_ERROR_BAND,
         friction_position_band=FRICTION_POSITION_BAND_M,
@@ -588,10 +615,53 @@ def design(model: RobotModel, task: cl.Task, rate_hz: float = 1000.0,
         'velocity_limits_rad_s': velocity, 'friction_learning': friction_learning,
         'cruise_fraction': cruise_fraction,
         'regular_sigma_min': data['regular_sigma_min'],
-        'warnings': friction_warnings(model, friction, learning),
+        'warnings': (friction_warnings(model, friction, learning_limit)
+                     + inertia_warnings(model, effort, inertia)),
+        'time_to_goal_s': time_to_goal_s(np.array(terminal), configs, np.array(kp_r),
+                                         np.array(kv_r), np.array(lam_r), extra, dt_s),
+        'friction_effort_share': friction_effort_share,
     }
     return Design(task, model.joint_names, model.base_link, model.tip_link, rate_hz, kp_r,
                   kv_r, lam_r, shaping, figures, model.armature)
+
+
+def time_to_goal_s(cruise_rad_s: np.ndarray, configs, kp: np.ndarray, kv: np.ndarray,
+                   lam: np.ndarray, extra: np.ndarray, dt_s: float,
+                   move_rad: float = 1.0) -> float:
+    """
+    Return the expected time to a goal ``move_rad`` away in every joint (s), roughly.
+
+    The slowest joint's cruise, ``move_rad / v_j`` at its cruising speed, plus the linearised
+    tanh loop's settling, ln(1000) time constants of its slowest mode (an error 1000 x
+    smaller: a 0.5 rad error down to ~0.5 mrad), at the median of the representative
+    configurations, nominal gains and one tick of delay.
+    """
+    rhos = sorted(spectral_radius(M, joint_stiffness(rows, kp * lam) + np.diag(extra),
+                                  np.diag(kv), 1, dt_s) for _, rows, M in configs)
+    settle = np.log(1000.0) * time_constant_s(rhos[len(rhos) // 2], dt_s)
+    return float(move_rad / np.min(cruise_rad_s) + settle)
+
+
+def inertia_warnings(model: RobotModel, effort: np.ndarray, inertia: np.ndarray) -> list[str]:
+    """
+    Warn of joints whose inertia is implausibly small for a geared drive, with no armature.
+
+    A joint that its effort limit would accelerate faster than PLAUSIBLE_ACCELERATION_RAD_S2
+    on the smallest inertia it sees, ``1 / (M^-1)_jj``, is most likely a URDF without the
+    rotor inertia its drive reflects (gear ratio squared times the rotor's); the damping the
+    sampled loop tolerates on it is then far below what the real joint takes.
+    """
+    if any(a > 0.0 for a in model.armature):
+        return []
+    fast = [f'{name} ({e / i:.3g} rad/s^2 on {i:.3g} kg m^2)'
+            for name, e, i in zip(model.joint_names, effort, inertia)
+            if e / i > PLAUSIBLE_ACCELERATION_RAD_S2]
+    if not fast:
+        return []
+    return [f'implausibly light for a geared drive: {", ".join(fast)} on the effort limit. '
+            "The URDF's inertias likely leave out the drives' rotor inertia, and the gains are "
+            'sized for that light a joint (slow, weakly damped). Give the rotor inertia with '
+            f'--armature (e.g. --armature {SUGGESTED_ARMATURE:g} kg m^2 per joint)']
 
 
 def friction_warnings(model: RobotModel, friction: np.ndarray,
@@ -683,7 +753,9 @@ def to_yaml(d: Design, potential: str = 'tanh', command: str = '',
         f'{_fmt(f["friction_nm"])}, rotor inertia (armature, in M(q)) '
         f'{_fmt(d.armature or [0.0] * len(d.joints))} kg m^2;',
         f'  at rest the regulator may learn {f["friction_learning"]:g} x the estimates more, '
-        f'in {FRICTION_LEARNING_TIME_S:g} s;',
+        f'and without an estimate {f.get("friction_effort_share", 0.0):g} x the effort limit (a '
+        'friction nobody measured; at most k_v x the cruising speed), in '
+        f'{FRICTION_LEARNING_TIME_S:g} s;',
         f'  budget {TORQUE_SHARE:g} x (effort - gravity - friction - learnable friction) = '
         f'{_fmt(f["budget_nm"])}, of which the task potential may ask at most (a-priori '
         f'bound of the tanh law) {_fmt(f["task_bound_nm"])} and the goal-configuration term '
@@ -700,6 +772,8 @@ def to_yaml(d: Design, potential: str = 'tanh', command: str = '',
         f'  cruising speeds far from the goal {_fmt(f["terminal_speed_rad_s"])} rad/s '
         f'(velocity limits {_fmt(f["velocity_limits_rad_s"])}, aimed at '
         f'{f["cruise_fraction"]:g} x them).',
+        f'Expected time to a goal: about {f["time_to_goal_s"]:.2g} s for a 1 rad move of every '
+        'joint (the slowest cruise, then ln(1000) time constants of the slowest linear mode).',
     ]
     header += [f'WARNING: {w}' for w in f.get('warnings', ())]
     lines = []
@@ -864,6 +938,11 @@ def main(argv: Optional[list] = None) -> int:
     parser.add_argument('--friction-learning', type=non_negative, default=FRICTION_LEARNING,
                         help='how much more than the estimates the regulator may learn at '
                         f'rest, x the estimates (default {FRICTION_LEARNING:g}; 0 = none)')
+    parser.add_argument('--friction-effort-share', type=_number(0.0, 0.5, low_open=False),
+                        default=FRICTION_EFFORT_SHARE,
+                        help='what the regulator may learn at rest on a joint without a '
+                        'friction estimate, as a share of its effort limit: a friction nobody '
+                        f'measured (default {FRICTION_EFFORT_SHARE:g}; 0 = none)')
     parser.add_argument('--delays', type=_number(0.0, low_open=False, integer=True), nargs='+',
                         default=[1], help='ticks of delay the sampled loop must be stable with')
     parser.add_argument('--cruise-fraction', type=_number(0.0, 1.0), default=CRUISE_FRACTION,
@@ -924,6 +1003,7 @@ def main(argv: Optional[list] = None) -> int:
         result = design(model, cl.Task(args.task), args.rate, args.effort_limits,
                         args.friction, tuple(args.delays),
                         friction_learning=args.friction_learning,
+                        friction_effort_share=args.friction_effort_share,
                         cruise_fraction=args.cruise_fraction,
                         preferred_configuration_rad=args.preferred_configuration)
         command = shlex.join(['python', '-m', 'quat_jt_controller.gain_design']

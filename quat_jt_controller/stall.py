@@ -3,11 +3,12 @@ Stall detection for /diagnostics: at rest, away from the goal, and why.
 
 The regulator's Lyapunov function only decreases (docs/lyapunov.md), so the robot can come to
 rest before the goal: against a joint limit, where the potential's torque is below the
-friction, near a singular configuration, or near a 180-degree orientation error (where the
-paper's torque fades). :class:`StallDetector` is fed every tick with the tick's output
-(``TickOutput``) and q/qdot, but evaluates only every ``period_s`` (10 Hz: no SVD per tick). If
-the joints are at rest and the error is above tolerance for more than ``hold_s`` it reports a
-WARN naming the likely causes. ROS-free.
+friction (estimated, or with no estimate below a plausible level), near a singular
+configuration, or near a 180-degree orientation error (where the paper's torque fades).
+:class:`StallDetector` is fed every tick with the tick's output (``TickOutput``) and q/qdot,
+but evaluates only every ``period_s`` (10 Hz: no SVD per tick). If the joints are at rest and
+the error is above tolerance for more than ``hold_s`` it reports a WARN naming the likely
+causes. ROS-free.
 """
 from math import isfinite, nan
 from typing import Optional, Sequence
@@ -26,6 +27,9 @@ POSITION_TOLERANCE_M = 0.001  # ||p_d - p|| above this: off the goal (pose task)
 NEAR_LIMIT_RAD = 0.05  # a joint this close to a URDF limit (or inside the band) is at a limit
 SINGULAR_SIGMA_MIN = 0.05  # sigma_min of the task Jacobian below this: near-singular
 NEAR_180_ETA_E = 0.1  # |eta_e| below this: within ~11.5 degrees of a half turn
+# With no friction estimate, a potential torque below this share of a joint's effort limit
+# (or below what the joint may learn, if more) is within a geared drive's plausible friction
+PLAUSIBLE_FRICTION_SHARE = 0.05
 
 Status = tuple[int, str, list[tuple[str, str]]]
 
@@ -91,7 +95,9 @@ class StallDetector:
                                   f'its {side} limit {limit:g} rad')
         friction = shaping.friction_compensation_nm
         tau_p = out.tau_potential_nm
-        if friction and tau_p:
+        if tau_p and not any(f > 0.0 for f in friction):
+            causes += self._unmeasured_friction(tau_p)
+        elif friction and tau_p:
             learned = reg.learned_friction_nm  # the estimate so far: f + what was learned
             weak = [f'{name} |tau| {abs(t):.3g} N m <= {f + a:.3g} N m'
                     for name, t, f, a in zip(model.joint_names, tau_p, friction, learned)
@@ -110,6 +116,31 @@ class StallDetector:
         if not causes:
             causes.append('no known cause (a local minimum of the potential)')
         return causes
+
+    def _unmeasured_friction(self, tau_p: Sequence[float]) -> list[str]:
+        """
+        Name friction as the likely cause when no estimate is set and the push is weak.
+
+        A joint whose potential torque is below a plausible friction level,
+        PLAUSIBLE_FRICTION_SHARE x its effort limit or what it may learn at rest if more, can
+        be held by a friction nobody measured (docs/lyapunov.md, section 4).
+        """
+        reg = self.regulator
+        model, shaping = reg.model, reg.shaping
+        limits = shaping.friction_learning_limit_nm or (0.0,) * model.n
+        weak = []
+        for name, t, effort, a, a_max in zip(model.joint_names, tau_p, model.effort_limits,
+                                             reg.learned_friction_nm, limits):
+            level = max(PLAUSIBLE_FRICTION_SHARE * effort, a_max)
+            if isfinite(level) and abs(t) <= level:
+                learned = f', learned {a:.3g} of {a_max:.3g} N m' if a_max > 0.0 else ''
+                weak.append(f'{name} |tau| {abs(t):.3g} N m <= {level:.3g} N m{learned}')
+        if not weak:
+            return []
+        return ['likely friction: no friction estimate is set (friction_compensation 0) and '
+                'the potential torque is below a plausible friction level ('
+                + ', '.join(weak) + '); measure the breakaway torque per joint and set '
+                'friction_compensation, or raise friction_learning_limit']
 
     def status(self) -> Status:
         """Return ``(level, message, values)`` for /diagnostics."""

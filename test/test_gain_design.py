@@ -178,8 +178,10 @@ def test_the_design_warns_of_estimates_the_urdf_does_not_support():
 def test_the_learnable_friction_comes_out_of_the_budget():
     model = wrist_model()
     friction = [1.8, 0.72, 0.45]
-    plain = gd.design(model, cl.Task.ORIENTATION, friction_nm=friction, friction_learning=0.0)
-    learning = gd.design(model, cl.Task.ORIENTATION, friction_nm=friction)
+    plain = gd.design(model, cl.Task.ORIENTATION, friction_nm=friction, friction_learning=0.0,
+                      friction_effort_share=0.0)
+    learning = gd.design(model, cl.Task.ORIENTATION, friction_nm=friction,
+                         friction_effort_share=0.0)
     assert learning.shaping.friction_learning_limit_nm == pytest.approx(
         [gd.FRICTION_LEARNING * f for f in friction])
     assert plain.shaping.friction_learning_limit_nm == (0.0, 0.0, 0.0)
@@ -358,3 +360,42 @@ def test_the_command_takes_one_armature_for_all_joints_or_one_per_joint(tmp_path
 def test_the_simulator_engines_are_the_ones_the_tool_writes():
     from wrist_sim.simulator import ENGINES
     assert gd.ENGINES == ENGINES
+
+
+def test_with_no_friction_estimate_a_share_of_the_effort_may_be_learned():
+    model = wrist_model()
+    unmeasured = gd.design(model, cl.Task.ORIENTATION)
+    effort = np.array(model.effort_limits)
+    np.testing.assert_allclose(unmeasured.shaping.friction_learning_limit_nm,
+                               gd.FRICTION_EFFORT_SHARE * effort)
+    assert unmeasured.shaping.friction_compensation_nm == (0.0, 0.0, 0.0)
+    none = gd.design(model, cl.Task.ORIENTATION, friction_effort_share=0.0)
+    np.testing.assert_allclose(none.figures['budget_nm'] - unmeasured.figures['budget_nm'],
+                               gd.TORQUE_SHARE * gd.FRICTION_EFFORT_SHARE * effort)
+    with pytest.raises(ValueError, match='friction_effort_share'):
+        gd.design(model, cl.Task.ORIENTATION, friction_effort_share=0.6)
+
+
+def _xarm7(armature=None):
+    from robots import example_robot_data_urdf
+    urdf = example_robot_data_urdf('xarm_description/urdf/xarm7.urdf').read_text()
+    model = RobotModel(urdf, 'link_base', 'link7')
+    return model if armature is None else RobotModel(urdf, 'link_base', 'link7', None,
+                                                     [armature] * model.n)
+
+
+def test_a_light_wrist_does_not_collapse_the_task_gains():
+    """The xArm7's last link sees ~1.3e-4 kg m^2: its joint gets what it takes, not the rows."""
+    light = gd.design(_xarm7(), cl.Task.POSE)
+    geared = gd.design(_xarm7(0.1), cl.Task.POSE)
+    assert min(light.figures['inertia_min']) < 1e-3
+    # the position rows keep a useful share of what they get with the drives' inertia
+    assert light.kp[0] > 0.1 * geared.kp[0]
+    bound = light.figures['task_bound_nm']
+    assert max(bound) > 0.01 * max(light.figures['budget_nm'])
+    for d in (light, geared):  # the expected speeds stay within the URDF velocity limits
+        assert np.all(d.figures['terminal_speed_rad_s'] < d.figures['velocity_limits_rad_s'])
+        assert 0.0 < d.figures['time_to_goal_s'] < 10.0
+    assert any('--armature' in w for w in light.figures['warnings'])
+    assert not any('--armature' in w for w in geared.figures['warnings'])
+    assert 'Expected time to a goal' in gd.to_yaml(light)

@@ -17,6 +17,7 @@ The Lyapunov argument of docs/lyapunov.md, checked in the ideal loop and at rest
   steady, with no sign flips (no chattering, no limit cycle).
 """
 import dataclasses
+import functools
 import math
 
 import numpy as np
@@ -174,3 +175,73 @@ def test_a_redundant_arm_comes_to_rest_at_the_goal_configuration_elbow_included(
     assert dV.max() <= 1e-9 * traj.lyapunov[0], f'V increased by {dV.max()}'
     assert np.abs(traj.q_rad[-1] - q_star).max() < 1e-3
     assert traj.error_norm[-1] < 1e-4
+
+
+@functools.lru_cache(maxsize=None)
+def _unmeasured_friction_design(share):
+    from quat_jt_controller import gain_design as gd
+    return gd.design(wrist_model(), ORI, friction_effort_share=share)
+
+
+def test_with_no_estimate_the_learning_is_bounded_by_the_effort_budget():
+    """Estimate 0: a_max is a share of each effort limit; a never leaves [0, a_max]."""
+    from quat_jt_controller import gain_design as gd
+    model = wrist_model()
+    shaping = _unmeasured_friction_design(gd.FRICTION_EFFORT_SHARE).shaping
+    a_max = np.array(shaping.friction_learning_limit_nm)
+    np.testing.assert_allclose(a_max, gd.FRICTION_EFFORT_SHARE * np.array(model.effort_limits))
+    rng = np.random.default_rng(3)
+    learned = [0.0, 0.0, 0.0]
+    for _ in range(4000):  # stuck and pushed, then freed, at random: 4 s of ticks
+        tau_p = rng.normal(0.0, 1.0, 3)
+        qdot = rng.choice([0.0, 1.0], 3) * rng.normal(0.0, 0.2, 3)
+        phi = float(rng.choice([0.0, 0.5, 1.0]))
+        stuck = [0.0, 0.0, 0.0]
+        fc = sh.friction_compensation(tau_p, qdot, phi, shaping, learned, stuck)
+        sh.learn_friction(learned, stuck, phi, shaping, 1e-3)
+        assert np.all(np.array(learned) >= 0.0) and np.all(np.array(learned) <= a_max)
+        assert np.all(np.abs(fc) <= a_max + 1e-12)
+        # positive work only along the potential's torque
+        assert np.all(np.array(fc) * qdot <= 1e-12 + np.maximum(0.0, np.sign(tau_p) * qdot)
+                      * a_max)
+    # pushed at rest off the goal for the learning time, a reaches its bound (not more)
+    learned = [0.0, 0.0, 0.0]
+    for _ in range(3000):
+        stuck = [0.0, 0.0, 0.0]
+        sh.friction_compensation([1.0, -1.0, 1.0], [0.0] * 3, 1.0, shaping, learned, stuck)
+        sh.learn_friction(learned, stuck, 1.0, shaping, 1e-3)
+    np.testing.assert_allclose(learned, a_max)
+
+
+@pytest.mark.parametrize('potential', ['quadratic', 'tanh'])
+def test_lyapunov_never_increases_with_the_unmeasured_friction_extension(potential):
+    """The ideal loop with the design's extensions, estimate 0 and learning on: V decreases."""
+    model = wrist_model()
+    d = _unmeasured_friction_design(0.03)
+    assert d.shaping.learning_on and not any(d.shaping.friction_compensation_nm)
+    q_goal = (0.5, 1.2, -0.4)
+    _, R = model.forward_kinematics(list(q_goal))
+    loop = ClosedLoop(model, d.gains(potential), ORI, quat.from_rotation_matrix(R),
+                      shaping=d.shaping, q_star=q_goal)
+    traj = loop.run((0.2, 0.8, 0.3), 0.8, dt_s=1e-3)
+    dV = np.diff(traj.lyapunov)
+    assert dV.max() <= 1e-9 * traj.lyapunov[0], f'V increased by {dV.max()}'
+    assert traj.lyapunov[-1] < 0.1 * traj.lyapunov[0]
+
+
+def test_with_no_estimate_a_friction_plant_still_reaches_the_goal():
+    """Coulomb friction of 2% of effort, untold: the learned part breaks it; without, a stall."""
+    model = wrist_model()
+    coulomb = (0.02 * np.array(model.effort_limits)).tolist()
+    final = {}
+    for share in (0.0, 0.03):
+        d = _unmeasured_friction_design(share)
+        loop = ClosedLoop(model, d.gains('quadratic'), ORI, paper.Q_DESIRED, shaping=d.shaping)
+        with WristSimulator(default_urdf_xml(), model.joint_names, coulomb_nm=coulomb) as sim:
+            run = run_sampled(loop, sim, 1.5, 1, list(paper.Q_JOINT_DESIRED_RAD), 0.05)
+        final[share] = (run.final()[1], run.settled_at_s(orientation=0.01))
+        learned = loop.clamped.learned_friction_nm
+        assert np.all(np.array(learned) <= np.array(d.shaping.friction_learning_limit_nm)
+                      + 1e-12)
+    assert final[0.0][0] > 0.01  # stalls short of the goal with nothing to learn
+    assert final[0.03][0] < 0.01 and final[0.03][1] < 1.5  # reaches, and stays

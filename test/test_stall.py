@@ -95,3 +95,16 @@ def test_the_detector_is_cheap_svd_at_most_at_10_hz(monkeypatch):
     feed_for(det, reg, [math.pi - 0.01, 0.8, 0.3], REST, 2.0)  # 2000 ticks, stalled
     assert det.stalled
     assert 10 <= len(calls) <= 21  # once per evaluation while stalled, never per tick
+
+
+def test_with_no_friction_estimate_a_weak_push_names_friction():
+    """Off the goal by a little, at rest, no estimate: friction, not a local minimum."""
+    reg = regulator(potential='quadratic')
+    det = stall.StallDetector(reg)
+    near = [v + 0.02 for v in paper.Q_JOINT_DESIRED_RAD]
+    out = reg.update(near, REST)
+    assert out.orientation_error_norm > stall.ORIENTATION_TOLERANCE
+    feed_for(det, reg, near, REST, 0.7)
+    message = det.status()[1]
+    assert det.stalled and 'likely friction' in message
+    assert 'local minimum' not in message
