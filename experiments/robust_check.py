@@ -54,7 +54,8 @@ CONDITIONS = {  # name: (armature told x the true one, true armature, friction s
 }
 
 
-def run_arm(arm: str, condition: str, goals: int, duration_s: float, seed: int) -> dict:
+def run_arm(arm: str, condition: str, goals: int, duration_s: float, seed: int,
+            effort_share: float = 0.0) -> dict:
     """Return the figures of ``goals`` random goals of ``arm`` under ``condition``."""
     path, base, tip, joints, task = ARMS[arm]
     urdf = default_urdf_xml() if path is None else Path(_erd(path)).read_text()
@@ -64,7 +65,7 @@ def run_arm(arm: str, condition: str, goals: int, duration_s: float, seed: int) 
     model = (RobotModel(urdf, base, tip, joints, [told * true_armature] * n) if true_armature
              else plain)
     t0 = time.time()
-    d = design(model, cl.Task(task))
+    d = design(model, cl.Task(task), friction_effort_share=effort_share)
     design_s = time.time() - t0
     gains, shaping = d.gains('tanh'), d.shaping
     lower = np.maximum(np.array(plain.position_lower), -np.pi)
@@ -113,10 +114,13 @@ def main(argv=None) -> int:
     parser.add_argument('--goals', type=int, default=20)
     parser.add_argument('--duration', type=float, default=5.0)
     parser.add_argument('--seed', type=int, default=1)
+    parser.add_argument('--friction-effort-share', type=float, default=0.0,
+                        help="design_gains' --friction-effort-share (0.03 measured; default 0)")
     args = parser.parse_args(argv)
     for arm in args.arms:
         for condition in args.conditions:
-            r = run_arm(arm, condition, args.goals, args.duration, args.seed)
+            r = run_arm(arm, condition, args.goals, args.duration, args.seed,
+                        args.friction_effort_share)
             print(f"{r['arm']:6s} {r['condition']:14s} reached {r['reached']}/{r['goals']} "
                   f"(median {r['time_median_s']:.2f} s, max {r['time_max_s']:.2f} s; "
                   f"expected {r['expected_time_s']:.2g} s), peak |qdot|/limit "

@@ -68,9 +68,12 @@ FRICTION_POSITION_BAND_M = 0.0005
 # At rest the regulator may learn this much more than the estimate (x the estimate), in
 # FRICTION_LEARNING_TIME_S: a friction up to (1 + this) x the estimate is still broken
 FRICTION_LEARNING = 2.0
-# ... and with no estimate (0) this share of the joint's effort limit: a friction nobody
-# measured up to this much is still broken (docs/lyapunov.md, section 4)
+# ... and with no estimate (0), when asked (--friction-effort-share), a share of the joint's
+# effort limit: a friction nobody measured up to this much is still broken (docs/lyapunov.md,
+# section 4). This is the share measured; the default is none, because on an arm whose
+# potential is weak near the goal the learning over-pushes (docs/gain_design.md).
 FRICTION_EFFORT_SHARE = 0.03
+DEFAULT_FRICTION_EFFORT_SHARE = 0.0
 FRICTION_LEARNING_TIME_S = 1.0
 # A joint that accelerates faster than this on its effort limit and the inertia it sees, with
 # no armature given, is taken for a URDF without its drive's rotor inertia (a warning)
@@ -421,7 +424,7 @@ def design(model: RobotModel, task: cl.Task, rate_hz: float = 1000.0,
            seed: int = 0, friction_learning: float = FRICTION_LEARNING,
            cruise_fraction: float = CRUISE_FRACTION,
            preferred_configuration_rad: Optional[Sequence[float]] = None,
-           friction_effort_share: float = FRICTION_EFFORT_SHARE) -> Design:
+           friction_effort_share: float = DEFAULT_FRICTION_EFFORT_SHARE) -> Design:
     """
     Compute gains and extensions for ``model`` and ``task`` (docs/gain_design.md).
 
@@ -939,10 +942,11 @@ def main(argv: Optional[list] = None) -> int:
                         help='how much more than the estimates the regulator may learn at '
                         f'rest, x the estimates (default {FRICTION_LEARNING:g}; 0 = none)')
     parser.add_argument('--friction-effort-share', type=_number(0.0, 0.5, low_open=False),
-                        default=FRICTION_EFFORT_SHARE,
+                        default=DEFAULT_FRICTION_EFFORT_SHARE,
                         help='what the regulator may learn at rest on a joint without a '
                         'friction estimate, as a share of its effort limit: a friction nobody '
-                        f'measured (default {FRICTION_EFFORT_SHARE:g}; 0 = none)')
+                        f'measured ({FRICTION_EFFORT_SHARE:g} measured; default '
+                        f'{DEFAULT_FRICTION_EFFORT_SHARE:g}, none)')
     parser.add_argument('--delays', type=_number(0.0, low_open=False, integer=True), nargs='+',
                         default=[1], help='ticks of delay the sampled loop must be stable with')
     parser.add_argument('--cruise-fraction', type=_number(0.0, 1.0), default=CRUISE_FRACTION,
