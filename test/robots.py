@@ -38,6 +38,21 @@ def random_q(model: RobotModel, rng: np.random.Generator, margin: float = 0.1) -
     return rng.uniform(lo, hi)
 
 
+def assert_jacobian_matches_finite_differences(model: RobotModel, q, h: float = 1e-6) -> None:
+    """J_p = dp/dq and S(J_o dq) R = dR by central differences in each joint (Eq. 12)."""
+    _, R, J = model.kinematics(q)
+    J = np.array(J)
+    for j in range(model.n):
+        dq = np.zeros(model.n)
+        dq[j] = h
+        p1, R1 = model.forward_kinematics(q + dq)
+        p0, R0 = model.forward_kinematics(q - dq)
+        np.testing.assert_allclose((np.subtract(p1, p0)) / (2 * h), J[:3, j], atol=1e-7)
+        omega_skew = (np.array(R1) - np.array(R0)) / (2 * h) @ np.array(R).T
+        omega = np.array([omega_skew[2, 1], omega_skew[0, 2], omega_skew[1, 0]])
+        np.testing.assert_allclose(omega, J[3:, j], atol=1e-7)
+
+
 def _inertial(mass: float, x: float) -> str:
     i = 0.01 * mass
     return (f'<inertial><origin xyz="{x} 0 0"/><mass value="{mass}"/><inertia ixx="{i}" '

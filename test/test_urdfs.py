@@ -7,7 +7,8 @@ from quat_jt_controller import control_law as cl
 from quat_jt_controller import gain_design as gd
 from quat_jt_controller.goal_check import goal_configuration
 from quat_jt_controller.model import ModelError, RobotModel
-from robots import example_robot_data_urdf, small_arm_urdf
+from robots import assert_jacobian_matches_finite_differences, example_robot_data_urdf
+from robots import small_arm_urdf
 from wrist_sim.simulator import WristSimulator
 
 pytestmark = pytest.mark.unit
@@ -39,16 +40,7 @@ def test_continuous_joint_model_against_finite_differences():
 
     for _ in range(10):
         q = rng.uniform(-1.8, 1.8, model.n) + np.array([3.0, 0.0, 0.0, -5.0, 0.0])
-        p, R, J = model.kinematics(q)
-        J = np.array(J)
-        for j in range(model.n):
-            dq = np.zeros(model.n)
-            dq[j] = h
-            p1, R1 = model.forward_kinematics(q + dq)
-            p0, R0 = model.forward_kinematics(q - dq)
-            np.testing.assert_allclose((np.subtract(p1, p0)) / (2 * h), J[:3, j], atol=1e-7)
-            w = (np.array(R1) - np.array(R0)) / (2 * h) @ np.array(R).T
-            np.testing.assert_allclose([w[2, 1], w[0, 2], w[1, 0]], J[3:, j], atol=1e-7)
+        assert_jacobian_matches_finite_differences(model, q, h)
         fd = [(energy(q + h * e) - energy(q - h * e)) / (2 * h) for e in np.eye(model.n)]
         np.testing.assert_allclose(model.gravity(q), fd, atol=1e-6)
 
