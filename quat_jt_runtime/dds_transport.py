@@ -63,12 +63,18 @@ def choose(env: Mapping[str, str], share_path: Callable[[str], object]) -> Choic
         return Choice(note='DDS transport: Fast DDS defaults, shared memory on (LOCALHOST with '
                       'ROS_STATIC_PEERS); a process joining a topic can hold a publish for '
                       '333 ms (docs/ros.md, Transport)')
+    try:
+        profile = str(share_path(UDP_LOCALHOST_PROFILE if localhost else UDP_PROFILE))
+    except FileNotFoundError as exc:  # an install without the config files: say so, run on
+        return Choice(note=f'DDS transport: Fast DDS defaults, shared memory on ({exc}); a '
+                      'process joining a topic can hold a publish for 333 ms (docs/ros.md, '
+                      'Transport)')
     if localhost:
-        changes = {'FASTRTPS_DEFAULT_PROFILES_FILE': str(share_path(UDP_LOCALHOST_PROFILE)),
+        changes = {'FASTRTPS_DEFAULT_PROFILES_FILE': profile,
                    'ROS_AUTOMATIC_DISCOVERY_RANGE': 'SUBNET'}
         if 'ROS_LOCALHOST_ONLY' in env:
             changes['ROS_LOCALHOST_ONLY'] = '0'
         return Choice(changes, 'DDS transport: UDP on 127.0.0.1 only (LOCALHOST), shared '
                       'memory off (docs/ros.md, Transport)')
-    return Choice({'FASTRTPS_DEFAULT_PROFILES_FILE': str(share_path(UDP_PROFILE))},
+    return Choice({'FASTRTPS_DEFAULT_PROFILES_FILE': profile},
                   'DDS transport: UDP, shared memory off (docs/ros.md, Transport)')

@@ -62,6 +62,15 @@ def test_a_users_own_choice_is_left_alone_and_named(env, said):
 
 
 @pytest.mark.unit
+def test_a_missing_profile_leaves_the_defaults_and_says_so():
+    def missing(relative):
+        raise FileNotFoundError(f'{relative!r} not found')
+    choice = dds_transport.choose({'ROS_AUTOMATIC_DISCOVERY_RANGE': 'LOCALHOST'}, missing)
+    assert choice.changes == {}
+    assert 'fastdds_udp_localhost.xml' in choice.note and 'shared memory on' in choice.note
+
+
+@pytest.mark.unit
 def test_the_profiles_are_shipped():
     from quat_jt_runtime.resources import share_path
     for relative in (dds_transport.UDP_PROFILE, dds_transport.UDP_LOCALHOST_PROFILE):
