@@ -145,8 +145,7 @@ class RobotModel:
             raise ModelError(f'link {link!r} is not in the URDF')
         if self._link_data is None:
             self._link_data = self.model.createData()
-        qv = self._set_q(q).copy()
-        pin.framesForwardKinematics(self.model, self._link_data, qv)
+        pin.framesForwardKinematics(self.model, self._link_data, self.configuration(q))
         frame = self._link_data.oMf[self.model.getFrameId(link, pin.FrameType.BODY)]
         if self._base_is_root:
             return frame.translation.tolist(), frame.rotation.tolist()

@@ -29,6 +29,8 @@ PROFILE_VARIABLES = ('FASTRTPS_DEFAULT_PROFILES_FILE', 'FASTDDS_DEFAULT_PROFILES
 OPT_OUT_VARIABLE = 'QUAT_JT_SHARED_MEMORY'
 UDP_PROFILE = 'config/fastdds_udp.xml'
 UDP_LOCALHOST_PROFILE = 'config/fastdds_udp_localhost.xml'
+SHARED_MEMORY_RISK = ('a process joining a topic can hold a publish for 333 ms (docs/ros.md, '
+                      'Transport)')
 
 
 @dataclass(frozen=True)
@@ -50,8 +52,7 @@ def choose(env: Mapping[str, str], share_path: Callable[[str], object]) -> Choic
         return Choice(note=f'DDS transport: {rmw}, as configured')
     if env.get(OPT_OUT_VARIABLE, '') not in ('', '0'):
         return Choice(note=f'DDS transport: Fast DDS defaults, shared memory on '
-                      f'({OPT_OUT_VARIABLE}); a process joining a topic can hold a publish '
-                      'for 333 ms (docs/ros.md, Transport)')
+                      f'({OPT_OUT_VARIABLE}); {SHARED_MEMORY_RISK}')
     for name in PROFILE_VARIABLES:
         if env.get(name):
             return Choice(note=f'DDS transport: the Fast DDS profile {env[name]} ({name})')
@@ -61,14 +62,12 @@ def choose(env: Mapping[str, str], share_path: Callable[[str], object]) -> Choic
                  or env.get('ROS_LOCALHOST_ONLY', '') == '1')
     if localhost and env.get('ROS_STATIC_PEERS'):
         return Choice(note='DDS transport: Fast DDS defaults, shared memory on (LOCALHOST with '
-                      'ROS_STATIC_PEERS); a process joining a topic can hold a publish for '
-                      '333 ms (docs/ros.md, Transport)')
+                      f'ROS_STATIC_PEERS); {SHARED_MEMORY_RISK}')
     try:
         profile = str(share_path(UDP_LOCALHOST_PROFILE if localhost else UDP_PROFILE))
     except FileNotFoundError as exc:  # an install without the config files: say so, run on
-        return Choice(note=f'DDS transport: Fast DDS defaults, shared memory on ({exc}); a '
-                      'process joining a topic can hold a publish for 333 ms (docs/ros.md, '
-                      'Transport)')
+        return Choice(note=f'DDS transport: Fast DDS defaults, shared memory on ({exc}); '
+                      f'{SHARED_MEMORY_RISK}')
     if localhost:
         changes = {'FASTRTPS_DEFAULT_PROFILES_FILE': profile,
                    'ROS_AUTOMATIC_DISCOVERY_RANGE': 'SUBNET'}
