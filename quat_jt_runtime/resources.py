@@ -1,7 +1,9 @@
 """
 Locate the package's data files (URDF, config) in a source tree, a pip or a colcon install.
 
-ROS-free: looks for ``share/quat_jt_controller`` the way ament_index does, without importing it.
+ROS-free: looks for ``share/<package>`` the way ament_index does, without importing it. This is
+the package's one resolver of ament share folders: the simulator's mesh lookup uses
+:func:`ament_package_dirs` too.
 """
 import os
 from pathlib import Path
@@ -11,14 +13,31 @@ PACKAGE_NAME = 'quat_jt_controller'
 DEFAULT_URDF = 'urdf/spherical_wrist.urdf'
 
 
+def ament_package_dirs(package: str) -> list[Path]:
+    """
+    Return ``<prefix>/share/<package>`` of each sourced workspace that has it.
+
+    The prefixes are ``AMENT_PREFIX_PATH``'s, as ``ament_index_python`` reads them (a package
+    is in the index if ``<prefix>/share/ament_index/resource_index/packages/<package>``
+    exists); ROS-free, so a pip install without ROS finds nothing and goes on.
+    """
+    out = []
+    for prefix in os.environ.get('AMENT_PREFIX_PATH', '').split(os.pathsep):
+        if not prefix:
+            continue
+        marker = Path(prefix) / 'share' / 'ament_index' / 'resource_index' / 'packages'
+        share = Path(prefix) / 'share' / package
+        if (marker / package).is_file() and share.is_dir():
+            out.append(share)
+    return out
+
+
 def _candidate_roots() -> list[Path]:
     roots = []
     source_root = Path(__file__).resolve().parent.parent
     if (source_root / 'package.xml').is_file() and (source_root / 'urdf').is_dir():
         roots.append(source_root)  # a source checkout or an editable pip install
-    for prefix in os.environ.get('AMENT_PREFIX_PATH', '').split(os.pathsep):
-        if prefix:
-            roots.append(Path(prefix) / 'share' / PACKAGE_NAME)  # colcon / ROS install
+    roots += ament_package_dirs(PACKAGE_NAME)  # colcon / ROS install
     roots.append(Path(sys.prefix) / 'share' / PACKAGE_NAME)  # pip install (data_files)
     return roots
 

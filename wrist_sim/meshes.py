@@ -11,30 +11,12 @@ import re
 from typing import Optional, Sequence, Union
 import xml.etree.ElementTree as ET
 
+from quat_jt_runtime.resources import ament_package_dirs
 from wrist_sim.engine import SimulatorError
 
 _PACKAGE_URI = re.compile(r'package://([^/"\'\s]+)/([^"\'\s<>]*)')
 
 PathLike = Union[str, os.PathLike]
-
-
-def ament_package_dirs(package: str) -> list[Path]:
-    """
-    Return ``<prefix>/share/<package>`` of each sourced workspace that has it.
-
-    The prefixes are ``AMENT_PREFIX_PATH``'s, as ``ament_index_python`` reads them (a package
-    is in the index if ``<prefix>/share/ament_index/resource_index/packages/<package>``
-    exists); ROS-free, so a pip install without ROS finds nothing and goes on.
-    """
-    out = []
-    for prefix in os.environ.get('AMENT_PREFIX_PATH', '').split(os.pathsep):
-        if not prefix:
-            continue
-        marker = Path(prefix) / 'share' / 'ament_index' / 'resource_index' / 'packages'
-        share = Path(prefix) / 'share' / package
-        if (marker / package).is_file() and share.is_dir():
-            out.append(share)
-    return out
 
 
 def _find_mesh(filename: str, dirs: list[Path]) -> Optional[str]:
