@@ -59,10 +59,10 @@ class UrdfTfTree:
             if not self.model.existJointName(name):
                 raise ValueError(f'joint {name!r} is not a movable joint of the URDF')
             joint = self.model.joints[self.model.getJointId(name)]
-            if joint.nq != 1:
-                raise ValueError(f'joint {name!r} has {joint.nq} coordinates; only revolute '
-                                 'and prismatic joints are supported')
-            self._q_index.append(joint.idx_q)
+            if joint.nv != 1 or joint.nq not in (1, 2):
+                raise ValueError(f'joint {name!r} has {joint.nq} coordinates; only revolute, '
+                                 'continuous and prismatic joints are supported')
+            self._q_index.append((joint.idx_q, joint.nq == 2))  # continuous: (cos q, sin q)
         self._q = pin.neutral(self.model)
 
     @property
@@ -74,8 +74,11 @@ class UrdfTfTree:
                     pairs: list[tuple[str, str]]) -> list[Transform]:
         self._q[:] = pin.neutral(self.model)
         if q_rad is not None:
-            for i, v in zip(self._q_index, q_rad):
-                self._q[i] = v
+            for (i, continuous), v in zip(self._q_index, q_rad):
+                if continuous:
+                    self._q[i:i + 2] = np.cos(v), np.sin(v)
+                else:
+                    self._q[i] = v
         pin.framesForwardKinematics(self.model, self.data, self._q)
         return [_as_transform(parent, child, self.data.oMf[self._frame[parent]].actInv(
             self.data.oMf[self._frame[child]])) for parent, child in pairs]

@@ -6,15 +6,16 @@ the tip link.
 """
 from experiments.mcap_log import (cdr_joint_state, LATCHED_QOS_YAML, McapLog,
                                   message_definition, SEPARATOR)
-from experiments.robot_tf import write_robot_replay
+from experiments.robot_tf import UrdfTfTree, write_robot_replay
 from mcap.reader import make_reader
 from mcap_ros2.decoder import DecoderFactory
 import numpy as np
 import pytest
 from quat_jt_controller import paper
 from quat_jt_controller import quaternion as quat
+from quat_jt_controller.model import RobotModel
 from quat_jt_runtime.resources import default_urdf_xml
-from robots import wrist_model, xarm6_model, XARM6_URDF
+from robots import small_arm_urdf, wrist_model, xarm6_model, XARM6_URDF
 
 pytestmark = pytest.mark.unit
 
@@ -112,3 +113,25 @@ def test_replay_decodes_and_composes_to_the_forward_kinematics(tmp_path, robot):
     np.testing.assert_allclose(T_goal[:3, 3], p_goal, atol=1e-12)
     np.testing.assert_allclose(quat.from_rotation_matrix(T_goal[:3, :3]),
                                quat.normalized(quat.from_xyzw(*goal_xyzw)), atol=1e-9)
+
+
+def test_continuous_joints_compose_to_the_forward_kinematics():
+    urdf = small_arm_urdf()
+    names = ['joint1', 'joint2', 'joint3', 'joint4', 'tool']
+    model = RobotModel(urdf, 'base_link', 'tool', joint_names=names)
+    tree = UrdfTfTree(urdf, names)
+    q_rad = [2.5, -0.7, 1.1, -3.0, 0.4]  # joint1 and joint4 are continuous
+    by_child = {child: (parent, _transform(xyz, xyzw))
+                for parent, child, xyz, xyzw in tree.static_transforms()
+                + tree.moving_transforms(q_rad)}
+    T = _compose(by_child, 'base_link', 'tool')
+    p_m, R = model.forward_kinematics(q_rad)
+    np.testing.assert_allclose(T[:3, 3], p_m, atol=1e-12)
+    np.testing.assert_allclose(T[:3, :3], R, atol=1e-12)
+
+
+def _transform(xyz, xyzw):
+    """A decoded-message stand-in for :func:`_compose`: ``translation`` and ``rotation``."""
+    from types import SimpleNamespace as NS
+    return NS(translation=NS(x=xyz[0], y=xyz[1], z=xyz[2]),
+              rotation=NS(x=xyzw[0], y=xyzw[1], z=xyzw[2], w=xyzw[3]))
