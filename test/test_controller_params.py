@@ -18,12 +18,12 @@ import pytest
 from quat_jt_controller import paper
 from quat_jt_controller import quaternion as quat
 from quat_jt_controller.control_law import GainsError, Potential, Task
+from quat_jt_controller.controller import NO_STATE_WARN_NS
 from quat_jt_controller.controller_node import NODE_NAME, QuatJtController
 from quat_jt_controller.goal_motion import MAX_GAP_S
 from quat_jt_controller.model import ModelError
 from quat_jt_controller.parameters import GAIN_PARAMETERS, SHAPING_PARAMETERS
 from quat_jt_controller.shaping import Shaping, ShapingError
-from quat_jt_controller.supervision import NO_STATE_WARN_NS
 from rcl_interfaces.msg import Log, ParameterType
 import rclpy
 from rclpy.executors import SingleThreadedExecutor
@@ -366,7 +366,7 @@ def test_no_joint_states_after_start_is_a_warning_naming_the_topic(context, sim_
         assert ', 0 publishers on it:' in line and 'remap with -r joint_states:=' in line, line
         waited_s = float(line.split(' s after start')[0].rsplit(' ', 1)[1])
         assert waited_s >= NO_STATE_WARN_NS * 1e-9, line  # due 1.8 s after start, not before
-        assert node.supervisor.regulator.goal is None  # nothing held, nothing commanded
+        assert node.controller.goal is None  # nothing held, nothing commanded
     finally:
         executor.remove_node(listener)
         executor.remove_node(node)
@@ -408,7 +408,7 @@ def test_states_without_velocities_get_them_estimated_and_say_so_once(make_probe
     probe.wait_log('joint_states carry no velocities: estimating them')
     assert sum('carry no velocities' in m for m in probe.logs) == 1
     assert probe.node.counters.rejected_states == 0
-    _, qdot = probe.node._last_q, probe.node._last_qdot
+    qdot = probe.node.controller.last_qdot
     assert qdot[0] == 0.0 and qdot[2] == 0.0
     assert 0.49 < qdot[1] < 0.5  # the estimate has settled on 0.5 rad/s
     # the damping acts on it: the same state at rest asks for a different torque
