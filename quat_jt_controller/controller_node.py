@@ -26,7 +26,6 @@ from quat_jt_runtime.loop_stats import TickStats
 from quat_jt_runtime.params import declare_realtime, history_qos
 from quat_jt_runtime.prewarm_timer import describe_prewarm, prewarm_off_reason, PrewarmTimer
 from quat_jt_runtime.resources import bundled_urdf_hint
-from rclpy.callback_groups import MutuallyExclusiveCallbackGroup
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from sensor_msgs.msg import JointState
@@ -82,9 +81,8 @@ class QuatJtController(Node):
         self._no_state_timer = self.create_timer(
             NO_STATE_CHECK_S, self._on_no_state_yet, clock=Clock(clock_type=ClockType.STEADY_TIME))
         self.create_timer(0.05, self._on_goal_checks)
-        # the graph is read here, once a second, off the state callback (its own group)
-        self.create_timer(1.0, self._on_diagnostics_timer,
-                          callback_group=MutuallyExclusiveCallbackGroup())
+        # the graph is read on this timer, once a second, never in the state callback
+        self.create_timer(1.0, self._on_diagnostics_timer)
         off = prewarm_off_reason(cfg.prewarm_lead_s, not prewarm, self._use_sim_time)
         self._prewarm = None if off else PrewarmTimer(self, cfg.prewarm_lead_s, ctl.prewarm)
         for line in parameters.describe_start(cfg, reg, self._state_sub.topic_name) + [
