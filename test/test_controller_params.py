@@ -8,6 +8,7 @@ joint states and goals on the node's topics and listens to its commands, poses, 
 """
 import math
 from pathlib import Path
+import sys
 import time
 from typing import Callable
 
@@ -623,6 +624,41 @@ def test_a_second_commander_and_a_name_twin_are_warned_about(make_probe, context
     finally:
         probe.executor.remove_node(twin)
         twin.destroy_node()
+
+
+def test_the_state_callback_never_reads_the_graph(make_probe):
+    """While states flow, /diagnostics go out after a command; the graph is read on a timer."""
+    probe = make_probe()
+    node = probe.node
+    callers: list[list[str]] = []  # the functions up the stack of each graph query
+
+    def recorded(query):
+        def call(*args, **kwargs):
+            frame, names = sys._getframe(1), []
+            while frame is not None:
+                names.append(frame.f_code.co_name)
+                frame = frame.f_back
+            callers.append(names)
+            return query(*args, **kwargs)
+        return call
+    node.count_publishers = recorded(node.count_publishers)
+    node.get_node_names_and_namespaces = recorded(node.get_node_names_and_namespaces)
+    in_tick = []  # each /diagnostics array: published from the state callback?
+    publish_diagnostics = node._diagnostics.publish
+
+    def publish() -> None:
+        in_tick.append(sys._getframe(1).f_code.co_name == '_on_joint_state')
+        publish_diagnostics()
+    node._diagnostics.publish = publish
+    probe.command_for(state((0.1, 0.2, 0.3)))
+    deadline = time.monotonic() + 15.0
+    while sum(in_tick) < 2:  # states every ~2 ms: the diagnostics wait for the next command
+        assert time.monotonic() < deadline, 'no /diagnostics after a command'
+        probe.state_pub.publish(state((0.1, 0.2, 0.3)))
+        probe.executor.spin_once(timeout_sec=0.002)
+    assert len(callers) >= 2 * 2, callers  # both queries, at each diagnostics timer
+    assert not any('_on_joint_state' in names for names in callers), callers
+    assert probe.diagnostics and status_values(probe, 'control loop')
 
 
 # --------------------------------------------------------------------------- the extensions
