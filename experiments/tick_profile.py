@@ -18,6 +18,8 @@ from typing import Callable, Optional
 
 from quat_jt_controller import control_law as cl
 from quat_jt_controller import paper
+from quat_jt_controller import quaternion as quat
+from quat_jt_controller.controller import Controller, GoalRequest
 from quat_jt_controller.model import RobotModel
 from quat_jt_controller.regulator import Goal, Regulator
 from quat_jt_runtime.joints import stamp_problem, StateLayout
@@ -100,6 +102,15 @@ def profile(calls: int) -> dict[str, dict[str, float]]:
         tick_stats, loop_stats = TickStats(), LoopStats()
         tau = [0.1, -0.1, 0.05]
 
+        ctl = Controller(Regulator(model, cl.Task.ORIENTATION, gains), 0.5, 10, 0.5)
+        ctl.on_goal(GoalRequest('', quat.to_xyzw(paper.Q_DESIRED), (0.0, 0.0, 0.0)), 0)
+        ticks = [0]
+
+        def whole_tick() -> None:  # a state 1 ms after the last (its stamp's age: 0)
+            ticks[0] += 1
+            ctl.on_state(js.name, js.position, js.velocity, stamp_ns, stamp_ns,
+                         ticks[0] * 1_000_000)
+
         def set_data() -> None:
             cmd.data = out.tau_nm
 
@@ -123,6 +134,8 @@ def profile(calls: int) -> dict[str, dict[str, float]]:
             'stamp check': best_us(lambda: stamp_problem(stamp_ns, time.time_ns(), 500_000_000),
                                    calls),
             'Regulator.update (paper config)': best_us(lambda: regulator.update(q, qdot), calls),
+            'the whole tick without ROS (Controller.on_state: joints, stamp, law and the '
+            'decisions around it)': best_us(whole_tick, calls),
             'command into the message': best_us(set_data, calls),
             'publish the command (no subscriber)': best_us(lambda: cmd_pub.publish(cmd), calls),
             'statistics': best_us(lambda: tick_stats.record(1, 2, 3, 4.0, False), calls),

@@ -4,18 +4,18 @@ What the controller reports: the feedback topics and ``/diagnostics`` (ROS marsh
 :class:`Feedback` publishes ``~/current_pose``, ``~/orientation_error`` and, for the pose task,
 ``~/position_error``; :class:`GoalPose` the goal in force on ``~/goal_pose``;
 :class:`Diagnostics` turns the figures of the ROS-free builders
-(``diagnostics.py``) into ``/diagnostics`` and warns of a second commander on the robot.
+(``controller.py``, ``diagnostics.py``) into ``/diagnostics`` and warns of a second commander on
+the robot.
 """
 import time
-from typing import Callable, Optional, Sequence
+from typing import Optional, Sequence
 
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped, Vector3Stamped
 from quat_jt_controller import diagnostics
 from quat_jt_controller import quaternion as quat
-from quat_jt_controller.control_law import Task
+from quat_jt_controller.controller import Controller
 from quat_jt_controller.regulator import Goal, TickOutput
-from quat_jt_controller.supervision import Supervisor
 from quat_jt_runtime.description import LATCHED_QOS
 from quat_jt_runtime.loop_stats import TickStats
 from quat_jt_runtime.messages import diagnostic_array
@@ -96,45 +96,37 @@ class Diagnostics:
     """
     ``/diagnostics`` of the controller: the loop, the goal and the stall, one array a second.
 
-    The figures come from the node's parts (read when published, never in the tick);
-    ``last_tick`` returns the last tick's output and joint velocities. A second commander on
-    the command topic, or a second node of the same name, is warned of every 10 s while it
-    lasts.
+    The statuses are the :class:`~quat_jt_controller.controller.Controller`'s (built when
+    published, never in the tick's computation); the loop's figures are ``stats``' window.
+    The ROS graph is read only by :meth:`check_graph`, on a timer, never in the state
+    callback (a graph query can block for milliseconds while DDS discovers a process): a
+    second commander on the command topic, or a second node of the same name, is warned of
+    every 10 s while it lasts and reported in the next arrays.
     """
 
     def __init__(self, node: Node, hardware_id: str, command_topic: str,
-                 supervisor: Supervisor, stats: TickStats, counters: diagnostics.Counters,
-                 checker, stall, last_tick: Callable[[], tuple]) -> None:
+                 controller: Controller, stats: TickStats) -> None:
         self._node = node
         self._hardware_id = hardware_id
         self._command_topic = command_topic
-        self._supervisor, self._stats, self._counters = supervisor, stats, counters
-        self._checker, self._stall, self._last_tick = checker, stall, last_tick
+        self._controller, self._stats = controller, stats
         self._pub = node.create_publisher(DiagnosticArray, '/diagnostics', 10)
         self._name = node.get_fully_qualified_name().lstrip('/')  # one topic for the graph
         self._graph_log = Throttle(10.0)
+        self._graph_warnings: list[str] = []
         self._window_start_ns = time.monotonic_ns()
 
     def publish(self) -> None:
         """Publish the loop's figures since the last call, the goal's state and the stall's."""
-        now, sup, checker = time.monotonic_ns(), self._supervisor, self._checker
-        regulator = sup.regulator
+        now = time.monotonic_ns()
         figures = self._stats.window((now - self._window_start_ns) * 1e-9)
         self._window_start_ns = now
-        out, qdot = self._last_tick()
-        statuses = (
-            ('control loop', *diagnostics.loop_status(
-                figures, sup.last_state_ns == 0, sup.stopped, self._counters,
-                self._graph_warnings())),
-            ('goal', *diagnostics.goal_status(
-                sup.goal_source, regulator.goal, sup.goal_warning, out, qdot,
-                regulator.task is Task.POSE, self._counters, checker.unavailable_reason,
-                checker.ready, diagnostics.configuration_state(regulator))),
-            ('stall', *self._stall.status()))
+        statuses = self._controller.statuses(figures, self._graph_warnings)
         self._pub.publish(diagnostic_array(self._name, self._hardware_id, statuses,
                                            self._node.get_clock().now().to_msg()))
 
-    def _graph_warnings(self) -> list[str]:
+    def check_graph(self) -> None:
+        """Read the graph: warn of a second commander or a second node of this name."""
         node = self._node
         me = (node.get_name(), node.get_namespace())
         warnings = diagnostics.graph_warnings(
@@ -144,4 +136,4 @@ class Diagnostics:
         for warning in warnings:
             if self._graph_log(cause(warning)) is not None:
                 node.get_logger().warn(warning)
-        return warnings
+        self._graph_warnings = warnings

@@ -8,6 +8,7 @@ joint states and goals on the node's topics and listens to its commands, poses, 
 """
 import math
 from pathlib import Path
+import sys
 import time
 from typing import Callable
 
@@ -18,12 +19,12 @@ import pytest
 from quat_jt_controller import paper
 from quat_jt_controller import quaternion as quat
 from quat_jt_controller.control_law import GainsError, Potential, Task
+from quat_jt_controller.controller import NO_STATE_WARN_NS
 from quat_jt_controller.controller_node import NODE_NAME, QuatJtController
 from quat_jt_controller.goal_motion import MAX_GAP_S
 from quat_jt_controller.model import ModelError
 from quat_jt_controller.parameters import GAIN_PARAMETERS, SHAPING_PARAMETERS
 from quat_jt_controller.shaping import Shaping, ShapingError
-from quat_jt_controller.supervision import NO_STATE_WARN_NS
 from rcl_interfaces.msg import Log, ParameterType
 import rclpy
 from rclpy.executors import SingleThreadedExecutor
@@ -366,7 +367,7 @@ def test_no_joint_states_after_start_is_a_warning_naming_the_topic(context, sim_
         assert ', 0 publishers on it:' in line and 'remap with -r joint_states:=' in line, line
         waited_s = float(line.split(' s after start')[0].rsplit(' ', 1)[1])
         assert waited_s >= NO_STATE_WARN_NS * 1e-9, line  # due 1.8 s after start, not before
-        assert node.supervisor.regulator.goal is None  # nothing held, nothing commanded
+        assert node.controller.goal is None  # nothing held, nothing commanded
     finally:
         executor.remove_node(listener)
         executor.remove_node(node)
@@ -408,7 +409,7 @@ def test_states_without_velocities_get_them_estimated_and_say_so_once(make_probe
     probe.wait_log('joint_states carry no velocities: estimating them')
     assert sum('carry no velocities' in m for m in probe.logs) == 1
     assert probe.node.counters.rejected_states == 0
-    _, qdot = probe.node._last_q, probe.node._last_qdot
+    qdot = probe.node.controller.last_qdot
     assert qdot[0] == 0.0 and qdot[2] == 0.0
     assert 0.49 < qdot[1] < 0.5  # the estimate has settled on 0.5 rad/s
     # the damping acts on it: the same state at rest asks for a different torque
@@ -623,6 +624,41 @@ def test_a_second_commander_and_a_name_twin_are_warned_about(make_probe, context
     finally:
         probe.executor.remove_node(twin)
         twin.destroy_node()
+
+
+def test_the_state_callback_never_reads_the_graph(make_probe):
+    """While states flow, /diagnostics go out after a command; the graph is read on a timer."""
+    probe = make_probe()
+    node = probe.node
+    callers: list[list[str]] = []  # the functions up the stack of each graph query
+
+    def recorded(query):
+        def call(*args, **kwargs):
+            frame, names = sys._getframe(1), []
+            while frame is not None:
+                names.append(frame.f_code.co_name)
+                frame = frame.f_back
+            callers.append(names)
+            return query(*args, **kwargs)
+        return call
+    node.count_publishers = recorded(node.count_publishers)
+    node.get_node_names_and_namespaces = recorded(node.get_node_names_and_namespaces)
+    in_tick = []  # each /diagnostics array: published from the state callback?
+    publish_diagnostics = node._diagnostics.publish
+
+    def publish() -> None:
+        in_tick.append(sys._getframe(1).f_code.co_name == '_on_joint_state')
+        publish_diagnostics()
+    node._diagnostics.publish = publish
+    probe.command_for(state((0.1, 0.2, 0.3)))
+    deadline = time.monotonic() + 15.0
+    while sum(in_tick) < 2:  # states every ~2 ms: the diagnostics wait for the next command
+        assert time.monotonic() < deadline, 'no /diagnostics after a command'
+        probe.state_pub.publish(state((0.1, 0.2, 0.3)))
+        probe.executor.spin_once(timeout_sec=0.002)
+    assert len(callers) >= 2 * 2, callers  # both queries, at each diagnostics timer
+    assert not any('_on_joint_state' in names for names in callers), callers
+    assert probe.diagnostics and status_values(probe, 'control loop')
 
 
 # --------------------------------------------------------------------------- the extensions

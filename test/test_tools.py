@@ -131,7 +131,9 @@ def test_tick_profile_times_every_piece_of_both_ticks():
     assert len(sleep_table.strip().splitlines()) == 4, sleep_table  # default and 1 ns slack
     assert '(1 ns)' in sleep_table, sleep_table
     for piece in ('rclpy deserialising the JointState (before the callback)',
-                  'Regulator.update (paper config)', 'publish the command (no subscriber)',
+                  'Regulator.update (paper config)',
+                  'the whole tick without ROS (Controller.on_state: joints, stamp, law and the '
+                  'decisions around it)', 'publish the command (no subscriber)',
                   'PyBullet step and read', 'publish JointState (no subscriber)'):
         assert float(pieces[piece]) > 0.0, (piece, stdout)
 

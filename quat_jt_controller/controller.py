@@ -1,0 +1,433 @@
+"""
+The controller around the law, ROS-free: a joint state in, a command out; a goal in, its log.
+
+:class:`Controller` owns the goal and every decision around :meth:`Regulator.update
+<quat_jt_controller.regulator.Regulator.update>`, the one control tick, so that the node only
+reads a message, calls :meth:`Controller.on_state` and publishes the :class:`Command` (as
+ros2_controllers' read, update, write):
+
+- the state check: the controlled joints by name, the stamp's age, velocities estimated when
+  a driver sends none (``quat_jt_runtime.joints.StateCheck``);
+- until the first goal, hold the pose of the first valid joint state (q* = q);
+- goals given in any link of the URDF, placed in the base (``goal_frames``); a goal equal to
+  the one in force is not a new goal (no log, no new check);
+- a stream of stamped goals: its velocity (``goal_motion``), which stops when the stream does;
+- the goal check (a worker process, ``goal_check.GoalCheckWorker``): what to ask it for a new
+  goal, and its answers (A1/A2, q*, the stream's qdot*) applied to the goal still in force,
+  each warning said once;
+- the state watchdog: after ``state_timeout`` without a valid state, zero the command once;
+- no valid state at all since start: a warning after ``NO_STATE_WARN_NS``, then one every
+  ``NO_STATE_REPEAT_NS`` while it lasts (a topic remapped wrong looks like a working node);
+- feedback every ``publish_rate_divider``-th tick, its quaternion kept in one hemisphere;
+- ``/diagnostics``: right after the next command while states flow, else at once; their
+  content (``diagnostics.py``) and the stall detection (``stall.py``);
+- the log lines to emit, with their severity, rate-limited per cause.
+
+Two clocks, both read by the caller, once per call: ``now_ns``, the clock of the states'
+stamps (ROS time), only to check a stamp's age; ``steady_ns``, a monotonic clock in ns, for
+everything the controller times (the watchdog, streams, decimation of diagnostics, the stall,
+the log throttles).
+"""
+from enum import IntEnum
+from typing import Any, NamedTuple, Optional, Sequence
+
+from quat_jt_controller import diagnostics
+from quat_jt_controller import quaternion as quat
+from quat_jt_controller.control_law import Gains, Task
+from quat_jt_controller.goal_check import Posture
+from quat_jt_controller.goal_frames import GoalFrames
+from quat_jt_controller.goal_motion import GoalVelocityEstimator
+from quat_jt_controller.regulator import Goal, Regulator, TickOutput
+from quat_jt_controller.stall import StallDetector
+from quat_jt_runtime.joints import DEFAULT_STATE_RATE_HZ, StaleState, StateCheck
+from quat_jt_runtime.throttle import cause, Throttle
+
+# /diagnostics wait for the next tick while states come at least this often (else: at once)
+DIAGNOSTICS_WAIT_NS = 20_000_000
+# No valid state since start: the first warning after this long (within 2 s, on the node's
+# timer), then one every NO_STATE_REPEAT_NS
+NO_STATE_WARN_NS = 1_800_000_000
+NO_STATE_REPEAT_NS = 10_000_000_000
+THROTTLE_S = 1.0  # rejected goals and states, non-finite torques: one line a second and cause
+GOAL_LOG_PERIOD_S = 0.2  # accepted distinct goals: one line each, at most 5 a second
+
+
+class Severity(IntEnum):
+    """The severity of a log line (the values of rclpy's ``LoggingSeverity``)."""
+
+    INFO = 20
+    WARN = 30
+    ERROR = 40
+
+
+class LogLine(NamedTuple):
+    """A line for the node's log."""
+
+    severity: Severity
+    text: str
+
+
+NO_LOGS: tuple[LogLine, ...] = ()
+
+
+class Command(NamedTuple):
+    """
+    What :meth:`Controller.on_state` (or the watchdog) decided: publish ``tau_nm``, then the rest.
+
+    ``tau_nm`` is None when the state was refused (nothing to publish). ``feedback`` is the
+    measured orientation (scalar first, in the hemisphere of the last one published) when a
+    feedback sample is due, with ``out`` the tick's pose and errors; ``diagnostics`` says that
+    ``/diagnostics`` are due now (:meth:`Controller.statuses`).
+    """
+
+    tau_nm: Optional[list[float]]
+    out: Optional[TickOutput] = None
+    feedback: Optional[quat.Quaternion] = None
+    diagnostics: bool = False
+    logs: tuple[LogLine, ...] = NO_LOGS
+
+
+class GoalRequest(NamedTuple):
+    """A goal as it came, in plain values: its frame, orientation, position and stamp."""
+
+    frame_id: str
+    xyzw: tuple[float, float, float, float]  # ROS order
+    position_m: tuple[float, float, float]
+    stamp_s: float = 0.0  # 0: not stamped (a fixed goal)
+
+
+class GoalReply(NamedTuple):
+    """What :meth:`Controller.on_goal` did with a goal request."""
+
+    accepted: bool
+    new: bool  # accepted and different from the goal it replaced: logged and checked
+    nu_desired_base: Optional[tuple[float, ...]]  # the stream's task velocity, or None
+    logs: tuple[LogLine, ...] = NO_LOGS
+
+
+class Controller:
+    """
+    The goal and the decisions around one :class:`Regulator`; one per controller node.
+
+    :param regulator: the law; the controller is the only one to set its goal, q* and qdot*.
+    :param state_timeout_s: the watchdog: no valid state for longer, and the command is zero.
+    :param publish_rate_divider: a feedback sample every this many ticks.
+    :param max_state_age_s: a state older than this (or from the future) is refused; 0: off.
+    :param state_rate_hz: the states' expected rate (the velocity estimate's time constant).
+    :param checker: the goal-check worker (``submit``, ``poll``, ``take_*``), or None.
+    :param started_ns: when the node started (``steady_ns``), for :meth:`no_state_yet`.
+    """
+
+    def __init__(self, regulator: Regulator, state_timeout_s: float,
+                 publish_rate_divider: int, max_state_age_s: float = 0.0,
+                 state_rate_hz: float = DEFAULT_STATE_RATE_HZ, checker: Optional[Any] = None,
+                 started_ns: int = 0) -> None:
+        self.regulator = regulator
+        model = regulator.model
+        self.checker = checker
+        self.pose_task = regulator.task is Task.POSE
+        self.state_timeout_s = state_timeout_s
+        self.state_timeout_ns = int(state_timeout_s * 1e9)
+        self.state_rate_hz = state_rate_hz
+        self.publish_rate_divider = publish_rate_divider
+        self.started_ns = started_ns
+        self.counters = diagnostics.Counters()
+        self.stall = StallDetector(regulator)
+        self._frames = GoalFrames(model, regulator.task)  # the base and every link
+        self._check_state = StateCheck(model.joint_names, max_state_age_s, state_rate_hz,
+                                       model.continuous)
+        self._zero = [0.0] * regulator.n
+        # the goal
+        self.goal_source = 'none'  # 'none' | 'hold' (initial pose) | 'target_pose'
+        self.goal_warning = ''  # the goal check's warning for the goal in force ('' = none)
+        self.goal_anchor: Optional[Sequence[float]] = None  # the tip when the goal took force
+        self._motion = GoalVelocityEstimator(self.pose_task)
+        self._goal_velocity_until_ns = 0  # 0: not a stream (a fixed goal)
+        # the states
+        self.last: Optional[TickOutput] = None  # the last tick's output, q and qdot
+        self.last_q: Optional[list[float]] = None
+        self.last_qdot: Optional[list[float]] = None
+        self.last_state_ns = 0  # the last valid state (steady_ns); 0: none yet
+        self.stopped = False  # commanding zeros after a state timeout
+        self._last_stamp_ns = 0
+        self._said_estimating = False
+        self._no_state_warn_ns = started_ns + NO_STATE_WARN_NS  # the next warning, if none yet
+        # what goes out
+        self._decimation = 0
+        self._published_q: quat.Quaternion = (1.0, 0.0, 0.0, 0.0)
+        self._diagnostics_due = False
+        self._steady_ns = started_ns  # the throttles' clock: the last time given
+        clock = self._clock_s
+        self._reject_log = Throttle(THROTTLE_S, clock)  # per cause (the reason without numbers)
+        self._nonfinite_log = Throttle(THROTTLE_S, clock)
+        self._goal_log = Throttle(GOAL_LOG_PERIOD_S, clock)
+
+    def _clock_s(self) -> float:
+        return self._steady_ns * 1e-9
+
+    @property
+    def gains(self) -> Gains:
+        """Return the gains in force (immutable)."""
+        return self.regulator.gains
+
+    @property
+    def goal(self) -> Optional[Goal]:
+        """Return the goal in force (immutable), or None before the first state or goal."""
+        return self.regulator.goal
+
+    @property
+    def has_state(self) -> bool:
+        """Tell whether a valid joint state has come since start."""
+        return self.last_state_ns != 0
+
+    @property
+    def streaming(self) -> bool:
+        """Tell whether a stream of goals is in force (its velocity may be given)."""
+        return self._goal_velocity_until_ns != 0
+
+    # -- states ---------------------------------------------------------------------------
+    def on_state(self, names: Sequence[str], positions: Sequence[float],
+                 velocities: Sequence[float], stamp_ns: int, now_ns: int,
+                 steady_ns: int) -> Command:
+        """
+        One control tick: check the state, keep the goal, run the law, say what goes out.
+
+        ``stamp_ns``: the state's stamp (0: unstamped) and ``now_ns`` the time on its clock;
+        ``steady_ns``: the monotonic clock. A refused state gives no torque and its reason
+        (rate-limited per cause); the watchdog goes on counting from the last valid state.
+        """
+        self._steady_ns = steady_ns
+        try:
+            q, qdot = self._check_state(names, positions, velocities, stamp_ns, now_ns)
+        except ValueError as exc:
+            self.counters.rejected_states += 1
+            self.counters.stale_states += isinstance(exc, StaleState)
+            return Command(None, logs=self._rejection('joint_states', str(exc)))
+        logs = NO_LOGS
+        if self._check_state.estimating and not self._said_estimating:
+            self._said_estimating = True
+            logs += (LogLine(Severity.WARN, self._estimating(stamp_ns)),)
+        regulator = self.regulator
+        if regulator.goal is None:  # until a goal arrives, hold the pose measured here
+            self.goal_source = 'hold'
+            held = regulator.hold(q)
+            self.goal_anchor = held.p_desired_base
+            logs += (LogLine(Severity.INFO, (
+                f'first joint state, {(steady_ns - self.started_ns) * 1e-9:.2f} s after '
+                f'start: holding the measured pose, {held.describe()}')),)
+        elif self._goal_velocity_until_ns and steady_ns > self._goal_velocity_until_ns:
+            self._goal_velocity_until_ns = 0  # the stream stopped: a fixed goal again
+            regulator.set_goal_joint_velocity(None)
+        out = regulator.update(q, qdot, self._tick_interval_s(stamp_ns))
+        self.last, self.last_q, self.last_qdot = out, q, qdot
+        self.stall.feed(steady_ns * 1e-9, q, qdot, out)
+        if not out.finite:
+            self.counters.nonfinite_torques += 1
+            if self._nonfinite_log('nonfinite') is not None:
+                logs += (LogLine(Severity.ERROR, (
+                    f'the law gave a non-finite torque at q = {q} (gains {self.gains}): '
+                    'published zero torque')),)
+        self.last_state_ns = steady_ns
+        if self.stopped:
+            self.stopped = False
+            logs += (LogLine(Severity.INFO, 'joint_states are back: commanding torque again'),)
+        self._decimation += 1
+        feedback = None
+        if self._decimation >= self.publish_rate_divider:
+            self._decimation = 0
+            feedback = self._published_quaternion(out.R_tip_base)
+        due, self._diagnostics_due = self._diagnostics_due, False
+        return Command(out.tau_nm, out, feedback, due, logs)
+
+    def _estimating(self, stamp_ns: int) -> str:
+        rate = self.state_rate_hz
+        return ('joint_states carry no velocities: estimating them from the positions and '
+                + ('their stamps' if stamp_ns else 'their arrival times (no stamps)')
+                + f' (finite differences, low-pass of time constant {1e3 / rate:g} ms = one '
+                f'period at state_rate {rate:g} Hz); a driver that publishes velocities gives '
+                'better damping')
+
+    def _tick_interval_s(self, stamp_ns: int) -> float:
+        """
+        Return the time since the last state's stamp (s), the tick's time step; 0 if unknown.
+
+        0 for the first state, an unstamped one, or one not newer than the last: a tick of
+        zero length re-evaluates the law without advancing its slow state (the friction
+        learned at rest). The regulator caps long gaps.
+        """
+        last, self._last_stamp_ns = self._last_stamp_ns, stamp_ns
+        if last <= 0 or stamp_ns <= last:
+            return 0.0
+        return (stamp_ns - last) * 1e-9
+
+    def _published_quaternion(self, R_tip_base: Sequence[Sequence[float]]) -> quat.Quaternion:
+        """Return the measured orientation in the hemisphere of the last one published."""
+        q = quat.same_hemisphere(quat.from_rotation_matrix(R_tip_base), self._published_q)
+        self._published_q = q
+        return q
+
+    def prewarm(self) -> None:
+        """Run the last state's law again, its output dropped (the caches stay warm)."""
+        if self.last_q is None:
+            return
+        self.regulator.update(self.last_q, self.last_qdot)
+        self.counters.prewarm_passes += 1
+
+    # -- timers ---------------------------------------------------------------------------
+    def on_watchdog(self, steady_ns: int) -> Optional[Command]:
+        """
+        Return a zero command, once, when valid states stopped for longer than the timeout.
+
+        None otherwise, and before the first state (nothing was commanded yet).
+        """
+        if self.stopped or not self.last_state_ns:
+            return None
+        silent_ns = steady_ns - self.last_state_ns
+        if silent_ns <= self.state_timeout_ns:
+            return None
+        self.stopped = True
+        return Command(list(self._zero), logs=(LogLine(Severity.ERROR, (
+            f'no valid joint_states for {silent_ns * 1e-9:.3f} s (> state_timeout '
+            f'{self.state_timeout_s} s): published zero torque, waiting for states')),))
+
+    def no_state_yet(self, steady_ns: int) -> Optional[float]:
+        """
+        Return the seconds since start when no valid state has come and a warning is due.
+
+        The first after ``NO_STATE_WARN_NS``, then one every ``NO_STATE_REPEAT_NS`` while no
+        valid state comes; None otherwise, and for good once one has.
+        """
+        if self.last_state_ns or steady_ns < self._no_state_warn_ns:
+            return None
+        self._no_state_warn_ns = steady_ns + NO_STATE_REPEAT_NS
+        return (steady_ns - self.started_ns) * 1e-9
+
+    def on_diagnostics_timer(self, steady_ns: int) -> bool:
+        """At 1 Hz: return True to publish now; else they are due after the next command."""
+        last = self.last_state_ns
+        flowing = last and steady_ns - last < DIAGNOSTICS_WAIT_NS
+        if flowing and not self._diagnostics_due:
+            self._diagnostics_due = True
+            return False
+        self._diagnostics_due = False
+        return True
+
+    # -- goals ----------------------------------------------------------------------------
+    def on_goal(self, request: GoalRequest, steady_ns: int) -> GoalReply:
+        """
+        Validate a goal and put it in force, or refuse it with its reason (the last stays).
+
+        A goal in a link of the robot is placed in the base with the last measured joints.
+        A stamped stream gets its velocity; a new goal is logged (at most 5 lines a second)
+        and given to the goal check.
+        """
+        self._steady_ns = steady_ns
+        try:
+            goal = self._frames.goal(request.frame_id, request.xyzw, request.position_m,
+                                     self.last_q)
+        except ValueError as exc:
+            self.counters.rejected_goals += 1
+            return GoalReply(False, False, None, self._rejection(
+                'target_pose', f'previous goal stays in force: {exc}'))
+        self.counters.accepted_goals += 1
+        regulator = self.regulator
+        previous = regulator.goal
+        regulator.set_goal(goal)
+        self.goal_source = 'target_pose'
+        nu_desired = self._motion.update(request.stamp_s, goal.q_desired_base,
+                                         goal.p_desired_base)
+        if nu_desired is None:  # a fixed goal, or the first of a stream
+            self._goal_velocity_until_ns = 0
+            regulator.set_goal_joint_velocity(None)
+        else:  # a stream: its joint velocity comes from the worker, until the stream stops
+            self._goal_velocity_until_ns = steady_ns + int(self._motion.hold_s() * 1e9)
+        if goal == previous:
+            return GoalReply(True, False, nu_desired)
+        self.goal_anchor = None if self.last is None else self.last.p_tip_base
+        self._check_goal(goal, nu_desired)
+        frame, base = request.frame_id, self._frames.base_link
+        placed = ('' if frame in ('', base) else
+                  f' (given in {frame}, placed in {base} at the measured joints)')
+        line = self._goal_log.line(  # one line per distinct goal, at most 5 a second
+            'goal', lambda: f'new goal: {goal.describe(self.pose_task)}{placed}',
+            ' ({} more distinct goals since the last line)')
+        return GoalReply(True, True, nu_desired,
+                         NO_LOGS if line is None else (LogLine(Severity.INFO, line),))
+
+    def _check_goal(self, goal: Goal, nu_desired: Optional[Sequence[float]]) -> None:
+        """
+        Ask the worker about a new goal: A1/A2, q* (when a term uses it), and a stream's qdot*.
+
+        q* is searched from the measured joints, within the band margin when the
+        goal-configuration term or goal tracking needs it, near the preferred posture.
+        """
+        shaping = self.regulator.shaping
+        tracking = shaping.goal_velocity_gain > 0.0 and nu_desired is not None
+        self.goal_warning = ''
+        if self.checker is None:
+            return
+        self.checker.submit(
+            goal, self.last_q, goal.q_desired_base, goal.p_desired_base,
+            shaping.joint_limit_margin_rad if shaping.configuration_on or tracking else None,
+            nu_desired if tracking else None,
+            Posture(shaping.preferred_configuration_rad or None, shaping.posture_weight))
+
+    def take_goal_checks(self) -> tuple[LogLine, ...]:
+        """
+        Apply the worker's answers (never waits); return the lines to log.
+
+        q* and qdot* go to the regulator for the goal they answer (the regulator ignores a
+        goal no longer in force; qdot* only while the stream goes on). A verdict counts only
+        for the goal still in force, and a warning is logged once per change. The worker's
+        death is said once (it restarts by itself); a verdict without a goal is skipped.
+        """
+        checker = self.checker
+        if checker is None:
+            return NO_LOGS
+        verdicts = checker.poll()
+        failure = checker.take_failure()
+        logs = NO_LOGS
+        if failure is not None:
+            logs += (LogLine(Severity.ERROR, f'{failure}; regulation goes on'),)
+        regulator = self.regulator
+        for goal, verdict in verdicts:
+            if goal is None:
+                continue
+            q_star = checker.take_configuration(goal)
+            if q_star is not None:  # the goal-configuration term pulls towards it
+                regulator.set_goal_configuration(goal, q_star)
+            qdot_star = checker.take_configuration_velocity(goal)
+            if qdot_star is not None and self.streaming:
+                regulator.set_goal_joint_velocity(qdot_star)
+            if goal is regulator.goal and verdict != self.goal_warning:
+                self.goal_warning = verdict
+                if verdict:
+                    logs += (LogLine(Severity.WARN, f'goal {goal.describe(False)} accepted '
+                                                    f'with a warning: {verdict}'),)
+        return logs
+
+    # -- reports --------------------------------------------------------------------------
+    def statuses(self, figures: dict, graph_warnings: Sequence[str] = ()
+                 ) -> list[tuple[str, int, str, list[tuple[str, str]]]]:
+        """
+        Return the ``/diagnostics`` statuses: the control loop, the goal and the stall.
+
+        ``figures``: the loop's window (``TickStats.window``); ``graph_warnings``: what the
+        node found in the ROS graph (a second commander, a second node of its name).
+        """
+        regulator, checker = self.regulator, self.checker
+        unavailable = 'no goal-check worker' if checker is None else checker.unavailable_reason
+        ready = checker is not None and checker.ready
+        return [
+            ('control loop', *diagnostics.loop_status(
+                figures, not self.last_state_ns, self.stopped, self.counters, graph_warnings)),
+            ('goal', *diagnostics.goal_status(
+                self.goal_source, regulator.goal, self.goal_warning, self.last, self.last_qdot,
+                self.pose_task, self.counters, unavailable, ready,
+                diagnostics.configuration_state(regulator))),
+            ('stall', *self.stall.status())]
+
+    def _rejection(self, topic: str, reason: str) -> tuple[LogLine, ...]:
+        """Warn once per cause and second; held-back repeats are counted in the next line."""
+        line = self._reject_log.line((topic, cause(reason)), f'{topic} rejected, {reason}')
+        return NO_LOGS if line is None else (LogLine(Severity.WARN, line),)

@@ -1,0 +1,323 @@
+"""The controller around the law (quat_jt_controller.controller), ROS-free: states and goals in."""
+import math
+
+import pytest
+from quat_jt_controller import control_law as cl
+from quat_jt_controller import diagnostics
+from quat_jt_controller import paper
+from quat_jt_controller import quaternion as quat
+from quat_jt_controller.controller import (
+    Controller, DIAGNOSTICS_WAIT_NS, GoalRequest, NO_STATE_REPEAT_NS, NO_STATE_WARN_NS, Severity)
+from quat_jt_controller.regulator import Goal, Regulator
+from robots import wrist_model
+
+pytestmark = pytest.mark.unit
+
+MS = 1_000_000  # ns
+JOINTS = ('joint1', 'joint2', 'joint3')
+REST = (0.0, 0.0, 0.0)
+GAINS = cl.Gains.create('tanh', paper.KP, paper.KV, paper.LAMBDA, cl.Task.ORIENTATION, 3)
+
+
+def regulator() -> Regulator:
+    return Regulator(wrist_model(), cl.Task.ORIENTATION, GAINS)
+
+
+def controller(divider: int = 3, checker=None, started_ns: int = 0, **kwargs) -> Controller:
+    return Controller(regulator(), 0.5, divider, checker=checker, started_ns=started_ns,
+                      **kwargs)
+
+
+def tick(ctl: Controller, q, steady_ns: int, qdot=REST, stamp_ns: int = 0):
+    """One state of the wrist's joints, unstamped unless told (max_state_age off)."""
+    return ctl.on_state(JOINTS, q, qdot, stamp_ns, stamp_ns, steady_ns)
+
+
+def turned(angle: float) -> Goal:
+    s = math.sin(0.5 * angle)
+    return Goal(quat.multiply((math.cos(0.5 * angle), 0.0, 0.0, s), paper.Q_DESIRED))
+
+
+def request(goal: Goal, stamp_s: float = 0.0, frame: str = 'base_link') -> GoalRequest:
+    return GoalRequest(frame, goal.xyzw(), (0.0, 0.0, 0.0), stamp_s)
+
+
+def texts(logs, severity: Severity) -> list[str]:
+    return [text for level, text in logs if level == severity]
+
+
+def test_a_goal_then_states_give_the_regulators_torques():
+    ctl = controller()
+    reply = ctl.on_goal(request(Goal(paper.Q_DESIRED)), 0)
+    assert reply.accepted and reply.new
+    assert texts(reply.logs, Severity.INFO)[0].startswith('new goal: quaternion (x, y, z, w)')
+    reference = Regulator(wrist_model(), cl.Task.ORIENTATION, GAINS, goal=Goal(paper.Q_DESIRED))
+    for k, (q, qdot) in enumerate((((0.1, 0.2, 0.3), (0.3, -0.1, 0.2)),
+                                   ((0.0, 0.5, 0.0), REST), ((-0.4, 1.0, 0.7), (0.0, 0.1, 0.0)))):
+        cmd = tick(ctl, q, (k + 1) * MS, qdot)
+        assert cmd.tau_nm == pytest.approx(reference.update(q, qdot).tau_nm)
+        assert cmd.out.finite and not cmd.logs
+    assert ctl.goal_source == 'target_pose' and ctl.counters.accepted_goals == 1
+    assert not ctl.on_goal(request(Goal(paper.Q_DESIRED)), 5 * MS).new  # the same goal again
+
+
+def test_the_first_state_holds_its_pose_until_a_goal():
+    ctl = controller()
+    assert ctl.goal is None and ctl.goal_source == 'none'
+    cmd = tick(ctl, (0.1, 0.5, 0.2), 1500 * MS)
+    assert ctl.goal_source == 'hold'
+    assert ctl.regulator.goal_configuration == (0.1, 0.5, 0.2)
+    [line] = texts(cmd.logs, Severity.INFO)
+    assert line.startswith('first joint state, 1.50 s after start: holding the measured pose')
+    held = ctl.goal
+    assert cmd.tau_nm == pytest.approx(Regulator(
+        wrist_model(), cl.Task.ORIENTATION, GAINS, goal=held).update((0.1, 0.5, 0.2), REST).tau_nm)
+    assert not tick(ctl, (0.3, 0.5, 0.2), 1501 * MS).logs and ctl.goal is held  # held once
+    assert ctl.on_goal(request(Goal(paper.Q_DESIRED)), 1502 * MS).new
+    assert ctl.goal_source == 'target_pose'
+
+
+def test_a_bad_goal_is_refused_with_its_reason_and_the_last_stays():
+    ctl = controller()
+    tick(ctl, (0.0, 0.5, 0.0), MS)
+    held = ctl.goal
+    bad = ctl.on_goal(GoalRequest('base_link', (0.0, 0.0, 0.0, 2.0), (0.0, 0.0, 0.0)), 2 * MS)
+    assert not bad.accepted and ctl.goal is held and ctl.goal_source == 'hold'
+    [line] = texts(bad.logs, Severity.WARN)
+    assert line.startswith('target_pose rejected, previous goal stays in force:'), line
+    assert '(x, y, z, w) = (0.0, 0.0, 0.0, 2.0)' in line, line
+    nan = ctl.on_goal(GoalRequest('base_link', (math.nan, 0.0, 0.0, 1.0), (0.0, 0.0, 0.0)),
+                      3 * MS)
+    assert not nan.accepted and 'non-finite' in texts(nan.logs, Severity.WARN)[0]
+    unknown = ctl.on_goal(request(Goal(paper.Q_DESIRED), frame='/world'), 4 * MS)
+    assert not unknown.accepted and "header.frame_id is '/world'" in unknown.logs[0].text
+    assert ctl.counters.rejected_goals == 3 and ctl.goal is held
+    # the same cause again within a second: held back, then counted in the next line
+    again = ctl.on_goal(GoalRequest('base_link', (0.0, 0.0, 0.0, 3.0), (0.0, 0.0, 0.0)),
+                        500 * MS)
+    assert not again.accepted and not again.logs
+    later = ctl.on_goal(GoalRequest('base_link', (0.0, 0.0, 0.0, 4.0), (0.0, 0.0, 0.0)),
+                        1100 * MS)
+    assert later.logs[0].text.endswith('(and 1 more like it)'), later.logs
+
+
+def test_a_link_goal_is_placed_with_the_measured_joints():
+    ctl = controller()
+    before = ctl.on_goal(GoalRequest('tool0', (0.0, 0.0, 0.0, 1.0), (0.0, 0.0, 0.0)), MS)
+    assert not before.accepted and 'no joint state has come yet' in before.logs[0].text
+    q = (0.2, 0.6, -0.3)
+    tick(ctl, q, 2 * MS)
+    reply = ctl.on_goal(GoalRequest('tool0', (0.0, 0.0, 0.0, 1.0), (0.0, 0.0, 0.0)), 3 * MS)
+    assert reply.accepted and 'placed in base_link at the measured joints' in reply.logs[0].text
+    here = ctl.regulator.pose(q).q_desired_base
+    assert abs(sum(a * b for a, b in zip(ctl.goal.q_desired_base, here))) == pytest.approx(1.0)
+
+
+def test_a_refused_state_gives_no_torque_and_says_why():
+    ctl = controller(max_state_age_s=0.5)
+    now = 10_000 * MS
+    stale = ctl.on_state(JOINTS, (0.0, 0.5, 0.0), REST, now - 900 * MS, now, MS)
+    assert stale.tau_nm is None and stale.out is None
+    assert texts(stale.logs, Severity.WARN)[0].startswith('joint_states rejected, stamped 0.900')
+    missing = ctl.on_state(('joint1', 'joint2'), (0.0, 0.5), (0.0, 0.0), now, now, 2 * MS)
+    assert missing.tau_nm is None and 'joint3' in missing.logs[0].text
+    assert ctl.counters.rejected_states == 2 and ctl.counters.stale_states == 1
+    assert not ctl.has_state and ctl.goal is None
+    assert tick(ctl, (0.0, 0.5, 0.0), 3 * MS, stamp_ns=now).tau_nm is not None
+
+
+def test_states_without_velocities_are_estimated_and_said_once():
+    ctl = controller(state_rate_hz=500.0)
+    logs = []
+    for k in range(10):
+        logs += tick(ctl, (0.0, 0.5 + 0.001 * k, 0.0), (k + 1) * MS, qdot=(),
+                     stamp_ns=1_000_000_000 + 2 * MS * k).logs
+    [line] = texts(logs, Severity.WARN)
+    assert 'carry no velocities: estimating them from the positions and their stamps' in line
+    assert '2 ms = one period at state_rate 500 Hz' in line
+    assert 0.0 < ctl.last_qdot[1] <= 0.5 and ctl.last_qdot[0] == 0.0
+
+
+def test_the_watchdog_trips_once_and_states_coming_back_say_so():
+    ctl = controller()
+    assert ctl.on_watchdog(10_000 * MS) is None  # no state yet: nothing to stop
+    tick(ctl, (0.0, 0.5, 0.0), 100 * MS)
+    assert ctl.on_watchdog(500 * MS) is None  # 0.4 s: within state_timeout
+    zero = ctl.on_watchdog(700 * MS)
+    assert zero.tau_nm == [0.0, 0.0, 0.0] and ctl.stopped
+    [line] = texts(zero.logs, Severity.ERROR)
+    assert line.startswith('no valid joint_states for 0.600 s (> state_timeout 0.5 s)'), line
+    assert ctl.on_watchdog(800 * MS) is None  # once
+    back = tick(ctl, (0.0, 0.5, 0.0), 900 * MS)
+    assert texts(back.logs, Severity.INFO) == ['joint_states are back: commanding torque again']
+    assert not ctl.stopped and back.tau_nm is not None
+
+
+def test_no_state_since_start_warns_soon_then_slowly_and_never_after_a_state():
+    start = 5_000 * MS
+    ctl = controller(started_ns=start)
+    assert NO_STATE_WARN_NS < 2_000 * MS < NO_STATE_REPEAT_NS
+    assert ctl.no_state_yet(start + NO_STATE_WARN_NS - MS) is None
+    first = start + NO_STATE_WARN_NS
+    assert ctl.no_state_yet(first) == pytest.approx(NO_STATE_WARN_NS * 1e-9)
+    assert ctl.no_state_yet(first + 50 * MS) is None  # throttled
+    again = first + NO_STATE_REPEAT_NS
+    assert ctl.no_state_yet(again - MS) is None
+    assert ctl.no_state_yet(again) == pytest.approx((again - start) * 1e-9)
+    tick(ctl, (0.0, 0.5, 0.0), again + MS)
+    assert ctl.has_state and ctl.no_state_yet(again + 3 * NO_STATE_REPEAT_NS) is None
+
+
+def test_the_no_state_warning_says_what_is_known():
+    none = diagnostics.no_state_warning('/arm/joint_states', 1.8, 0, 0)
+    assert none.startswith('no valid joint state on /arm/joint_states 1.8 s after start, '
+                           '0 publishers on it: is the robot driver or simulator running')
+    assert 'remap with -r joint_states:=' in none
+    connecting = diagnostics.no_state_warning('/joint_states', 1.8, 1, 0)
+    assert '1 publisher on it: none received yet (still connecting?)' in connecting
+    silent = diagnostics.no_state_warning('/joint_states', 11.8, 1, 0)
+    assert '1 publisher on it: none received (a QoS mismatch' in silent
+    refused = diagnostics.no_state_warning('/joint_states', 1.8, 2, 40)
+    assert '2 publishers on it: 40 received and rejected' in refused
+
+
+def test_feedback_every_nth_tick_and_diagnostics_after_the_next_command():
+    ctl = controller(divider=3)
+    cmds = [tick(ctl, (0.0, 0.5, 0.0), k * MS) for k in range(1, 7)]
+    assert [c.feedback is not None for c in cmds] == [False, False, True, False, False, True]
+    measured = quat.from_rotation_matrix(cmds[2].out.R_tip_base)
+    assert abs(sum(a * b for a, b in zip(cmds[2].feedback, measured))) == pytest.approx(1.0)
+    assert not ctl.on_diagnostics_timer(6 * MS + DIAGNOSTICS_WAIT_NS // 2)  # states flow
+    assert tick(ctl, (0.0, 0.5, 0.0), 7 * MS).diagnostics  # owed: after this command
+    assert not tick(ctl, (0.0, 0.5, 0.0), 8 * MS).diagnostics
+    assert ctl.on_diagnostics_timer(8 * MS + 2 * DIAGNOSTICS_WAIT_NS)  # states stopped: now
+
+
+def test_the_statuses_report_the_loop_the_goal_and_the_stall():
+    ctl = controller()
+    figures = {'control_rate_hz': 0.0, 'ticks_in_window': 0, 'saturated_ticks': 0}
+    waiting = ctl.statuses(figures)
+    assert [s[0] for s in waiting] == ['control loop', 'goal', 'stall']
+    assert waiting[0][1] == diagnostics.WARN and 'waiting for joint_states' in waiting[0][2]
+    tick(ctl, (0.0, 0.5, 0.0), MS)
+    loop, goal, stall = ctl.statuses(figures, ['2 publishers on /cmd: another controller'])
+    assert loop[1] == diagnostics.WARN and '2 publishers on /cmd' in loop[2]
+    assert 'holding the initial pose' in goal[2]
+    assert ('goal_configuration_rad', '[0.0, 0.5, 0.0]') in goal[3]
+    assert stall[1] == diagnostics.OK
+
+
+def test_the_published_quaternion_keeps_its_hemisphere():
+    ctl = controller(divider=1)
+    ctl.on_goal(request(Goal(paper.Q_DESIRED)), 0)
+    signs = []
+    for k, q in enumerate(((3.1, 0.5, 0.0), (-3.1, 0.5, 0.0), (3.13, 0.5, 0.0))):
+        signs.append(tick(ctl, q, (k + 1) * MS).feedback)
+    for a, b in zip(signs, signs[1:]):  # about the same rotation: never the other sign
+        assert sum(x * y for x, y in zip(a, b)) > 0.0
+
+
+class StepRecorder(Regulator):
+    """The wrist's regulator, recording the time step each tick is given."""
+
+    def __init__(self) -> None:
+        super().__init__(wrist_model(), cl.Task.ORIENTATION, GAINS)
+        self.steps = []
+
+    def update(self, q, qdot, dt_s=0.0):
+        self.steps.append(dt_s)
+        return super().update(q, qdot, dt_s)
+
+
+def test_the_tick_interval_comes_from_the_state_stamps():
+    recorder = StepRecorder()
+    ctl = Controller(recorder, 0.5, 3)
+    for k, stamp in enumerate((0, 5_000_000_000, 5_001_000_000, 5_001_000_000, 5_000_500_000,
+                               5_002_500_000)):
+        tick(ctl, (0.0, 0.5, 0.0), (k + 1) * MS, stamp_ns=stamp)
+    # unstamped, the first stamped, 1 ms, a repeat, older, then 2 ms after the last
+    assert recorder.steps == pytest.approx([0.0, 0.0, 1e-3, 0.0, 0.0, 2e-3])
+
+
+def test_a_stamped_stream_has_a_velocity_until_it_stops():
+    checker = FakeChecker()
+    ctl = controller(checker=checker)
+    tick(ctl, (0.0, 0.5, 0.0), 0)
+    goals = [turned(0.01 * k) for k in range(5)]
+    taken = [ctl.on_goal(request(g, 100.0 + 0.01 * k), k * 10 * MS)
+             for k, g in enumerate(goals)]
+    assert taken[0].nu_desired_base is None  # the first of a stream is a fixed goal
+    omega = taken[-1].nu_desired_base
+    assert omega[2] == pytest.approx(1.0) and ctl.streaming  # 0.01 rad per 10 ms about z
+    checker.verdicts = [(ctl.goal, '')]
+    checker.qdot_star = {id(ctl.goal): [0.0, 0.0, 1.0]}
+    ctl.take_goal_checks()
+    assert ctl.regulator.goal_joint_velocity == (0.0, 0.0, 1.0)
+    tick(ctl, (0.0, 0.5, 0.0), 60 * MS)  # within the hold
+    assert ctl.regulator.goal_joint_velocity is not None
+    tick(ctl, (0.0, 0.5, 0.0), 200 * MS)  # no goal for longer than the hold
+    assert ctl.regulator.goal_joint_velocity is None and not ctl.streaming
+    checker.verdicts = [(ctl.goal, '')]  # a late answer is not taken
+    checker.qdot_star = {id(ctl.goal): [0.0, 0.0, 1.0]}
+    ctl.take_goal_checks()
+    assert ctl.regulator.goal_joint_velocity is None
+    ctl.on_goal(request(turned(1.0)), 300 * MS)  # not stamped: fixed
+    assert not ctl.streaming
+
+
+class FakeChecker:
+    """The goal-check worker's interface, answering what the test tells it to."""
+
+    unavailable_reason = ''
+    ready = True
+
+    def __init__(self) -> None:
+        self.submitted = []
+        self.verdicts = []
+        self.failure = None
+        self.q_star = {}
+        self.qdot_star = {}
+
+    def submit(self, goal, q_measured, *rest) -> None:
+        self.submitted.append((goal, q_measured, rest))
+
+    def poll(self):
+        verdicts, self.verdicts = self.verdicts, []
+        return verdicts
+
+    def take_failure(self):
+        failure, self.failure = self.failure, None
+        return failure
+
+    def take_configuration(self, goal):
+        return self.q_star.pop(id(goal), None)
+
+    def take_configuration_velocity(self, goal):
+        return self.qdot_star.pop(id(goal), None)
+
+
+def test_the_goal_check_answers_the_goal_in_force_and_warns_once():
+    checker = FakeChecker()
+    ctl = controller(checker=checker)
+    # The worker died before any goal: the failure is said, the goal-less verdict skipped.
+    checker.failure = 'the goal-check worker exited'
+    checker.verdicts = [(None, 'the goal-check worker exited')]
+    logs = ctl.take_goal_checks()
+    assert texts(logs, Severity.ERROR) == ['the goal-check worker exited; regulation goes on']
+    assert len(logs) == 1
+    tick(ctl, (0.0, 0.5, 0.0), MS)
+    old, new = turned(0.2), turned(0.4)
+    for k, goal in enumerate((old, new)):
+        ctl.on_goal(request(goal), (k + 2) * MS)
+    old, new = (s[0] for s in checker.submitted)  # the goals as the controller holds them
+    assert new is ctl.goal
+    assert checker.submitted[-1][1] == [0.0, 0.5, 0.0]  # searched from the measured joints
+    q_star = (0.1, 0.6, 0.2)
+    checker.q_star = {id(new): q_star}
+    checker.verdicts = [(old, 'near a singularity'), (new, 'near a singularity')]
+    [warning] = ctl.take_goal_checks()
+    assert warning.severity == Severity.WARN and 'near a singularity' in warning.text
+    assert ctl.goal_warning == 'near a singularity'
+    assert ctl.regulator.goal_configuration == pytest.approx(q_star)
+    checker.verdicts = [(new, 'near a singularity')]
+    assert ctl.take_goal_checks() == ()  # the same warning again: said once
