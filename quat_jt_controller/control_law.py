@@ -23,10 +23,11 @@ from math import asin, exp, isfinite, log, log1p, sqrt, tanh
 from typing import Optional, Sequence
 
 from quat_jt_controller import quaternion as quat
-from quat_jt_controller.shaping import LARGE_ERROR_DELTA
 from quat_jt_runtime.errors import checked_vector, QuatJtError
 
 LN2 = log(2.0)
+# Width of the fade of the large-error term at 180 degrees, in eta_e (docs/lyapunov.md, 3).
+LARGE_ERROR_DELTA = 0.1
 
 
 class Potential(str, enum.Enum):

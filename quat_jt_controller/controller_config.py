@@ -1,7 +1,7 @@
 """
 The controller from its parameters, ROS-free: what a config file makes of the regulator.
 
-``controller_node`` declares these parameters from its table (``parameters.py``) and validates
+``controller_node`` declares these parameters from its table (``parameter_table.py``) and validates
 them with the same constructors: ``Gains.create`` with the URDF effort limits as ceilings,
 ``shaping.from_parameters`` and ``Regulator.set_shaping``. :func:`controller_from_config` does
 the same from a mapping (a config file's ``ros__parameters``), so the experiments, the

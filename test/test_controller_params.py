@@ -21,9 +21,10 @@ from quat_jt_controller.control_law import GainsError, Potential, Task
 from quat_jt_controller.controller_node import NODE_NAME, QuatJtController
 from quat_jt_controller.goal_motion import MAX_GAP_S
 from quat_jt_controller.model import ModelError
-from quat_jt_controller.parameters import GAIN_PARAMETERS, SHAPING_PARAMETERS
+from quat_jt_controller.parameter_table import GAINS, SHAPING
 from quat_jt_controller.shaping import Shaping, ShapingError
 from quat_jt_controller.supervision import NO_STATE_WARN_NS
+from quat_jt_runtime.param_table import names
 from rcl_interfaces.msg import Log, ParameterType
 import rclpy
 from rclpy.executors import SingleThreadedExecutor
@@ -159,7 +160,7 @@ def make_probe(context, make_node):
 
 def test_parameters_are_declared_with_descriptors(make_node):
     node = make_node()
-    for name in STRUCTURAL + GAIN_PARAMETERS:
+    for name in STRUCTURAL + names(GAINS):
         d = node.describe_parameter(name)
         assert d.description, name
         assert not d.dynamic_typing, name
@@ -171,8 +172,8 @@ def test_parameters_are_declared_with_descriptors(make_node):
 
 def test_the_node_declares_exactly_its_table(make_node):
     """Every parameter the node has is a row of its table, with the row's type and range."""
-    from quat_jt_controller import parameters as table
-    from quat_jt_runtime.params import REALTIME
+    from quat_jt_controller import parameter_table as table
+    from quat_jt_runtime.params import rclpy_type, REALTIME
     node = make_node()
     rows = {spec.name: spec for spec in table.STRUCTURE + table.GAINS + table.SHAPING
             + REALTIME}
@@ -182,8 +183,8 @@ def test_the_node_declares_exactly_its_table(make_node):
         d = node.describe_parameter(name)
         assert d.type == spec.kind.descriptor_type, name
         assert d.read_only == spec.read_only, name
-        assert node.get_parameter(name).type_ is spec.kind.rclpy_type, name
-        if spec.bounds is not None:
+        assert node.get_parameter(name).type_ is rclpy_type(spec.kind), name
+        if spec.bounds is not None and not spec.kind.is_array:  # an array's: its entries'
             limits = d.floating_point_range or d.integer_range
             assert (limits[0].from_value, limits[0].to_value) == spec.bounds, name
     assert 'values in (0, ' in node.describe_parameter('kv').additional_constraints
@@ -258,13 +259,13 @@ def test_defaults_and_paper_config_file_are_the_paper_experiment(make_node):
 def test_invalid_sets_are_rejected_and_nothing_changes(make_node, changes, words):
     node = make_node()
     before = node.gains
-    values_before = {k: node.get_parameter(k).value for k in GAIN_PARAMETERS}
+    values_before = {k: node.get_parameter(k).value for k in names(GAINS)}
     result = node.set_parameters_atomically(
         [Parameter(k, value=v) for k, v in changes.items()])
     assert not result.successful
     assert words in result.reason, result.reason
     assert node.gains is before
-    for k in GAIN_PARAMETERS:
+    for k in names(GAINS):
         assert node.get_parameter(k).value == values_before[k]
 
 
@@ -632,7 +633,7 @@ def test_product_config_turns_the_extensions_on(make_node):
     assert s.limits_on and s.friction_on and s.configuration_on and s.speed_damping_on
     assert node.regulator.limit_band is not None
     assert node.gains.kp != paper.KP  # designed, not the paper's
-    for name in SHAPING_PARAMETERS:
+    for name in names(SHAPING):
         d = node.describe_parameter(name)
         assert d.description and not d.read_only and not d.dynamic_typing, name
 

@@ -60,7 +60,7 @@ def test_parameters_default_from_the_urdf(context):
 
 @pytest.mark.node
 def test_the_node_declares_exactly_its_table(context):
-    from quat_jt_runtime.params import REALTIME
+    from quat_jt_runtime.params import rclpy_type, REALTIME
     from wrist_sim import parameters as table
     node = _make_node(context)
     try:
@@ -70,7 +70,7 @@ def test_the_node_declares_exactly_its_table(context):
         for name, spec in rows.items():
             d = node.describe_parameter(name)
             assert (d.type, d.read_only) == (spec.kind.descriptor_type, spec.read_only), name
-            assert node.get_parameter(name).type_ is spec.kind.rclpy_type, name
+            assert node.get_parameter(name).type_ is rclpy_type(spec.kind), name
             assert d.description, name
     finally:
         node.destroy_node()
