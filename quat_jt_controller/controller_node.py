@@ -4,7 +4,8 @@ The regulator as a ROS 2 node: marshalling around ``regulator.Regulator`` (Eq. 2
 Each valid ``joint_states`` message is one tick, its command published at once on
 ``effort_controller/commands``. The decisions around the law are the ROS-free
 ``supervision.Supervisor``'s; ``reports.py`` publishes the feedback and ``/diagnostics``; the
-parameters are the table of ``parameter_table.py`` (declared by ``parameters.py``), applied as immutable snapshots.
+parameters are the table of ``parameter_table.py``, declared by ``parameters.py`` and applied
+as immutable snapshots.
 """
 import time
 from typing import Optional
