@@ -214,3 +214,24 @@ def yaml_value(kind: Kind, value: Any) -> str:
     if kind is Kind.DOUBLE_ARRAY:
         return '[' + ', '.join(yaml_float(v) for v in value) + ']'
     return '[' + ', '.join(str(v) for v in value) + ']'
+
+
+def yaml_lines(specs: Sequence[Spec], values: Mapping[str, Any],
+               comments: Optional[Mapping[str, str]] = None, indent: str = '    ',
+               column: int = 33) -> list[str]:
+    """
+    Return a parameter file's lines, ``name: value  # comment``, one per row given a value.
+
+    In the order of ``specs``; the rows without a value in ``values`` are left out. A comment
+    starts at ``column`` (or two spaces after a longer line).
+    """
+    lines = []
+    for spec in specs:
+        if spec.name not in values:
+            continue
+        text = f'{indent}{spec.name}: {yaml_value(spec.kind, values[spec.name])}'
+        comment = (comments or {}).get(spec.name, '')
+        if comment:
+            text += ' ' * max(2, column - len(text)) + f'# {comment}'
+        lines.append(text)
+    return lines
