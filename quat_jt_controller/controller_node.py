@@ -50,10 +50,10 @@ class QuatJtController(Node):
         # applied by lifecycle.run_node; on simulated time there are no deadlines to keep
         self.realtime = declare_realtime(self, 'simulated time' if self._use_sim_time else '')
         try:
-            model = RobotModel(cfg.robot_description, cfg.base_link, cfg.tip_link, cfg.joints,
+            model = RobotModel(cfg.urdf_xml, cfg.base_link, cfg.tip_link, cfg.joints,
                                cfg.armature)
         except ModelError as exc:
-            raise ModelError(f'{exc}{bundled_urdf_hint(cfg.given_robot_description)}') from None
+            raise ModelError(f'{exc}{bundled_urdf_hint(cfg.given_urdf)}') from None
         gains = parameters.declare_gains(  # each change logged once by the ChangeLog
             self, cfg, model.effort_limits, on_apply=lambda new: self.regulator.set_gains(new))
         reg = self.regulator = Regulator(model, cfg.task, gains.current)
@@ -67,7 +67,7 @@ class QuatJtController(Node):
                                        model.continuous)
         self._said_estimating = False
         self._goal_checker = GoalCheckWorker(ModelSpec(
-            cfg.robot_description, cfg.base_link, cfg.tip_link, cfg.joints, cfg.task))
+            cfg.urdf_xml, cfg.base_link, cfg.tip_link, cfg.joints, cfg.task))
         self.supervisor = Supervisor(reg, cfg.state_timeout_s, cfg.publish_rate_divider,
                                      self._goal_checker, started_ns=time.monotonic_ns())
         self.stall = StallDetector(reg)

@@ -43,12 +43,12 @@ class StructuralConfig:
     prewarm_lead_s: float  # 0: no throwaway tick before each state
 
     @property
-    def robot_description(self) -> str:
+    def urdf_xml(self) -> str:
         """Return the URDF in use (the bundled wrist's if none was given)."""
         return self.description.xml
 
     @property
-    def given_robot_description(self) -> str:
+    def given_urdf(self) -> str:
         """Return the URDF as given to the node ('' = none: the bundled wrist)."""
         return self.description.given
 
