@@ -86,24 +86,31 @@ def _per_task(position: Sequence[float], orientation: Sequence[float]) -> Callab
         orientation if context['task'] is Task.ORIENTATION else tuple(position) + orientation)
 
 
-# The live parameters that make up a Gains. Context: task, dim, axes, n, top (gain_ceiling).
+# The live parameters that make up a Gains (checked by Gains.create). Context: task, dim, axes,
+# n, top (the gain ceiling, as text), ceiling and lambda_ceiling (the bounds: numbers, or the
+# docs' text).
+CEILING_WHY = (f'its term alone would ask for more than the largest effort limit '
+               f'({{effort_max}} N m) at an error of {SATURATING_ERROR:g} (rad, m or rad/s): the '
+               'joints would only saturate')
 GAINS = (
     Spec('potential', Kind.STRING, Potential.TANH.value,
          "Artificial potential: 'quadratic' (Eq. 23 -> law 24/37) or 'tanh' (Eq. 31 -> law "
-         '32/38). Live.', constraints="one of 'quadratic', 'tanh'"),
+         '32/38). Live.', choices=tuple(p.value for p in Potential)),
     Spec('kp', Kind.DOUBLE_ARRAY, _per_task(DEFAULT_KP_POSITION, paper.KP),
          'Diagonal of K_p, {dim} values ({axes}); N/m for position rows, N m for orientation '
-         'rows. Finite, > 0, <= {top}. Live.', constraints='{dim} values in (0, {top}]',
+         'rows. Finite, > 0, <= {top}. Live.', size='dim', bounds=(0.0, 'ceiling'), strict=True,
+         why=CEILING_WHY,
          default_text=f'{markdown_value(paper.KP)} (pose: {markdown_value(DEFAULT_KP_POSITION)} '
                       'first)'),
     Spec('kv', Kind.DOUBLE_ARRAY, lambda context: [paper.KV[0]] * context['n'],
          'Diagonal of K_v (joint damping), one per joint ({n}), N m s/rad. Finite, > 0, '
-         '<= {top}. Live.', constraints='{n} values in (0, {top}]',
+         '<= {top}. Live.', size='n', bounds=(0.0, 'ceiling'), strict=True, why=CEILING_WHY,
          default_text=f'`{paper.KV[0]:g}` per joint'),
     Spec('lambda', Kind.DOUBLE_ARRAY, _per_task(DEFAULT_LAMBDA_POSITION, paper.LAMBDA),
          'Diagonal of Lambda in tanh(Lambda y) (Eq. 32/38), {dim} values ({axes}); used by the '
-         f'tanh potential. Finite, > 0, <= {MAX_LAMBDA:g}. Live.',
-         constraints=f'{{dim}} values in (0, {MAX_LAMBDA:g}]',
+         f'tanh potential. Finite, > 0, <= {MAX_LAMBDA:g}. Live.', size='dim',
+         bounds=(0.0, 'lambda_ceiling'), strict=True,
+         why='tanh(lambda y) would switch like sign(y) within sensor noise (chatter)',
          default_text=f'{markdown_value(paper.LAMBDA)} (pose: '
                       f'{markdown_value(DEFAULT_LAMBDA_POSITION)} first)'),
     Spec('gravity_compensation', Kind.BOOL, True,
@@ -190,7 +197,8 @@ SHAPING = (
 DOCS_CONTEXT = {'task': Task.ORIENTATION, 'n': 'n', 'dim': '3 (orientation) or 6 (pose)',
                 'axes': 'rx, ry, rz; the pose task has x, y, z first',
                 'top': f'max(effort limit) / {SATURATING_ERROR:g}',
-                'preferred_configuration': ()}
+                'ceiling': f'max(effort limit) / {SATURATING_ERROR:g}',
+                'lambda_ceiling': MAX_LAMBDA, 'preferred_configuration': ()}
 
 
 def shaping_default(name: str) -> Any:

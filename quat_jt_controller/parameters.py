@@ -13,7 +13,7 @@ from dataclasses import dataclass
 from typing import Any, Callable, Mapping, Optional, Sequence
 
 from quat_jt_controller import parameter_table as table
-from quat_jt_controller.control_law import gain_ceiling, Gains, Task
+from quat_jt_controller.control_law import gain_ceiling, Gains, MAX_LAMBDA, Task
 from quat_jt_controller.regulator import Regulator
 from quat_jt_controller.shaping import describe as describe_shaping
 from quat_jt_controller.shaping import from_parameters as shaping_from_parameters
@@ -96,10 +96,11 @@ def declare_structural(node: Node) -> StructuralConfig:
 
 
 def gains_context(config: StructuralConfig, effort_limits_nm: Sequence[float]) -> dict:
-    """Return the context of the GAINS rows for this robot (sizes, axes, the ceiling)."""
+    """Return the context of the GAINS rows for this robot (sizes, axes, the ceilings)."""
+    ceiling = gain_ceiling(effort_limits_nm)
     return {'task': config.task, 'dim': config.task.dim, 'n': len(config.joints),
             'axes': 'x, y, z, rx, ry, rz' if config.task.dim == 6 else 'rx, ry, rz',
-            'top': f'{gain_ceiling(effort_limits_nm):g}'}
+            'top': f'{ceiling:g}', 'ceiling': ceiling, 'lambda_ceiling': MAX_LAMBDA}
 
 
 def declare_gains(node: Node, config: StructuralConfig, effort_limits_nm: Sequence[float],

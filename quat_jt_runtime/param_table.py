@@ -48,9 +48,11 @@ class Spec:
     number of joints ``n``, say): text through ``str.format``, the default called with it.
 
     The rules :meth:`check` applies: ``bounds`` is the closed range of a scalar (which rclpy
-    also enforces on every set) or of each entry of an array; ``size`` names the context entry
-    that is an array's length (``'n'``: one per joint); ``empty_ok`` lets an array be empty
-    (the snapshot then computes its own default). ``constraints`` is the docs' text of an
+    also enforces on every set) or of each entry of an array (open below if ``strict``; a bound
+    may name a number of the context, such as a ceiling from the effort limits, with ``why``
+    saying where it comes from); ``size`` names the context entry that is an array's length
+    (``'n'``: one per joint); ``empty_ok`` lets an array be empty (the snapshot then computes
+    its own default); ``choices`` are the values a string may take. ``constraints`` is the docs' text of an
     array's rules, written from them unless given. ``field`` is the name of the attribute of
     the snapshot the row fills ('' = the parameter's name).
     """
@@ -66,6 +68,20 @@ class Spec:
     size: str = ''
     empty_ok: bool = False
     field: str = ''
+    strict: bool = False  # an array's lower bound excluded
+    why: str = ''  # why an array's entries have their upper bound (text, with the context)
+    choices: tuple = ()  # the values a string may take
+
+    @staticmethod
+    def _bound(bound: Any, context: Mapping[str, Any]) -> Optional[float]:
+        """Return a bound: a number, or the context's number named by a string."""
+        return float(context[bound]) if isinstance(bound, str) else bound
+
+    @staticmethod
+    def _bound_text(bound: Any, context: Mapping[str, Any]) -> str:
+        """Return a bound as the docs show it (a context's text as it is)."""
+        value = context[bound] if isinstance(bound, str) else bound
+        return value if isinstance(value, str) else f'{value:g}'
 
     @property
     def attribute(self) -> str:
@@ -81,12 +97,15 @@ class Spec:
         if self.bounds is not None and not self.kind.is_array:
             return '[' + ', '.join(str(b) if isinstance(b, int) else f'{b:g}'
                                    for b in self.bounds) + ']'
+        if self.choices:
+            return 'one of ' + ', '.join(f"'{c}'" for c in self.choices)
         if self.constraints or not self.kind.is_array or not self.size:
             return self.constraints.format(**context)
         count = f'{{{self.size}}} finite values'
         if self.bounds is not None:
-            low, high = self.bounds
-            count += f' >= {low:g}' if high == inf else f' in [{low:g}, {high:g}]'
+            low, high = (self._bound_text(b, context) for b in self.bounds)
+            count += (f' {">" if self.strict else ">="} {low}' if high == 'inf'
+                      else f' in {"(" if self.strict else "["}{low}, {high}]')
         return count.format(**context)
 
     def check(self, value: Any, context: Mapping[str, Any], error: type = ValueError) -> Any:
@@ -96,6 +115,10 @@ class Spec:
         The message names the parameter and the value. Sizes come from ``context``.
         """
         name = self.name
+        if self.choices:
+            if value not in self.choices:
+                raise error(f'{name} must be one of {list(self.choices)}, got {value!r}')
+            return value
         if self.kind in (Kind.DOUBLE, Kind.INT):
             if isinstance(value, bool):
                 raise error(f'{name} must be a number, got {value!r}')
@@ -109,16 +132,16 @@ class Spec:
                 raise error(f'{name} must be in {self.rule_text(context)}, got {v}')
             return v
         if self.kind is Kind.DOUBLE_ARRAY:
-            values = list(value) if isinstance(value, (list, tuple)) else value
-            if self.empty_ok and values == []:
-                return ()
-            if not isinstance(values, list):
+            if isinstance(value, (str, bytes)) or not hasattr(value, '__iter__'):
                 raise error(f'{name} must be a list of numbers, got {value!r}')
-            low, high = self.bounds if self.bounds is not None else (None, inf)
+            values = list(value)
+            if self.empty_ok and not values:
+                return ()
+            low, high = (self._bound(b, context) for b in self.bounds or (None, inf))
             size = int(context[self.size]) if self.size else len(values)
-            return checked_vector(name, values, size, error, lower=low, upper=high,
-                                  why=f'the range of {name} is [{low}, {high}]',
-                                  per_joint=self.size == 'n')
+            why = self.why.format(**context) or f'the range of {name} is {self.rule_text(context)}'
+            return checked_vector(name, values, size, error, lower=low, strict=self.strict,
+                                  upper=high, why=why, per_joint=self.size == 'n')
         if self.kind is Kind.BOOL:
             if not isinstance(value, bool):
                 raise error(f'{name} must be true or false, got {value!r}')

@@ -188,7 +188,7 @@ def test_the_node_declares_exactly_its_table(make_node):
             limits = d.floating_point_range or d.integer_range
             assert (limits[0].from_value, limits[0].to_value) == spec.bounds, name
     assert 'values in (0, ' in node.describe_parameter('kv').additional_constraints
-    assert '3 values' in node.describe_parameter('kv').additional_constraints  # n filled in
+    assert '3 finite values' in node.describe_parameter('kv').additional_constraints  # n filled
 
 
 @pytest.mark.parametrize('name, urdf', [('paper_wrist_controller.yaml', None),
