@@ -52,9 +52,9 @@ class Spec:
     may name a number of the context, such as a ceiling from the effort limits, with ``why``
     saying where it comes from); ``size`` names the context entry that is an array's length
     (``'n'``: one per joint); ``empty_ok`` lets an array be empty (the snapshot then computes
-    its own default); ``choices`` are the values a string may take. ``constraints`` is the docs' text of an
-    array's rules, written from them unless given. ``field`` is the name of the attribute of
-    the snapshot the row fills ('' = the parameter's name).
+    its own default); ``choices`` are the values a string may take. ``constraints`` is the
+    docs' text of an array's rules, written from them unless given. ``field`` is the name of
+    the attribute of the snapshot the row fills ('' = the parameter's name).
     """
 
     name: str

@@ -767,3 +767,41 @@ def test_the_parameter_page_is_generated_from_the_tables():
     assert written == page(), 'docs/parameters.md is stale: run make docs'
     for name in ('kp', 'goal_velocity_gain', 'coulomb_friction', 'cpu_affinity'):
         assert f'| `{name}` |' in written, name
+
+
+def test_the_node_refuses_a_value_just_outside_a_row_and_takes_one_inside(make_node):
+    """The node's path of test_parameter_table's cases: the same rows, the same verdicts."""
+    from parameter_cases import inside, live_rows, outside, wrist_context
+    node = make_node()
+    context = wrist_context(node.regulator.effort_limits_nm)
+    for spec in live_rows():
+        for name, value, words in outside(spec, context):
+            before = node.get_parameter(name).value
+            result = node.set_parameters([Parameter(name, value=value)])[0]
+            assert not result.successful, (name, value)
+            for word in words:
+                assert word in result.reason, (word, result.reason)
+            assert node.get_parameter(name).value == before
+        value = inside(spec, context)
+        result = node.set_parameters([Parameter(spec.name, value=value)])[0]
+        assert result.successful, (spec.name, value, result.reason)
+
+
+def test_a_row_added_to_the_table_is_declared_described_and_checked(make_node, monkeypatch):
+    from quat_jt_controller import parameter_table as table
+    from quat_jt_runtime.param_table import Kind, Spec
+    spec = Spec('test_added_gain', Kind.DOUBLE, 0.25, 'A row a test adds (N m). Live.',
+                bounds=(0.0, 2.0))
+    monkeypatch.setattr(table, 'SHAPING', (*table.SHAPING, spec))
+    node = make_node()
+    d = node.describe_parameter('test_added_gain')
+    assert d.description == spec.description and not d.read_only
+    assert (d.floating_point_range[0].from_value, d.floating_point_range[0].to_value) == (0.0,
+                                                                                          2.0)
+    assert node.get_parameter('test_added_gain').value == 0.25
+    refused = node.set_parameters([Parameter('test_added_gain', value=2.5)])[0]
+    assert not refused.successful and 'test_added_gain' in refused.reason
+    assert '2.5' in refused.reason
+    shaping = node.regulator.shaping
+    assert node.set_parameters([Parameter('test_added_gain', value=1.5)])[0].successful
+    assert node.regulator.shaping is not shaping  # a new snapshot, applied whole
