@@ -805,3 +805,21 @@ def test_a_row_added_to_the_table_is_declared_described_and_checked(make_node, m
     shaping = node.regulator.shaping
     assert node.set_parameters([Parameter('test_added_gain', value=1.5)])[0].successful
     assert node.regulator.shaping is not shaping  # a new snapshot, applied whole
+    from quat_jt_bringup.parameter_docs import page
+    assert ('| `test_added_gain` | double | `0.25` | [0, 2] | yes | A row a test adds (N m). '
+            'Live. |') in page()
+
+
+def test_the_readme_table_names_every_controller_parameter_and_no_other():
+    import fnmatch
+    import re
+    from quat_jt_controller import parameter_table as table
+    from quat_jt_runtime.params import REALTIME
+    readme = (Path(__file__).resolve().parent.parent / 'README.md').read_text()
+    rows = readme.split('## The parameters\n\n')[1].split('\n\n')[0].splitlines()[2:]
+    patterns = re.findall(r'`([a-z_*]+)`', ' '.join(line.split('|')[1] for line in rows))
+    parameters = names(table.STRUCTURE + table.GAINS + table.SHAPING + REALTIME)
+    assert len(patterns) > 20, patterns  # the table was found
+    assert [p for p in patterns if not fnmatch.filter(parameters, p)] == []
+    assert [p for p in parameters if not any(fnmatch.fnmatch(p, pattern)
+                                             for pattern in patterns)] == []

@@ -4,13 +4,13 @@ The controller's parameter table is the one source of each parameter, ROS-free.
 ``controller_from_config`` (the tools' path) refuses, by name and value, a value just outside
 any live row's rules, and takes one inside: the node's path is in test_controller_params.py,
 with the same cases (parameter_cases.py, written from the rows). A row added to the table is
-checked, documented and written to the design's parameter file without another edit.
+checked and written to the design's parameter file without another edit (declared and
+documented: test_controller_params.py).
 """
 import dataclasses
 
 from parameter_cases import inside, live_rows, outside, wrist_context
 import pytest
-from quat_jt_bringup import parameter_docs
 from quat_jt_controller import control_law as cl
 from quat_jt_controller import gain_design as gd
 from quat_jt_controller import parameter_table as table
@@ -70,15 +70,12 @@ def added_row(monkeypatch):
     return spec
 
 
-def test_an_added_row_is_checked_documented_and_written(added_row):
+def test_an_added_row_is_checked_and_written(added_row):
     with pytest.raises(sh.ShapingError, match=r'test_added_gain must be in \[0, 2\], got 2.5'):
         sh.Shaping.create(3, test_added_gain=2.5)
     with pytest.raises(sh.ShapingError, match='test_added_gain'):  # a config file's path
         controller_from_package_config(CONFIG, overrides={'test_added_gain': -1.0})
     sh.Shaping.create(3, test_added_gain=1.5)
-    page = parameter_docs.page()
-    assert ('| `test_added_gain` | double | `0.25` | [0, 2] | yes | A row a test adds (N m). '
-            'Live. |') in page
     design = gd.design(wrist_model(), cl.Task.ORIENTATION, delays=(1,))
     text = gd.to_yaml(design)
     assert yaml.safe_load(text)['/**']['ros__parameters']['test_added_gain'] == 0.25
