@@ -42,8 +42,7 @@ ARMATURE = Spec(
 STRUCTURE = (
     Spec('task', Kind.STRING, Task.ORIENTATION.value,
          "What is regulated: 'orientation' (y = e, Eqs. 37/38; the paper's wrist) or 'pose' "
-         '(y = [p_d - p; e], Eqs. 24/32).', read_only=True,
-         constraints="one of 'orientation', 'pose'"),
+         '(y = [p_d - p; e], Eqs. 24/32).', read_only=True, choices=tuple(t.value for t in Task)),
     Spec('joints', Kind.STRING_ARRAY, ['joint1', 'joint2', 'joint3'],
          'Controlled joints, in the order of effort_controller/commands; joint_states are '
          'matched by name.', read_only=True, constraints='non-empty names'),

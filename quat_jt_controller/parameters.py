@@ -20,7 +20,7 @@ from quat_jt_controller.shaping import from_parameters as shaping_from_parameter
 from quat_jt_controller.shaping import Shaping
 from quat_jt_runtime.description import robot_description
 from quat_jt_runtime.joints import check_state_rate
-from quat_jt_runtime.param_table import names
+from quat_jt_runtime.param_table import names, row
 from quat_jt_runtime.params import ChangeLog, declare, LiveParameters
 from quat_jt_runtime.urdf_source import Description
 from rclpy.node import Node
@@ -61,11 +61,7 @@ class StructuralConfig:
         ``description`` returns the URDF; it is called once the other values are checked (it
         may wait for a topic).
         """
-        try:
-            task = Task(values['task'])
-        except ValueError:
-            raise ValueError(f"task must be 'orientation' or 'pose', got {values['task']!r}"
-                             ) from None
+        task = Task(row(table.STRUCTURE, 'task').check(values['task'], {}))
         joints = tuple(values['joints'])
         if not joints or any(not j for j in joints):
             raise ValueError(f'joints must be a non-empty list of names, got {list(joints)}')
