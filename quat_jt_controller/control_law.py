@@ -19,14 +19,16 @@ differences.
 """
 from dataclasses import dataclass
 import enum
-from math import asin, exp, isfinite, log, log1p, sqrt, tanh
+from math import asin, exp, inf, isfinite, log, log1p, sqrt, tanh
 from typing import Optional, Sequence
 
 from quat_jt_controller import quaternion as quat
-from quat_jt_controller.shaping import LARGE_ERROR_DELTA
-from quat_jt_runtime.errors import checked_vector, QuatJtError
+from quat_jt_runtime.errors import QuatJtError
+from quat_jt_runtime.param_table import check_all
 
 LN2 = log(2.0)
+# Width of the fade of the large-error term at 180 degrees, in eta_e (docs/lyapunov.md, 3).
+LARGE_ERROR_DELTA = 0.1
 
 
 class Potential(str, enum.Enum):
@@ -87,34 +89,24 @@ class Gains:
                gravity_compensation: bool = True,
                effort_limits_nm: Optional[Sequence[float]] = None) -> 'Gains':
         """
-        Validate and build. Raises GainsError naming the bad value.
+        Validate and build by the rows of ``parameter_table.GAINS``; raise GainsError naming it.
 
         With ``effort_limits_nm``, K_p and K_v are also bounded by :func:`gain_ceiling` and
         Lambda by MAX_LAMBDA, so that no gain makes the law a saturating switch.
         """
-        try:
-            pot = Potential(potential)
-        except ValueError:
-            raise GainsError(
-                f'potential must be one of {[p.value for p in Potential]}, got {potential!r}'
-            ) from None
+        # The rows import this module (Task, Potential, the ceilings): imported at the call.
+        from quat_jt_controller import parameter_table as table
         task = Task(task)
-        ceiling, lam_ceiling = float('inf'), float('inf')
-        why = lam_why = ''
+        ceiling, lam_ceiling = inf, inf
         if effort_limits_nm is not None:
             ceiling, lam_ceiling = gain_ceiling(effort_limits_nm), MAX_LAMBDA
-            why = (f'its term alone would ask for more than the largest effort limit '
-                   f'({ceiling * SATURATING_ERROR:g} N m) at an error of {SATURATING_ERROR:g} '
-                   '(rad, m or rad/s): the joints would only saturate')
-            lam_why = 'tanh(lambda y) would switch like sign(y) within sensor noise (chatter)'
-        return cls(potential=pot,
-                   kp=checked_vector('kp', kp, task.dim, GainsError, lower=0.0, strict=True,
-                                     upper=ceiling, why=why),
-                   kv=checked_vector('kv', kv, n_joints, GainsError, lower=0.0, strict=True,
-                                     upper=ceiling, why=why),
-                   lam=checked_vector('lambda', lam, task.dim, GainsError, lower=0.0,
-                                      strict=True, upper=lam_ceiling, why=lam_why),
-                   gravity_compensation=bool(gravity_compensation))
+        context = {'task': task, 'dim': task.dim, 'n': n_joints, 'ceiling': ceiling,
+                   'lambda_ceiling': lam_ceiling, 'effort_max': f'{ceiling * SATURATING_ERROR:g}'}
+        v = check_all(table.GAINS, {'potential': potential, 'kp': kp, 'kv': kv, 'lambda': lam,
+                                    'gravity_compensation': bool(gravity_compensation)},
+                      context, GainsError)
+        return cls(potential=Potential(v['potential']), kp=v['kp'], kv=v['kv'], lam=v['lambda'],
+                   gravity_compensation=v['gravity_compensation'])
 
 
 def large_error_energy(s: float, k_l: float) -> float:

@@ -1,9 +1,10 @@
 """
 The controller from its parameters, ROS-free: what a config file makes of the regulator.
 
-``controller_node`` declares these parameters from its table (``parameters.py``) and validates
-them with the same constructors: ``Gains.create`` with the URDF effort limits as ceilings,
-``shaping.from_parameters`` and ``Regulator.set_shaping``. :func:`controller_from_config` does
+``controller_node`` declares these parameters from its table (``parameter_table.py``) and
+validates them with the same constructors: ``Gains.create`` with the URDF effort limits as
+ceilings, ``shaping.from_parameters`` (every row's range and size) and
+``Regulator.set_shaping``. :func:`controller_from_config` does
 the same from a mapping (a config file's ``ros__parameters``), so the experiments, the
 benchmark and the tests run the controller the node would run from that file.
 """

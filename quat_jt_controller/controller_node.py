@@ -6,8 +6,9 @@ Each ``joint_states`` message is read into plain values, given to the ROS-free
 ``Regulator.update``, with the decisions around it), and its command published at once on
 ``effort_controller/commands``, then its feedback, ``/diagnostics`` and log lines. Goals go to
 :meth:`Controller.on_goal` the same way. ``reports.py`` publishes the feedback and
-``/diagnostics``; the parameters are the table of ``parameters.py``, applied as immutable
-snapshots. The ROS graph is read on timers only, never in the state callback.
+``/diagnostics``; the parameters are the table of ``parameter_table.py``, declared by
+``parameters.py`` and applied as immutable snapshots. The ROS graph is read on timers only,
+never in the state callback.
 """
 import time
 from typing import Iterable
@@ -48,10 +49,10 @@ class QuatJtController(Node):
         # applied by lifecycle.run_node; on simulated time there are no deadlines to keep
         self.realtime = declare_realtime(self, 'simulated time' if self._use_sim_time else '')
         try:
-            model = RobotModel(cfg.robot_description, cfg.base_link, cfg.tip_link, cfg.joints,
+            model = RobotModel(cfg.urdf_xml, cfg.base_link, cfg.tip_link, cfg.joints,
                                cfg.armature)
         except ModelError as exc:
-            raise ModelError(f'{exc}{bundled_urdf_hint(cfg.given_robot_description)}') from None
+            raise ModelError(f'{exc}{bundled_urdf_hint(cfg.given_urdf)}') from None
         gains = parameters.declare_gains(  # each change logged once by the ChangeLog
             self, cfg, model.effort_limits, on_apply=lambda new: self.regulator.set_gains(new))
         reg = self.regulator = Regulator(model, cfg.task, gains.current)
@@ -61,7 +62,7 @@ class QuatJtController(Node):
         reg.set_shaping(self.shaping.current)
         self._change_log = parameters.change_log(self, reg)
         self._goal_checker = GoalCheckWorker(ModelSpec(
-            cfg.robot_description, cfg.base_link, cfg.tip_link, cfg.joints, cfg.task))
+            cfg.urdf_xml, cfg.base_link, cfg.tip_link, cfg.joints, cfg.task))
         ctl = self.controller = Controller(
             reg, cfg.state_timeout_s, cfg.publish_rate_divider, cfg.max_state_age_s,
             cfg.state_rate_hz, self._goal_checker, started_ns=steady_ns())

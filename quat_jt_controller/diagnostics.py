@@ -10,7 +10,7 @@ from typing import NamedTuple, Optional, Sequence
 
 from quat_jt_controller.regulator import Goal, Regulator, TickOutput
 
-OK, WARN, ERROR = 0, 1, 2
+OK, WARN, ERROR = 0, 1, 2  # diagnostic_msgs/DiagnosticStatus levels
 # |eta_e| below this means the error is within ~11.5 degrees of 180 degrees, where
 # Q(eta_e, e)^T K_p e can vanish (docs/errata.md, note 6): reported as a warning.
 NEAR_180_ETA_E = 0.1

@@ -41,10 +41,11 @@ from xml.etree import ElementTree
 import numpy as np
 
 from quat_jt_controller import control_law as cl
+from quat_jt_controller import parameter_table as table
 from quat_jt_controller.model import ModelError, RobotModel
 from quat_jt_controller.shaping import FULL_TURN_RAD, Shaping
-from quat_jt_runtime.joints import check_state_rate, DEFAULT_MAX_STATE_AGE_S
-from quat_jt_runtime.joints import DEFAULT_STATE_TIMEOUT_S, STATE_RATE_RANGE_HZ
+from quat_jt_runtime.joints import check_state_rate, STATE_RATE_RANGE_HZ
+from quat_jt_runtime.param_table import Kind, names, row, yaml_lines, yaml_value
 
 TORQUE_SHARE = 0.8  # of what gravity and friction compensation leave; the rest: damping
 GUIDE_OVER_TASK = 1.2  # the goal-configuration term must overcome the task term at a stop
@@ -201,27 +202,28 @@ class Design:
 
     def parameters(self, potential: str = 'tanh') -> dict:
         """Return the controller's live parameters of the design, by ROS parameter name."""
-        s = self.shaping
-        return {
-            'potential': potential, 'kp': list(self.kp), 'kv': list(self.kv),
-            'lambda': list(self.lam), 'gravity_compensation': True,
-            'joint_limit_margin': s.joint_limit_margin_rad,
-            'joint_limit_gain': list(s.joint_limit_gain),
-            'large_error_gain': s.large_error_gain,
-            'friction_compensation': list(s.friction_compensation_nm),
-            'friction_velocity': s.friction_velocity_rad_s,
-            'friction_error_band': s.friction_error_band,
-            'friction_position_band': s.friction_position_band_m,
-            'friction_learning_limit': list(s.friction_learning_limit_nm),
-            'friction_learning_time': s.friction_learning_time_s,
-            'configuration_gain': list(s.configuration_gain),
-            'configuration_radius': s.configuration_radius_rad,
-            'configuration_ramp': s.configuration_ramp_rad,
-            'damping_speed': s.damping_speed_rad_s,
-            'goal_velocity_gain': s.goal_velocity_gain,
-            'preferred_configuration': list(s.preferred_configuration_rad),
-            'posture_weight': s.posture_weight,
-        }
+        values = {'potential': potential, 'kp': list(self.kp), 'kv': list(self.kv),
+                  'lambda': list(self.lam), 'gravity_compensation': True}
+        for spec in table.SHAPING:  # each extension from its Shaping attribute
+            if hasattr(self.shaping, spec.attribute):
+                value = getattr(self.shaping, spec.attribute)
+                values[spec.name] = list(value) if isinstance(value, tuple) else value
+        return values
+
+    def structure(self) -> dict:
+        """
+        Return the read-only parameters of the design, by ROS parameter name.
+
+        The robot, the task and the rate it was designed for; the URDF and the state checks at
+        their defaults (a parameter file shows them).
+        """
+        defaults = {name: row(table.STRUCTURE, name).default
+                    for name in ('robot_description', 'state_timeout', 'max_state_age')}
+        return {'task': self.task.value, 'joints': list(self.joints),
+                'armature': list(self.armature or [0.0] * len(self.joints)),
+                'base_link': self.base_link, 'tip_link': self.tip_link, **defaults,
+                'state_rate': self.rate_hz,
+                'publish_rate_divider': max(1, int(round(self.rate_hz / 100.0)))}
 
 
 def _sample(model: RobotModel, rng: np.random.Generator, fraction: float) -> np.ndarray:
@@ -715,16 +717,35 @@ def _regular_note(f: dict) -> str:
             f'{REGULAR_SIGMA_MIN:g})')
 
 
-def _float(value: float) -> str:
-    """Four significant digits, always with a decimal point (ROS parameters are typed)."""
-    if abs(value) < 1e-9:
-        return '0.0'
-    return np.format_float_positional(float(value), precision=4, unique=True,
-                                      fractional=False, trim='0')
-
-
 def _fmt(values) -> str:
-    return '[' + ', '.join(_float(v) for v in values) + ']'
+    return yaml_value(Kind.DOUBLE_ARRAY, values)
+
+
+def _live_names(specs) -> str:
+    """
+    Return the names of ``specs``, a run of names with the same first word as ``prefix_*``.
+
+    ``joint_limit_margin, joint_limit_gain`` is written ``joint_limit_*``.
+    """
+    out, names_ = [], [spec.name for spec in specs]
+    i = 0
+    while i < len(names_):
+        word = names_[i].split('_')[0]
+        j = i
+        while j + 1 < len(names_) and names_[j + 1].split('_')[0] == word:
+            j += 1
+        if j == i:
+            out.append(names_[i])
+        else:
+            parts = [name.split('_') for name in names_[i:j + 1]]
+            common = []
+            for words in zip(*parts):
+                if len(set(words)) > 1:
+                    break
+                common.append(words[0])
+            out.append('_'.join(common) + '_*')
+        i = j + 1
+    return ', '.join(out)
 
 
 def to_yaml(d: Design, potential: str = 'tanh', command: str = '',
@@ -746,10 +767,9 @@ def to_yaml(d: Design, potential: str = 'tanh', command: str = '',
         f'{", ".join(d.joints)}.',
         'Generated by quat_jt_controller.gain_design (docs/gain_design.md gives each rule):',
         f'  {command or "python -m quat_jt_controller.gain_design ..."}',
-        'Live parameters (ros2 param set): potential, kp, kv, lambda, gravity_compensation and '
-        'the extensions (joint_limit_*, large_error_gain, friction_*, '
-        'configuration_*, damping_speed, goal_velocity_gain, preferred_configuration, '
-        'posture_weight; docs/lyapunov.md). The rest is read-only.',
+        f'Live parameters (ros2 param set): {", ".join(names(table.GAINS))} and the '
+        f'extensions ({_live_names(table.SHAPING)}; '
+        'docs/lyapunov.md). The rest is read-only.',
         'The design, per joint (N m unless said):',
         f'  effort limits {_fmt(f["effort_limits_nm"])}, largest |g(q)| '
         f'{_fmt(np.round(f["gravity_max_nm"], 4))}, friction estimates '
@@ -785,65 +805,53 @@ def to_yaml(d: Design, potential: str = 'tanh', command: str = '',
         lines += textwrap.wrap(entry.strip(), width=99, initial_indent=indent,
                                subsequent_indent=indent + '  ', break_on_hyphens=False,
                                break_long_words=False)
-    lines += [
-        '/**:  # any node name and namespace',
-        '  ros__parameters:',
-        f'    task: {d.task.value}              # read-only',
-        f"    potential: {potential}              # 'tanh' (Eq. 32/38) or 'quadratic' "
-        '(Eq. 24/37); one set serves both',
-        f'    kp: {_fmt(d.kp)}  # K_p, {axes}: a-priori torque bound within the budget',
-        f'    kv: {_fmt(d.kv)}  # K_v, N m s/rad: damping ratio {DAMPING_RATIO:.2f} (tanh), '
-        'from M(q)',
-        f'    lambda: {_fmt(d.lam)}  # Lambda: {_saturation(d.lam, pose)}',
-        '    gravity_compensation: true   # + g(q) from the URDF',
-        f'    joint_limit_margin: {_float(s.joint_limit_margin_rad)}   # rad, band inside each '
-        'limit (joints with less than a full turn)',
-        f'    joint_limit_gain: {_fmt(s.joint_limit_gain)}  # N m/rad: '
-        f'{LIMIT_OVER_TASK:g} x the task bound at the stop',
-        f'    large_error_gain: {_float(s.large_error_gain)}   # N m; 0: the goal-configuration '
-        'term carries large errors',
-        f'    friction_compensation: {_fmt(s.friction_compensation_nm)}  # N m, the Coulomb '
-        'estimates (0 = off)',
-        f'    friction_learning_limit: {_fmt(s.friction_learning_limit_nm)}  # N m, the most '
-        'learned at rest on top (0 = none)',
-        f'    friction_learning_time: {_float(s.friction_learning_time_s)}   # s, to learn it '
-        'while stuck; it leaks as fast near the goal',
-        f'    friction_velocity: {_float(s.friction_velocity_rad_s)}   # rad/s, v_eps of '
-        'f tanh(qdot / v_eps)',
-        f'    friction_error_band: {_float(s.friction_error_band)}   # ||e|| where the '
-        'compensation fades out',
-        f'    friction_position_band: {_float(s.friction_position_band_m)}   # m, the same for '
-        '||p_d - p||',
-        f'    configuration_gain: {_fmt(s.configuration_gain)}  # N m: '
-        f'{GUIDE_OVER_TASK:g} x the task bound, more on a joint it would leave slow',
-        f'    configuration_radius: {_float(s.configuration_radius_rad)}   # rad, dead zone '
-        'around q*',
-        f'    configuration_ramp: {_float(s.configuration_ramp_rad)}   # rad, the torque rises '
-        'over this',
-        f'    damping_speed: {_fmt(s.damping_speed_rad_s)}  # rad/s, v_c of the cubic '
-        'damping (0 = none)',
-        f'    goal_velocity_gain: {_float(s.goal_velocity_gain)}   # damping towards a streamed '
-        "goal's velocity (0 = off)",
-        f'    preferred_configuration: {_fmt(s.preferred_configuration_rad)}  # rad, the '
-        "posture a redundant arm's q* leans to",
-        f'    posture_weight: {_float(s.posture_weight)}   # of that posture against the '
-        'distance to the arm (no effect without self-motion)',
-        f'    joints: [{", ".join(d.joints)}]',
-        f'    armature: {_fmt(d.armature or [0.0] * len(d.joints))}  # kg m^2, rotor inertia '
-        'per joint, in M(q) of the design',
-        f'    base_link: {d.base_link}',
-        f'    tip_link: {d.tip_link}',
-        "    robot_description: ''        # URDF XML; '' = the bundled wrist"
-        + (f' ({robot_description_note})' if robot_description_note else ''),
-        f'    state_timeout: {DEFAULT_STATE_TIMEOUT_S}           # s without valid joint_states '
-        '-> zero torque (once)',
-        f'    max_state_age: {DEFAULT_MAX_STATE_AGE_S}           # s; older, future or unstamped '
-        'states are rejected; 0 = off',
-        f'    state_rate: {_float(d.rate_hz)}           # Hz, the joint_states rate designed for '
-        '(--rate)',
-        f'    publish_rate_divider: {max(1, int(round(d.rate_hz / 100.0)))}     # feedback '
-        'topics at 100 Hz',
-    ]
+    comments = {
+        'task': 'read-only',
+        'potential': "'tanh' (Eq. 32/38) or 'quadratic' (Eq. 24/37); one set serves both",
+        'kp': f'K_p, {axes}: a-priori torque bound within the budget',
+        'kv': f'K_v, N m s/rad: damping ratio {DAMPING_RATIO:.2f} (tanh), from M(q)',
+        'lambda': f'Lambda: {_saturation(d.lam, pose)}',
+        'gravity_compensation': '+ g(q) from the URDF',
+        'joint_limit_margin': 'rad, band inside each limit (joints with less than a full turn)',
+        'joint_limit_gain': f'N m/rad: {LIMIT_OVER_TASK:g} x the task bound at the stop',
+        'large_error_gain': 'N m; 0: the goal-configuration term carries large errors',
+        'friction_compensation': 'N m, the Coulomb estimates (0 = off)',
+        'friction_learning_limit': 'N m, the most learned at rest on top (0 = none)',
+        'friction_learning_time': 's, to learn it while stuck; it leaks as fast near the goal',
+        'friction_velocity': 'rad/s, v_eps of f tanh(qdot / v_eps)',
+        'friction_error_band': '||e|| where the compensation fades out',
+        'friction_position_band': 'm, the same for ||p_d - p||',
+        'configuration_gain': f'N m: {GUIDE_OVER_TASK:g} x the task bound, more on a joint it '
+                              'would leave slow',
+        'configuration_radius': 'rad, dead zone around q*',
+        'configuration_ramp': 'rad, the torque rises over this',
+        'damping_speed': 'rad/s, v_c of the cubic damping (0 = none)',
+        'goal_velocity_gain': "damping towards a streamed goal's velocity (0 = off)",
+        'preferred_configuration': "rad, the posture a redundant arm's q* leans to",
+        'posture_weight': 'of that posture against the distance to the arm (no effect without '
+                          'self-motion)',
+        'armature': 'kg m^2, rotor inertia per joint, in M(q) of the design',
+        'robot_description': "URDF XML; '' = the bundled wrist" + (
+            f' ({robot_description_note})' if robot_description_note else ''),
+        'state_timeout': 's without valid joint_states -> zero torque (once)',
+        'max_state_age': 's; older, future or unstamped states are rejected; 0 = off',
+        'state_rate': 'Hz, the joint_states rate designed for (--rate)',
+        'publish_rate_divider': 'feedback topics at 100 Hz',
+    }
+    # The task first (it sizes the gains), the live rows (the design's, or their defaults),
+    # then the read-only rows the design gives.
+    structure = d.structure()
+    context = {'task': d.task, 'dim': d.task.dim, 'n': len(d.joints),
+               'preferred_configuration': s.preferred_configuration_rad}
+    live = tuple(table.GAINS) + tuple(table.SHAPING)
+    values = {spec.name: spec.default_value(context) for spec in live}
+    values.update(d.parameters(potential))
+    values.update(structure)
+    first = row(table.STRUCTURE, 'task')
+    rows = (first, *live, *(spec for spec in table.STRUCTURE
+                            if spec is not first and spec.name in structure))
+    lines += ['/**:  # any node name and namespace', '  ros__parameters:']
+    lines += yaml_lines(rows, values, comments)
     return '\n'.join(lines) + '\n'
 
 

@@ -30,10 +30,9 @@ import numpy as np
 
 from quat_jt_controller import quaternion as quat
 from quat_jt_controller.control_law import Task
-from quat_jt_controller.model import RobotModel
+from quat_jt_controller.model import RobotModel, SINGULAR_SIGMA_MIN
 from quat_jt_runtime.realtime import start_at_normal_scheduling
 
-SINGULAR_SIGMA_MIN = 0.05  # sigma_min(J) below this at the goal: reported singular (A2)
 RESIDUAL_TOLERANCE = 1e-4  # IK residual (m and rad) below this: the goal is reached (A1)
 # q* is polished by Newton steps to this residual (m and rad), the model's precision, or refused:
 # the task and goal-configuration potentials must share their minimum exactly

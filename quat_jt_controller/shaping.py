@@ -39,20 +39,20 @@ The law of Eq. (22) becomes
 All are off by default (:class:`Shaping` ()), which gives the paper's law exactly. Plain
 floats: the functions here run in the 1 kHz tick.
 """
-from dataclasses import dataclass
+from dataclasses import dataclass, fields
 from functools import cached_property
 from math import isfinite, pi, sqrt, tanh
-from typing import Optional, Sequence
+from typing import Any, Mapping, Optional, Sequence
 
-from quat_jt_runtime.errors import checked_vector, QuatJtError
+from quat_jt_controller import parameter_table as table
+from quat_jt_runtime.errors import QuatJtError
+from quat_jt_runtime.param_table import check_all, names
 
 # A joint whose URDF range is at least this long turns freely: it gets no limit term.
 FULL_TURN_RAD = 2.0 * pi - 1e-6
 # t_p = tanh(tau_p / (TORQUE_BAND_FRACTION f)): the breakaway reaches 76% of f when the
 # potential torque is 0.1% of f, and changes sign smoothly (C-infinity) through tau_p = 0.
 TORQUE_BAND_FRACTION = 0.001
-# Width of the fade of the large-error term at 180 degrees, in eta_e (docs/lyapunov.md, 3).
-LARGE_ERROR_DELTA = 0.1
 # The cubic damping turns linear above the URDF velocity limit, or above this without one.
 DEFAULT_SPEED_CAP_RAD_S = 2.0 * pi
 
@@ -61,44 +61,7 @@ class ShapingError(QuatJtError):
     """An invalid extension parameter; the message names the parameter and the value."""
 
 
-def _nonnegative(name: str, value: float) -> float:
-    try:
-        v = float(value)
-    except (TypeError, ValueError):
-        raise ShapingError(f'{name} must be a number, got {value!r}') from None
-    if not isfinite(v) or v < 0.0:
-        raise ShapingError(f'{name} must be finite and >= 0, got {v}')
-    return v
-
-
-def _positive(name: str, value: float) -> float:
-    v = _nonnegative(name, value)
-    if v <= 0.0:
-        raise ShapingError(f'{name} must be finite and > 0, got {v}')
-    return v
-
-
-MAX_POSTURE_WEIGHT = 100.0  # of the preferred posture against the distance to the arm
-
-
-def _at_most(name: str, value: float, ceiling: float) -> float:
-    if value > ceiling:
-        raise ShapingError(f'{name} must be at most {ceiling:g}, got {value}')
-    return value
-
-
-def _per_joint(name: str, values: Optional[Sequence[float]], n: int,
-               nonnegative: bool = True) -> tuple[float, ...]:
-    """
-    Return ``n`` finite values (>= 0 if ``nonnegative``).
-
-    None is the default: zeros for a gain, () for a posture (``nonnegative`` False), as is an
-    empty posture.
-    """
-    if values is None or (not nonnegative and len(values) == 0):
-        return (0.0,) * n if nonnegative else ()
-    return checked_vector(name, values, n, ShapingError, lower=0.0 if nonnegative else None,
-                          per_joint=True)
+_default = table.shaping_default  # a field's default is its row's
 
 
 @dataclass(frozen=True)
@@ -114,87 +77,55 @@ class Shaping:
     ``friction_position_band_m`` m (the same for ``||p_d - p||``, pose task).
     ``configuration_gain`` N m per joint (``T_j``, the most the goal-configuration term asks
     of joint j; 0 = off) and ``configuration_radius_rad`` rad (its dead zone, also the width of
-    its ramp). Empty per-joint tuples mean zeros.
+    its ramp). Empty per-joint tuples mean zeros. The rules and the defaults are the rows of
+    ``parameter_table.SHAPING`` (each row's ``field`` names its attribute).
     """
 
-    joint_limit_margin_rad: float = 0.0
+    joint_limit_margin_rad: float = _default('joint_limit_margin')
     joint_limit_gain: tuple[float, ...] = ()
-    large_error_gain: float = 0.0
+    large_error_gain: float = _default('large_error_gain')
     friction_compensation_nm: tuple[float, ...] = ()
-    friction_velocity_rad_s: float = 0.05
-    friction_error_band: float = 0.004
-    friction_position_band_m: float = 0.0005
+    friction_velocity_rad_s: float = _default('friction_velocity')
+    friction_error_band: float = _default('friction_error_band')
+    friction_position_band_m: float = _default('friction_position_band')
     configuration_gain: tuple[float, ...] = ()
-    configuration_radius_rad: float = 0.05
-    configuration_ramp_rad: float = 0.25
+    configuration_radius_rad: float = _default('configuration_radius')
+    configuration_ramp_rad: float = _default('configuration_ramp')
     damping_speed_rad_s: tuple[float, ...] = ()
     # g_v: the joint damping acts on qdot - g_v qdot*_d of a streamed goal; 0 = off
-    goal_velocity_gain: float = 0.0
+    goal_velocity_gain: float = _default('goal_velocity_gain')
     # a_max per joint, N m: the most the friction estimate may learn at rest (0 = no learning)
     friction_learning_limit_nm: tuple[float, ...] = ()
     # s: a_max is learned in this time while stuck, and leaks with it inside the band
-    friction_learning_time_s: float = 1.0
+    friction_learning_time_s: float = _default('friction_learning_time')
     # the goal check's choice of q* along a redundant arm's self-motion (goal_check.posture):
     # nearest the measured q, then this posture (rad per joint; empty: the middle of the
     # ranges) with this weight. Not read by the tick.
     preferred_configuration_rad: tuple[float, ...] = ()
-    posture_weight: float = 0.0
+    posture_weight: float = _default('posture_weight')
 
     @classmethod
-    def create(cls, n_joints: int, joint_limit_margin: float = 0.0,
-               joint_limit_gain: Optional[Sequence[float]] = None,
-               large_error_gain: float = 0.0,
-               friction_compensation: Optional[Sequence[float]] = None,
-               friction_velocity: float = 0.05, friction_error_band: float = 0.004,
-               friction_position_band: float = 0.0005,
-               configuration_gain: Optional[Sequence[float]] = None,
-               configuration_radius: float = 0.05, configuration_ramp: float = 0.25,
-               damping_speed: Optional[Sequence[float]] = None,
-               goal_velocity_gain: float = 0.0,
-               friction_learning_limit: Optional[Sequence[float]] = None,
-               friction_learning_time: float = 1.0,
-               preferred_configuration: Optional[Sequence[float]] = None,
-               posture_weight: float = 0.0) -> 'Shaping':
-        """Validate and build; raise ShapingError naming the bad value."""
-        if _nonnegative('goal_velocity_gain', goal_velocity_gain) > 1.0:
-            raise ShapingError(f'goal_velocity_gain must be in [0, 1], got {goal_velocity_gain}')
-        return cls(
-            joint_limit_margin_rad=_nonnegative('joint_limit_margin', joint_limit_margin),
-            joint_limit_gain=_per_joint('joint_limit_gain', joint_limit_gain, n_joints),
-            large_error_gain=_nonnegative('large_error_gain', large_error_gain),
-            friction_compensation_nm=_per_joint('friction_compensation', friction_compensation,
-                                                n_joints),
-            friction_velocity_rad_s=_positive('friction_velocity', friction_velocity),
-            friction_error_band=_positive('friction_error_band', friction_error_band),
-            friction_position_band_m=_positive('friction_position_band',
-                                               friction_position_band),
-            configuration_gain=_per_joint('configuration_gain', configuration_gain, n_joints),
-            configuration_radius_rad=_nonnegative('configuration_radius', configuration_radius),
-            configuration_ramp_rad=_positive('configuration_ramp', configuration_ramp),
-            damping_speed_rad_s=_per_joint('damping_speed', damping_speed, n_joints),
-            goal_velocity_gain=float(goal_velocity_gain),
-            friction_learning_limit_nm=_per_joint('friction_learning_limit',
-                                                  friction_learning_limit, n_joints),
-            friction_learning_time_s=_positive('friction_learning_time',
-                                               friction_learning_time),
-            preferred_configuration_rad=_per_joint('preferred_configuration',
-                                                   preferred_configuration, n_joints,
-                                                   nonnegative=False),
-            posture_weight=_at_most('posture_weight', _nonnegative('posture_weight',
-                                                                   posture_weight),
-                                    MAX_POSTURE_WEIGHT))
+    def create(cls, n_joints: int, **values: Any) -> 'Shaping':
+        """
+        Validate and build from values keyed by parameter name; raise ShapingError naming one.
+
+        Every row of ``parameter_table.SHAPING`` is checked by its rules (range, finiteness,
+        one value per joint), the node's own: a name not given (or None) takes its row's
+        default. An empty ``preferred_configuration`` means the middle of the ranges.
+        """
+        rows = table.SHAPING
+        checked = check_all(rows, values, table.shaping_context(n_joints), ShapingError)
+        attributes = {f.name for f in fields(cls)}
+        return cls(**{spec.attribute: checked[spec.name] for spec in rows
+                      if spec.attribute in attributes})
 
     def check_size(self, n_joints: int) -> 'Shaping':
         """Return self if the per-joint vectors fit ``n_joints`` (or are empty); else raise."""
-        for name, values in (('joint_limit_gain', self.joint_limit_gain),
-                             ('friction_compensation', self.friction_compensation_nm),
-                             ('configuration_gain', self.configuration_gain),
-                             ('damping_speed', self.damping_speed_rad_s),
-                             ('friction_learning_limit', self.friction_learning_limit_nm),
-                             ('preferred_configuration', self.preferred_configuration_rad)):
-            if values and len(values) != n_joints:
-                raise ShapingError(f'{name} must have {n_joints} values (one per joint), got '
-                                   f'{len(values)}')
+        for spec in table.SHAPING:
+            values = getattr(self, spec.attribute, ())
+            if spec.size == 'n' and values and len(values) != n_joints:
+                raise ShapingError(f'{spec.name} must have {n_joints} values (one per joint), '
+                                   f'got {len(values)}')
         return self
 
     @cached_property  # read every tick: computed once per snapshot
@@ -447,32 +378,15 @@ def add_speed_damping(qdot: Sequence[float], kv: Sequence[float], shaping: Shapi
             tau[j] -= kv[j] * v * s / (v_c * v_c)
 
 
-def from_parameters(values: dict, n_joints: int) -> Shaping:
+def from_parameters(values: Mapping[str, Any], n_joints: int) -> Shaping:
     """
     Build a Shaping from controller parameters keyed by their ROS names (a config file's).
 
-    Missing names keep their defaults (off). Raises ShapingError naming a bad value.
+    The names that are no extension parameter are left to the others. Missing names keep their
+    defaults (off). Raises ShapingError naming a bad value.
     """
-    d = Shaping()
-    return Shaping.create(
-        n_joints, joint_limit_margin=values.get('joint_limit_margin', 0.0),
-        joint_limit_gain=values.get('joint_limit_gain'),
-        large_error_gain=values.get('large_error_gain', 0.0),
-        friction_compensation=values.get('friction_compensation'),
-        friction_velocity=values.get('friction_velocity', d.friction_velocity_rad_s),
-        friction_error_band=values.get('friction_error_band', d.friction_error_band),
-        friction_position_band=values.get('friction_position_band',
-                                          d.friction_position_band_m),
-        configuration_gain=values.get('configuration_gain'),
-        configuration_radius=values.get('configuration_radius', d.configuration_radius_rad),
-        configuration_ramp=values.get('configuration_ramp', d.configuration_ramp_rad),
-        damping_speed=values.get('damping_speed'),
-        goal_velocity_gain=values.get('goal_velocity_gain', 0.0),
-        friction_learning_limit=values.get('friction_learning_limit'),
-        friction_learning_time=values.get('friction_learning_time',
-                                          d.friction_learning_time_s),
-        preferred_configuration=values.get('preferred_configuration'),
-        posture_weight=values.get('posture_weight', d.posture_weight))
+    extensions = set(names(table.SHAPING))
+    return Shaping.create(n_joints, **{k: v for k, v in values.items() if k in extensions})
 
 
 def describe(shaping: Shaping) -> str:

@@ -16,22 +16,19 @@ from typing import Optional, Sequence
 import numpy as np
 
 from quat_jt_controller import control_law as cl
+from quat_jt_controller.diagnostics import NEAR_180_ETA_E, OK, Status, WARN
+from quat_jt_controller.model import SINGULAR_SIGMA_MIN
 from quat_jt_controller.regulator import Regulator, TickOutput
 
-OK, WARN = 0, 1  # diagnostic_msgs/DiagnosticStatus levels
 PERIOD_S = 0.1  # evaluation period (10 Hz)
 HOLD_S = 0.5  # at rest and off the goal for longer than this: a stall
 REST_SPEED_RAD_S = 0.02  # max |qdot| below this: at rest
 ORIENTATION_TOLERANCE = 0.01  # ||e|| above this: off the goal
 POSITION_TOLERANCE_M = 0.001  # ||p_d - p|| above this: off the goal (pose task)
 NEAR_LIMIT_RAD = 0.05  # a joint this close to a URDF limit (or inside the band) is at a limit
-SINGULAR_SIGMA_MIN = 0.05  # sigma_min of the task Jacobian below this: near-singular
-NEAR_180_ETA_E = 0.1  # |eta_e| below this: within ~11.5 degrees of a half turn
 # With no friction estimate, a potential torque below this share of a joint's effort limit
 # (or below what the joint may learn, if more) is within a geared drive's plausible friction
 PLAUSIBLE_FRICTION_SHARE = 0.05
-
-Status = tuple[int, str, list[tuple[str, str]]]
 
 
 class StallDetector:

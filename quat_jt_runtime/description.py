@@ -1,20 +1,19 @@
 """
-The robot description of both nodes, the ROS way: parameter rows, the topic and its QoS.
+The robot description of both nodes, the ROS way: the wait for the topic, and its QoS.
 
 ``robot_description_file`` and ``robot_description_topic`` (with its
-``robot_description_timeout``) are rows of both nodes' tables, beside ``robot_description``;
-``urdf_source`` decides which source is meant (at most one; none: the bundled wrist). The topic
-is read as ros2_control reads robot_state_publisher's: ``std_msgs/String``, reliable, transient
-local, depth 1, so a description published before the node subscribed still arrives. The node
-waits for it in its constructor, before it builds its model, on an executor of its own (no
-other callback exists yet), with a log line saying what it waits for, and a Ctrl-C or the
-timeout ends the wait.
+``robot_description_timeout``) are rows of both nodes' tables (``urdf_source.SOURCES``), beside
+``robot_description``; ``urdf_source`` decides which source is meant (at most one; none: the
+bundled wrist). The topic is read as ros2_control reads robot_state_publisher's:
+``std_msgs/String``, reliable, transient local, depth 1, so a description published before the
+node subscribed still arrives. The node waits for it in its constructor, before it builds its
+model, on an executor of its own (no other callback exists yet), with a log line saying what it
+waits for, and a Ctrl-C or the timeout ends the wait.
 """
 import time
 
 from quat_jt_runtime import shutdown_signals
 from quat_jt_runtime import urdf_source
-from quat_jt_runtime.params import Kind, Spec
 from quat_jt_runtime.urdf_source import Description, DescriptionError, Source
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.node import Node
@@ -26,31 +25,12 @@ from std_msgs.msg import String
 LATCHED_QOS = QoSProfile(history=HistoryPolicy.KEEP_LAST, depth=1,
                          reliability=ReliabilityPolicy.RELIABLE,
                          durability=DurabilityPolicy.TRANSIENT_LOCAL)
-DEFAULT_TIMEOUT_S = 30.0
 WAIT_LOG_PERIOD_S = 5.0  # while waiting: a line this often, with the publishers seen
-
-ROBOT_DESCRIPTION_FILE = Spec(
-    'robot_description_file', Kind.STRING, '',
-    "Path of the robot's URDF file, read at start-up (the simplest with ros2 run: -p "
-    'robot_description_file:=/path/robot.urdf). At most one of robot_description, '
-    'robot_description_file and robot_description_topic; none = the bundled spherical wrist.',
-    read_only=True)
-ROBOT_DESCRIPTION_TOPIC = Spec(
-    'robot_description_topic', Kind.STRING, '',
-    'Topic to take the URDF from at start-up, e.g. robot_description (std_msgs/String, '
-    'transient local, as robot_state_publisher publishes it); the node waits for it, '
-    'robot_description_timeout at most, before it builds its model. At most one of '
-    'robot_description, robot_description_file and robot_description_topic.', read_only=True)
-ROBOT_DESCRIPTION_TIMEOUT = Spec(
-    'robot_description_timeout', Kind.DOUBLE, DEFAULT_TIMEOUT_S,
-    'Seconds to wait for the URDF on robot_description_topic before giving up with an error.',
-    read_only=True, bounds=(0.1, 86400.0))
-SOURCES = (ROBOT_DESCRIPTION_FILE, ROBOT_DESCRIPTION_TOPIC, ROBOT_DESCRIPTION_TIMEOUT)
 
 
 def robot_description(node: Node, values: dict) -> Description:
     """
-    Return the URDF the declared ``values`` name (with ``robot_description`` and SOURCES).
+    Return the URDF the declared ``values`` name (``robot_description``, ``SOURCES``' rows).
 
     A topic is waited for here (:func:`wait_for_description`). Raises DescriptionError saying
     what is wrong (two sources, an unreadable file, nothing on the topic in time).

@@ -6,16 +6,16 @@ callback by building the node's immutable snapshot from the current values merge
 incoming ones (a ValueError rejects the whole set, with its message as the reason), and the
 post-set callback swaps the snapshot in; the 1 kHz tick reads the snapshot, never
 ``get_parameter``. Structural parameters are read-only and read once at start-up.
-:class:`ChangeLog` logs one line per parameter request.
+:class:`ChangeLog` logs one line per parameter request. The rows of the tables
+(``param_table.Spec``) are ROS-free; :func:`declare` declares them with their descriptors.
 """
-from dataclasses import dataclass
-import enum
 from typing import (Any, Callable, Collection, Generic, Mapping, NamedTuple, Optional,
                     Sequence, TypeVar)
 
+from quat_jt_runtime.param_table import Kind, Spec
 from quat_jt_runtime.realtime import check_cpus, DEFAULT_THREAD_PRIORITY
 from rcl_interfaces.msg import FloatingPointRange, IntegerRange, ParameterDescriptor
-from rcl_interfaces.msg import ParameterType, SetParametersResult
+from rcl_interfaces.msg import SetParametersResult
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.parameter import Parameter
@@ -123,68 +123,26 @@ class ChangeLog:
                                                           else ''))
 
 
-class Kind(enum.Enum):
-    """A parameter's type: the descriptor's, rclpy's and the docs' names for it."""
-
-    BOOL = (ParameterType.PARAMETER_BOOL, Parameter.Type.BOOL, 'bool')
-    INT = (ParameterType.PARAMETER_INTEGER, Parameter.Type.INTEGER, 'int')
-    DOUBLE = (ParameterType.PARAMETER_DOUBLE, Parameter.Type.DOUBLE, 'double')
-    STRING = (ParameterType.PARAMETER_STRING, Parameter.Type.STRING, 'string')
-    INT_ARRAY = (ParameterType.PARAMETER_INTEGER_ARRAY, Parameter.Type.INTEGER_ARRAY, 'int[]')
-    DOUBLE_ARRAY = (ParameterType.PARAMETER_DOUBLE_ARRAY, Parameter.Type.DOUBLE_ARRAY,
-                    'double[]')
-    STRING_ARRAY = (ParameterType.PARAMETER_STRING_ARRAY, Parameter.Type.STRING_ARRAY,
-                    'string[]')
-
-    def __init__(self, descriptor_type: int, rclpy_type: Parameter.Type, label: str) -> None:
-        self.descriptor_type = descriptor_type
-        self.rclpy_type = rclpy_type
-        self.label = label
+def descriptor(spec: Spec, context: Mapping[str, Any]) -> ParameterDescriptor:
+    """Return the ``ParameterDescriptor`` of a row (``ros2 param describe``) for this node."""
+    d = ParameterDescriptor(
+        description=spec.description.format(**context), type=spec.kind.descriptor_type,
+        read_only=spec.read_only,
+        additional_constraints=(spec.rule_text(context) if spec.kind.is_array
+                                else spec.constraints.format(**context)),
+        dynamic_typing=False)
+    if spec.bounds is not None and spec.kind is Kind.DOUBLE:
+        d.floating_point_range = [FloatingPointRange(
+            from_value=float(spec.bounds[0]), to_value=float(spec.bounds[1]), step=0.0)]
+    elif spec.bounds is not None and spec.kind is Kind.INT:
+        d.integer_range = [IntegerRange(
+            from_value=int(spec.bounds[0]), to_value=int(spec.bounds[1]), step=1)]
+    return d
 
 
-@dataclass(frozen=True)
-class Spec:
-    """
-    One row of a node's parameter table: everything about a parameter, in one place.
-
-    The declaration, its ``ParameterDescriptor`` and the docs' table are generated from it. The
-    ``description``, ``constraints`` and a callable ``default`` take the node's context (the
-    number of joints ``n``, say): text through ``str.format``, the default called with it.
-    ``bounds`` is a scalar's range (enforced by rclpy on every set); what ``constraints`` says
-    of an array is checked by the snapshot the parameter belongs to (``LiveParameters``).
-    """
-
-    name: str
-    kind: Kind
-    default: Any  # a value, or a function of the context that returns it
-    description: str
-    read_only: bool = False
-    bounds: Optional[tuple[float, float]] = None
-    constraints: str = ''
-    default_text: str = ''  # the docs' default when ``default`` is a function
-
-    def default_value(self, context: Mapping[str, Any]) -> Any:
-        """Return the default for this node (a function default is called with the context)."""
-        return self.default(context) if callable(self.default) else self.default
-
-    def descriptor(self, context: Mapping[str, Any]) -> ParameterDescriptor:
-        """Return the ``ParameterDescriptor`` (``ros2 param describe``) for this node."""
-        d = ParameterDescriptor(
-            description=self.description.format(**context), type=self.kind.descriptor_type,
-            read_only=self.read_only, additional_constraints=self.constraints.format(**context),
-            dynamic_typing=False)
-        if self.bounds is not None and self.kind is Kind.DOUBLE:
-            d.floating_point_range = [FloatingPointRange(
-                from_value=float(self.bounds[0]), to_value=float(self.bounds[1]), step=0.0)]
-        elif self.bounds is not None and self.kind is Kind.INT:
-            d.integer_range = [IntegerRange(
-                from_value=int(self.bounds[0]), to_value=int(self.bounds[1]), step=1)]
-        return d
-
-
-def names(specs: Sequence[Spec]) -> tuple[str, ...]:
-    """Return the parameter names of a table, in order."""
-    return tuple(spec.name for spec in specs)
+def rclpy_type(kind: Kind) -> Parameter.Type:
+    """Return rclpy's type of a parameter of ``kind``."""
+    return Parameter.Type(kind.descriptor_type)
 
 
 def declare(node: Node, specs: Sequence[Spec],
@@ -201,52 +159,18 @@ def declare(node: Node, specs: Sequence[Spec],
     values = {}
     for spec in specs:
         default = spec.default_value(context)
-        descriptor = spec.descriptor(context)
+        described = descriptor(spec, context)
         if isinstance(default, (list, tuple)) and not default:
-            ptype = spec.kind.rclpy_type
+            ptype = rclpy_type(spec.kind)
             param = node.declare_parameter(
                 spec.name, ptype, ParameterDescriptor(type=spec.kind.descriptor_type))
             if param.type_ is Parameter.Type.NOT_SET:
                 node.set_parameters([Parameter(spec.name, ptype, [])])
-            node.set_descriptor(spec.name, descriptor)
+            node.set_descriptor(spec.name, described)
             values[spec.name] = list(node.get_parameter(spec.name).value)
         else:
-            values[spec.name] = node.declare_parameter(spec.name, default, descriptor).value
+            values[spec.name] = node.declare_parameter(spec.name, default, described).value
     return values
-
-
-def joint_zeros(context: Mapping[str, Any]) -> list[float]:
-    """Return a per-joint default of zeros, one per joint (``context['n']``), for a table row."""
-    return [0.0] * context['n']
-
-
-JOINT_ZEROS_TEXT = '`0` per joint'  # the docs' default of a ``joint_zeros`` row
-
-
-def markdown_value(value: Any) -> str:
-    """Return a parameter value as the docs' tables show it, in backticks (floats as ``:g``)."""
-    if isinstance(value, str):
-        return f"`'{value}'`" if value else "`''`"
-    if isinstance(value, bool):
-        return f'`{str(value).lower()}`'
-    if isinstance(value, (list, tuple)):
-        return '`[' + ', '.join(f'{v:g}' if isinstance(v, float) else str(v)
-                                for v in value) + ']`'
-    return f'`{value:g}`' if isinstance(value, float) else f'`{value}`'
-
-
-def markdown_table(specs: Sequence[Spec], context: Mapping[str, Any]) -> str:
-    """Return the table of ``specs`` as Markdown (the docs' parameter tables)."""
-    rows = ['| name | type | default | range | live | description |', '|---|---|---|---|---|---|']
-    for spec in specs:
-        default = spec.default_text or markdown_value(spec.default_value(context))
-        bounds = ('[' + ', '.join(str(b) if isinstance(b, int) else f'{b:g}'
-                                  for b in spec.bounds) + ']' if spec.bounds is not None
-                  else spec.constraints.format(**context))
-        description = ' '.join(spec.description.format(**context).split()).replace('|', '\\|')
-        rows.append(f'| `{spec.name}` | {spec.kind.label} | {default} | {bounds} | '
-                    f'{"no" if spec.read_only else "yes"} | {description} |')
-    return '\n'.join(rows) + '\n'
 
 
 CPU_AFFINITY = Spec(

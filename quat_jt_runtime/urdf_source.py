@@ -10,14 +10,36 @@ Both nodes take the URDF the ways a ROS 2 Jazzy node does, from at most one of:
   publishes it as ``std_msgs/String``, transient local, waited for at start-up.
 
 None of them: the bundled spherical wrist. Two of them are refused, naming both: which one was
-meant is not guessed. ROS-free: the choice and the file; the topic is ``description.py``'s.
+meant is not guessed. ROS-free: the choice, the file and the rows of the parameters
+(``SOURCES``); the topic is ``description.py``'s.
 """
 from dataclasses import dataclass
 import enum
 from pathlib import Path
 
 from quat_jt_runtime.errors import QuatJtError
+from quat_jt_runtime.param_table import Kind, Spec
 from quat_jt_runtime.resources import DEFAULT_URDF, default_urdf_xml
+
+DEFAULT_TIMEOUT_S = 30.0  # of the wait for robot_description_topic
+
+ROBOT_DESCRIPTION_FILE = Spec(
+    'robot_description_file', Kind.STRING, '',
+    "Path of the robot's URDF file, read at start-up (the simplest with ros2 run: -p "
+    'robot_description_file:=/path/robot.urdf). At most one of robot_description, '
+    'robot_description_file and robot_description_topic; none = the bundled spherical wrist.',
+    read_only=True)
+ROBOT_DESCRIPTION_TOPIC = Spec(
+    'robot_description_topic', Kind.STRING, '',
+    'Topic to take the URDF from at start-up, e.g. robot_description (std_msgs/String, '
+    'transient local, as robot_state_publisher publishes it); the node waits for it, '
+    'robot_description_timeout at most, before it builds its model. At most one of '
+    'robot_description, robot_description_file and robot_description_topic.', read_only=True)
+ROBOT_DESCRIPTION_TIMEOUT = Spec(
+    'robot_description_timeout', Kind.DOUBLE, DEFAULT_TIMEOUT_S,
+    'Seconds to wait for the URDF on robot_description_topic before giving up with an error.',
+    read_only=True, bounds=(0.1, 86400.0))
+SOURCES = (ROBOT_DESCRIPTION_FILE, ROBOT_DESCRIPTION_TOPIC, ROBOT_DESCRIPTION_TIMEOUT)
 
 
 class DescriptionError(QuatJtError):

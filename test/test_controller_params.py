@@ -23,8 +23,9 @@ from quat_jt_controller.controller import NO_STATE_WARN_NS
 from quat_jt_controller.controller_node import NODE_NAME, QuatJtController
 from quat_jt_controller.goal_motion import MAX_GAP_S
 from quat_jt_controller.model import ModelError
-from quat_jt_controller.parameters import GAIN_PARAMETERS, SHAPING_PARAMETERS
+from quat_jt_controller.parameter_table import GAINS, SHAPING
 from quat_jt_controller.shaping import Shaping, ShapingError
+from quat_jt_runtime.param_table import names
 from rcl_interfaces.msg import Log, ParameterType
 import rclpy
 from rclpy.executors import SingleThreadedExecutor
@@ -160,7 +161,7 @@ def make_probe(context, make_node):
 
 def test_parameters_are_declared_with_descriptors(make_node):
     node = make_node()
-    for name in STRUCTURAL + GAIN_PARAMETERS:
+    for name in STRUCTURAL + names(GAINS):
         d = node.describe_parameter(name)
         assert d.description, name
         assert not d.dynamic_typing, name
@@ -172,8 +173,8 @@ def test_parameters_are_declared_with_descriptors(make_node):
 
 def test_the_node_declares_exactly_its_table(make_node):
     """Every parameter the node has is a row of its table, with the row's type and range."""
-    from quat_jt_controller import parameters as table
-    from quat_jt_runtime.params import REALTIME
+    from quat_jt_controller import parameter_table as table
+    from quat_jt_runtime.params import rclpy_type, REALTIME
     node = make_node()
     rows = {spec.name: spec for spec in table.STRUCTURE + table.GAINS + table.SHAPING
             + REALTIME}
@@ -183,12 +184,12 @@ def test_the_node_declares_exactly_its_table(make_node):
         d = node.describe_parameter(name)
         assert d.type == spec.kind.descriptor_type, name
         assert d.read_only == spec.read_only, name
-        assert node.get_parameter(name).type_ is spec.kind.rclpy_type, name
-        if spec.bounds is not None:
+        assert node.get_parameter(name).type_ is rclpy_type(spec.kind), name
+        if spec.bounds is not None and not spec.kind.is_array:  # an array's: its entries'
             limits = d.floating_point_range or d.integer_range
             assert (limits[0].from_value, limits[0].to_value) == spec.bounds, name
     assert 'values in (0, ' in node.describe_parameter('kv').additional_constraints
-    assert '3 values' in node.describe_parameter('kv').additional_constraints  # n filled in
+    assert '3 finite values' in node.describe_parameter('kv').additional_constraints  # n filled
 
 
 @pytest.mark.parametrize('name, urdf', [('paper_wrist_controller.yaml', None),
@@ -259,13 +260,13 @@ def test_defaults_and_paper_config_file_are_the_paper_experiment(make_node):
 def test_invalid_sets_are_rejected_and_nothing_changes(make_node, changes, words):
     node = make_node()
     before = node.gains
-    values_before = {k: node.get_parameter(k).value for k in GAIN_PARAMETERS}
+    values_before = {k: node.get_parameter(k).value for k in names(GAINS)}
     result = node.set_parameters_atomically(
         [Parameter(k, value=v) for k, v in changes.items()])
     assert not result.successful
     assert words in result.reason, result.reason
     assert node.gains is before
-    for k in GAIN_PARAMETERS:
+    for k in names(GAINS):
         assert node.get_parameter(k).value == values_before[k]
 
 
@@ -668,7 +669,7 @@ def test_product_config_turns_the_extensions_on(make_node):
     assert s.limits_on and s.friction_on and s.configuration_on and s.speed_damping_on
     assert node.regulator.limit_band is not None
     assert node.gains.kp != paper.KP  # designed, not the paper's
-    for name in SHAPING_PARAMETERS:
+    for name in names(SHAPING):
         d = node.describe_parameter(name)
         assert d.description and not d.read_only and not d.dynamic_typing, name
 
@@ -802,3 +803,59 @@ def test_the_parameter_page_is_generated_from_the_tables():
     assert written == page(), 'docs/parameters.md is stale: run make docs'
     for name in ('kp', 'goal_velocity_gain', 'coulomb_friction', 'cpu_affinity'):
         assert f'| `{name}` |' in written, name
+
+
+def test_the_node_refuses_a_value_just_outside_a_row_and_takes_one_inside(make_node):
+    """The node's path of test_parameter_table's cases: the same rows, the same verdicts."""
+    from parameter_cases import inside, live_rows, outside, wrist_context
+    node = make_node()
+    context = wrist_context(node.regulator.effort_limits_nm)
+    for spec in live_rows():
+        for name, value, words in outside(spec, context):
+            before = node.get_parameter(name).value
+            result = node.set_parameters([Parameter(name, value=value)])[0]
+            assert not result.successful, (name, value)
+            for word in words:
+                assert word in result.reason, (word, result.reason)
+            assert node.get_parameter(name).value == before
+        value = inside(spec, context)
+        result = node.set_parameters([Parameter(spec.name, value=value)])[0]
+        assert result.successful, (spec.name, value, result.reason)
+
+
+def test_a_row_added_to_the_table_is_declared_described_and_checked(make_node, monkeypatch):
+    from quat_jt_controller import parameter_table as table
+    from quat_jt_runtime.param_table import Kind, Spec
+    spec = Spec('test_added_gain', Kind.DOUBLE, 0.25, 'A row a test adds (N m). Live.',
+                bounds=(0.0, 2.0))
+    monkeypatch.setattr(table, 'SHAPING', (*table.SHAPING, spec))
+    node = make_node()
+    d = node.describe_parameter('test_added_gain')
+    assert d.description == spec.description and not d.read_only
+    assert (d.floating_point_range[0].from_value, d.floating_point_range[0].to_value) == (0.0,
+                                                                                          2.0)
+    assert node.get_parameter('test_added_gain').value == 0.25
+    refused = node.set_parameters([Parameter('test_added_gain', value=2.5)])[0]
+    assert not refused.successful and 'test_added_gain' in refused.reason
+    assert '2.5' in refused.reason
+    shaping = node.regulator.shaping
+    assert node.set_parameters([Parameter('test_added_gain', value=1.5)])[0].successful
+    assert node.regulator.shaping is not shaping  # a new snapshot, applied whole
+    from quat_jt_bringup.parameter_docs import page
+    assert ('| `test_added_gain` | double | `0.25` | [0, 2] | yes | A row a test adds (N m). '
+            'Live. |') in page()
+
+
+def test_the_readme_table_names_every_controller_parameter_and_no_other():
+    import fnmatch
+    import re
+    from quat_jt_controller import parameter_table as table
+    from quat_jt_runtime.params import REALTIME
+    readme = (Path(__file__).resolve().parent.parent / 'README.md').read_text()
+    rows = readme.split('## The parameters\n\n')[1].split('\n\n')[0].splitlines()[2:]
+    patterns = re.findall(r'`([a-z_*]+)`', ' '.join(line.split('|')[1] for line in rows))
+    parameters = names(table.STRUCTURE + table.GAINS + table.SHAPING + REALTIME)
+    assert len(patterns) > 20, patterns  # the table was found
+    assert [p for p in patterns if not fnmatch.filter(parameters, p)] == []
+    assert [p for p in parameters if not any(fnmatch.fnmatch(p, pattern)
+                                             for pattern in patterns)] == []

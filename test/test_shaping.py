@@ -102,9 +102,9 @@ def test_joint_limit_potential_is_c1_zero_outside_the_band_and_pushes_out():
 
 def test_joint_limit_margin_must_fit_the_range():
     model = wrist_model()
-    with pytest.raises(sh.ShapingError, match='leaves no room'):
-        sh.LimitBand.create(model.position_lower, model.position_upper,
-                            sh.Shaping.create(3, joint_limit_margin=2.7,
+    with pytest.raises(sh.ShapingError, match='leaves no room'):  # a 1 rad range, 0.6 bands
+        sh.LimitBand.create((-0.5, -0.5, -0.5), (0.5, 0.5, 0.5),
+                            sh.Shaping.create(3, joint_limit_margin=0.6,
                                               joint_limit_gain=(1.0, 1.0, 1.0)))
     assert sh.LimitBand.create(model.position_lower, model.position_upper,
                                sh.Shaping.create(3, joint_limit_margin=0.3)) is None
@@ -114,7 +114,8 @@ def test_joint_limit_margin_must_fit_the_range():
     ('negative gain', {'joint_limit_gain': (1.0, -1.0, 1.0)}, 'joint_limit_gain[1]'),
     ('wrong size', {'friction_compensation': (1.0, 1.0)}, 'must have 3 values'),
     ('nan', {'large_error_gain': math.nan}, 'large_error_gain must be finite'),
-    ('zero band', {'friction_error_band': 0.0}, 'friction_error_band must be finite and > 0'),
+    ('zero band', {'friction_error_band': 0.0}, 'friction_error_band must be in [1e-05, 1]'),
+    ('above its range', {'large_error_gain': 1001.0}, 'large_error_gain must be in [0, 1000]'),
 ])
 def test_invalid_extensions_are_refused_with_their_name(name, kwargs, words):
     with pytest.raises(sh.ShapingError, match=words.replace('[', r'\[').replace(']', r'\]')):
@@ -133,7 +134,7 @@ def test_large_error_term_keeps_the_torque_where_the_papers_fades():
         extended = np.linalg.norm(cl.task_force(e, eta_e, paper_only, k_l))
         assert base == pytest.approx(0.5 * k * eta_e * math.sin(half))
         assert extended - base > 0.8 * 0.5 * k_l * math.sin(half) ** 2 * eta_e / math.sqrt(
-            eta_e ** 2 + sh.LARGE_ERROR_DELTA ** 2) - 1e-12
+            eta_e ** 2 + cl.LARGE_ERROR_DELTA ** 2) - 1e-12
         if theta_deg >= 150.0:
             assert extended > 3.0 * base
     # it fades to zero at the half turn itself (continuous torque) and is flat at the goal

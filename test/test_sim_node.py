@@ -60,7 +60,7 @@ def test_parameters_default_from_the_urdf(context):
 
 @pytest.mark.node
 def test_the_node_declares_exactly_its_table(context):
-    from quat_jt_runtime.params import REALTIME
+    from quat_jt_runtime.params import rclpy_type, REALTIME
     from wrist_sim import parameters as table
     node = _make_node(context)
     try:
@@ -70,10 +70,35 @@ def test_the_node_declares_exactly_its_table(context):
         for name, spec in rows.items():
             d = node.describe_parameter(name)
             assert (d.type, d.read_only) == (spec.kind.descriptor_type, spec.read_only), name
-            assert node.get_parameter(name).type_ is spec.kind.rclpy_type, name
+            assert node.get_parameter(name).type_ is rclpy_type(spec.kind), name
             assert d.description, name
     finally:
         node.destroy_node()
+
+
+@pytest.mark.node
+def test_the_file_design_gains_writes_holds_rows_of_the_simulators_table():
+    """gain_design.sim_yaml (which may not import the simulator) writes the table's names."""
+    import yaml
+    from quat_jt_controller import gain_design as gd
+    from quat_jt_runtime.params import REALTIME
+    from robots import panda_model
+    from wrist_sim import parameters as table
+    from wrist_sim.config import SimConfig
+    from wrist_sim.simulator import ENGINES
+    model = panda_model()
+    for engine in ENGINES:
+        text = gd.sim_yaml(model, 1000.0, None, [0.1] * model.n, None, engine=engine)
+        written = yaml.safe_load(text)['/**']['ros__parameters']
+        rows = {spec.name: spec for spec in table.STRUCTURE + table.LIVE + REALTIME}
+        assert set(written) <= set(rows), set(written) - set(rows)
+        for name, value in written.items():
+            kind = rows[name].kind
+            python = {'bool': bool, 'int': int, 'double': float, 'string': str}
+            values = value if kind.is_array else [value]
+            assert all(type(v) is python[kind.label.rstrip('[]')] for v in values), name
+        assert set(table.names(table.LIVE)) <= set(written)
+        SimConfig.create(written, model.n)  # the simulator's own checks take it
 
 
 @pytest.mark.node

@@ -12,12 +12,12 @@ the immutable :class:`~wrist_sim.config.SimConfig` (validated by ``SimConfig.cre
 from dataclasses import dataclass
 from typing import Callable, Optional
 
-from quat_jt_runtime.description import robot_description, SOURCES
+from quat_jt_runtime.description import robot_description
 from quat_jt_runtime.joints import movable_joints
-from quat_jt_runtime.params import ChangeLog, declare, joint_zeros, JOINT_ZEROS_TEXT, Kind
-from quat_jt_runtime.params import LiveParameters, names, REALTIME, Realtime, realtime_from
-from quat_jt_runtime.params import Spec
-from quat_jt_runtime.urdf_source import Description, DescriptionError, Source
+from quat_jt_runtime.param_table import joint_zeros, JOINT_ZEROS_TEXT, Kind, names, Spec
+from quat_jt_runtime.params import ChangeLog, declare, LiveParameters, REALTIME, Realtime
+from quat_jt_runtime.params import realtime_from
+from quat_jt_runtime.urdf_source import Description, DescriptionError, Source, SOURCES
 from rclpy.node import Node
 from wrist_sim.config import SimConfig
 from wrist_sim.simulator import ENGINES, per_joint, SimulatorError

@@ -1,0 +1,210 @@
+"""
+The controller's parameters, as one table, ROS-free.
+
+The table (``STRUCTURE``, ``GAINS``, ``SHAPING``, rows of
+:class:`~quat_jt_runtime.param_table.Spec`) is the only source of each parameter's type,
+default, range, size rule and description. From it come the node's declarations and descriptors
+(``parameters.py``), the validation of the :class:`~quat_jt_controller.shaping.Shaping` snapshot
+by the node and by ``controller_from_config`` alike (``Shaping.create`` checks every row), the
+snapshot's defaults, docs/parameters.md (``make docs``) and the parameter files ``gain_design``
+writes. Read the groups through this module at the time of use (``parameter_table.SHAPING``),
+so that a row added here is seen everywhere.
+
+Defaults are the paper's wrist experiment (Section 5, Eqs. 43-45, orientation task Eq. 37/38):
+K_p = (4.5, 20.5, 17.5) N m, K_v = (1, 1, 1) N m s/rad, Lambda = (30, 30, 30); the extensions
+are off (the paper's law).
+"""
+from math import inf
+from typing import Any, Callable, Sequence
+
+from quat_jt_controller import paper
+from quat_jt_controller.control_law import MAX_LAMBDA, Potential, SATURATING_ERROR, Task
+from quat_jt_runtime.joints import DEFAULT_MAX_STATE_AGE_S, DEFAULT_STATE_RATE_HZ
+from quat_jt_runtime.joints import DEFAULT_STATE_TIMEOUT_S, STATE_RATE_RANGE_HZ
+from quat_jt_runtime.param_table import joint_zeros, JOINT_ZEROS_TEXT, Kind, markdown_value
+from quat_jt_runtime.param_table import row, Spec
+from quat_jt_runtime.realtime import DEFAULT_PREWARM_LEAD_S
+from quat_jt_runtime.urdf_source import SOURCES
+
+# Pose task (Eq. 24/32): position rows (N/m, 1/m) then the paper's orientation rows.
+DEFAULT_KP_POSITION = (200.0, 200.0, 200.0)
+DEFAULT_LAMBDA_POSITION = (100.0, 100.0, 100.0)
+
+# Declared after ``joints``, whose length is its context's ``n``.
+ARMATURE = Spec(
+    'armature', Kind.DOUBLE_ARRAY, joint_zeros,
+    'Rotor inertia each drive adds about its joint, one per joint ({n}), kg m^2 (kg for a '
+    "prismatic joint): added to the diagonal of the URDF's M(q) wherever the controller uses "
+    "the inertia (Pinocchio's model.armature). A geared drive reflects its rotor times the "
+    'square of the gear ratio, often more than the links; design_gains --armature takes the '
+    'same values.', read_only=True, size='n', bounds=(0.0, inf),
+    default_text=JOINT_ZEROS_TEXT)
+STRUCTURE = (
+    Spec('task', Kind.STRING, Task.ORIENTATION.value,
+         "What is regulated: 'orientation' (y = e, Eqs. 37/38; the paper's wrist) or 'pose' "
+         '(y = [p_d - p; e], Eqs. 24/32).', read_only=True, choices=tuple(t.value for t in Task)),
+    Spec('joints', Kind.STRING_ARRAY, ['joint1', 'joint2', 'joint3'],
+         'Controlled joints, in the order of effort_controller/commands; joint_states are '
+         'matched by name.', read_only=True, constraints='non-empty names'),
+    ARMATURE,
+    Spec('base_link', Kind.STRING, 'base_link',
+         'Frame of goals and published poses (target_pose header.frame_id).', read_only=True),
+    Spec('tip_link', Kind.STRING, 'tool0', 'The end-effector link whose pose is regulated.',
+         read_only=True),
+    Spec('robot_description', Kind.STRING, '',
+         'URDF XML of the robot (kinematics, gravity, effort limits), e.g. from a launch or '
+         'params file; or robot_description_file, or robot_description_topic; none of them = '
+         'the bundled spherical wrist.', read_only=True),
+    *SOURCES,
+    Spec('state_timeout', Kind.DOUBLE, DEFAULT_STATE_TIMEOUT_S,
+         'Seconds without a valid joint_states message after which the command is zeroed '
+         '(published once) until states return.', read_only=True, bounds=(0.005, 10.0)),
+    Spec('max_state_age', Kind.DOUBLE, DEFAULT_MAX_STATE_AGE_S,
+         'A joint state stamped more than this many seconds before (or after) the '
+         "node's clock, or not stamped (zero), is rejected: no command is computed from it, "
+         'and it counts as no state for state_timeout. 0 = stamps are not checked (e.g. a '
+         'driver without time stamps).', read_only=True, bounds=(0.0, 60.0)),
+    Spec('state_rate', Kind.DOUBLE, DEFAULT_STATE_RATE_HZ,
+         "Hz, the rate of joint_states (the plant's control rate), as design_gains --rate was "
+         'given: the time constant of the velocity estimate for states without velocities is '
+         'one period of it.', read_only=True, bounds=STATE_RATE_RANGE_HZ),
+    Spec('publish_rate_divider', Kind.INT, 10,
+         '~/current_pose and the error topics are published every N-th tick (N = 10: 100 Hz '
+         'at a 1 kHz state rate).', read_only=True, bounds=(1, 1000)),
+    Spec('prewarm_lead', Kind.DOUBLE, DEFAULT_PREWARM_LEAD_S,
+         'Seconds before the next joint state is due (from the measured state rate) at which '
+         'the controller runs a throwaway tick, so that the real tick finds its code and data '
+         'in the CPU caches another process evicted, and its CPU awake; costs one wake-up per '
+         'state. 0 = off. Not used on simulated time or composed (docs/ros.md, Real-time '
+         'settings).', read_only=True, bounds=(0.0, 0.01)),
+)
+
+
+def _per_task(position: Sequence[float], orientation: Sequence[float]) -> Callable:
+    return lambda context: list(
+        orientation if context['task'] is Task.ORIENTATION else tuple(position) + orientation)
+
+
+# The live parameters that make up a Gains (checked by Gains.create). Context: task, dim, axes,
+# n, top (the gain ceiling, as text), ceiling and lambda_ceiling (the bounds: numbers, or the
+# docs' text).
+CEILING_WHY = (f'its term alone would ask for more than the largest effort limit '
+               f'({{effort_max}} N m) at an error of {SATURATING_ERROR:g} (rad, m or rad/s): the '
+               'joints would only saturate')
+GAINS = (
+    Spec('potential', Kind.STRING, Potential.TANH.value,
+         "Artificial potential: 'quadratic' (Eq. 23 -> law 24/37) or 'tanh' (Eq. 31 -> law "
+         '32/38). Live.', choices=tuple(p.value for p in Potential)),
+    Spec('kp', Kind.DOUBLE_ARRAY, _per_task(DEFAULT_KP_POSITION, paper.KP),
+         'Diagonal of K_p, {dim} values ({axes}); N/m for position rows, N m for orientation '
+         'rows. Finite, > 0, <= {top}. Live.', size='dim', bounds=(0.0, 'ceiling'), strict=True,
+         why=CEILING_WHY,
+         default_text=f'{markdown_value(paper.KP)} (pose: {markdown_value(DEFAULT_KP_POSITION)} '
+                      'first)'),
+    Spec('kv', Kind.DOUBLE_ARRAY, lambda context: [paper.KV[0]] * context['n'],
+         'Diagonal of K_v (joint damping), one per joint ({n}), N m s/rad. Finite, > 0, '
+         '<= {top}. Live.', size='n', bounds=(0.0, 'ceiling'), strict=True, why=CEILING_WHY,
+         default_text=f'`{paper.KV[0]:g}` per joint'),
+    Spec('lambda', Kind.DOUBLE_ARRAY, _per_task(DEFAULT_LAMBDA_POSITION, paper.LAMBDA),
+         'Diagonal of Lambda in tanh(Lambda y) (Eq. 32/38), {dim} values ({axes}); used by the '
+         f'tanh potential. Finite, > 0, <= {MAX_LAMBDA:g}. Live.', size='dim',
+         bounds=(0.0, 'lambda_ceiling'), strict=True,
+         why='tanh(lambda y) would switch like sign(y) within sensor noise (chatter)',
+         default_text=f'{markdown_value(paper.LAMBDA)} (pose: '
+                      f'{markdown_value(DEFAULT_LAMBDA_POSITION)} first)'),
+    Spec('gravity_compensation', Kind.BOOL, True,
+         'Add g(q) from the URDF model to the torque (Eq. 22). Live.'),
+)
+
+MAX_POSTURE_WEIGHT = 100.0  # of the preferred posture against the distance to the arm
+PER_JOINT = {'size': 'n', 'bounds': (0.0, inf)}  # one finite value >= 0 per joint
+
+# The extensions of the regulator (shaping.Shaping: ``field`` names its attribute), live,
+# applied whole. Defaults are all off, the paper's law; the robots' configs turn them on with
+# the values of quat_jt_controller.gain_design. Context: n, preferred_configuration.
+SHAPING = (
+    Spec('joint_limit_margin', Kind.DOUBLE, 0.0,
+         'Width (rad) of the band inside each joint limit where the joint-limit potential acts '
+         '(joints whose range is less than a full turn). 0 = off. Live.', bounds=(0.0, 1.0),
+         field='joint_limit_margin_rad'),
+    Spec('joint_limit_gain', Kind.DOUBLE_ARRAY, joint_zeros,
+         'Stiffness (N m/rad) of the joint-limit potential in the band, one per joint ({n}); '
+         '0 = no limit term for that joint. Live.', default_text=JOINT_ZEROS_TEXT, **PER_JOINT),
+    Spec('large_error_gain', Kind.DOUBLE, 0.0,
+         'k_L (N m) of the large-error term of the orientation potential, which keeps the '
+         'torque from fading towards 180 degrees. 0 = off. Live.', bounds=(0.0, 1000.0)),
+    Spec('friction_compensation', Kind.DOUBLE_ARRAY, joint_zeros,
+         'Coulomb friction estimates (N m), one per joint ({n}), compensated without exceeding '
+         'them: by velocity while moving, in the direction of the potential torque at rest, '
+         'all of it fading out near the goal. Zeros = off. Over-estimates break the stability '
+         'argument away from the goal (docs/lyapunov.md). Live.',
+         default_text=JOINT_ZEROS_TEXT, field='friction_compensation_nm', **PER_JOINT),
+    Spec('friction_learning_limit', Kind.DOUBLE_ARRAY, joint_zeros,
+         'The most (N m) the friction compensation may learn on top of the estimate, one per '
+         'joint ({n}): it grows while a joint is stuck away from the goal, stops once the '
+         'joint moves, and leaks away near the goal. Zeros = off. Live.',
+         default_text=JOINT_ZEROS_TEXT, field='friction_learning_limit_nm', **PER_JOINT),
+    Spec('friction_learning_time', Kind.DOUBLE, 1.0,
+         'Time (s) to learn friction_learning_limit while stuck; the learned part leaks with '
+         'this time constant near the goal. Live.', bounds=(0.01, 1000.0),
+         field='friction_learning_time_s'),
+    Spec('friction_velocity', Kind.DOUBLE, 0.05,
+         'v_eps (rad/s) of the velocity part, f tanh(qdot / v_eps). Live.',
+         bounds=(1e-4, 10.0), field='friction_velocity_rad_s'),
+    Spec('friction_error_band', Kind.DOUBLE, 0.004,
+         '||e|| below which the friction compensation fades out (it is off below half of '
+         'it). Live.', bounds=(1e-5, 1.0)),
+    Spec('friction_position_band', Kind.DOUBLE, 0.0005,
+         '||p_d - p|| (m) below which the friction compensation fades out (pose task). Live.',
+         bounds=(1e-6, 1.0), field='friction_position_band_m'),
+    Spec('configuration_gain', Kind.DOUBLE_ARRAY, joint_zeros,
+         'Most torque (N m) the goal-configuration term asks of each joint ({n}); it pulls '
+         'towards a goal configuration within the limits found by the goal check. Zeros = '
+         'off. Live.', default_text=JOINT_ZEROS_TEXT, **PER_JOINT),
+    Spec('configuration_radius', Kind.DOUBLE, 0.05,
+         'Dead zone (rad, per joint) around the goal configuration where only the '
+         "paper's term acts. Live.", bounds=(0.0, 3.2), field='configuration_radius_rad'),
+    Spec('configuration_ramp', Kind.DOUBLE, 0.25,
+         'Width (rad) over which the goal-configuration torque rises to its gain. Live.',
+         bounds=(1e-3, 3.2), field='configuration_ramp_rad'),
+    Spec('damping_speed', Kind.DOUBLE_ARRAY, joint_zeros,
+         'v_c (rad/s) of the cubic damping term -k_v qdot (qdot / v_c)^2, one per joint ({n}); '
+         '0 = linear damping only. Live.', default_text=JOINT_ZEROS_TEXT,
+         field='damping_speed_rad_s', **PER_JOINT),
+    Spec('goal_velocity_gain', Kind.DOUBLE, 0.0,
+         'g_v in [0, 1]: for a stream of stamped goals on ~/target_pose, the joint damping '
+         'acts on qdot - g_v qdot*_d, qdot*_d the velocity of the goal configuration (the '
+         'velocity of the stream, mapped to the joints by the goal-check worker), so a moving '
+         'goal is followed without the lag of the damping. A fixed goal, or a stream that '
+         'stops, has qdot*_d = 0. 0 = off. Live.', bounds=(0.0, 1.0)),
+    Spec('preferred_configuration', Kind.DOUBLE_ARRAY,
+         lambda context: [float(v) for v in context['preferred_configuration']],
+         'A comfortable posture (rad), one per joint ({n}), within the limits: of the goal '
+         "configurations along a redundant arm's self-motion, the goal check takes the one "
+         'nearest the measured joints, then nearest this posture with posture_weight, and out '
+         'of the joint-limit bands (docs/lyapunov.md, section 9). Default: the middle of the '
+         'ranges. Next goal on. Live.', constraints='{n} finite values within the joint limits',
+         default_text='the middle of the ranges', size='n', empty_ok=True,
+         field='preferred_configuration_rad'),
+    Spec('posture_weight', Kind.DOUBLE, 0.0,
+         'Weight of preferred_configuration against the distance to the measured joints when '
+         "a redundant arm's goal configuration is chosen (0: the nearest only). No effect on "
+         'an arm without self-motion. Next goal on. Live.', bounds=(0.0, MAX_POSTURE_WEIGHT)),
+)
+
+# The context the docs' table is written with (docs/parameters.md): symbols, not one robot.
+DOCS_CONTEXT = {'task': Task.ORIENTATION, 'n': 'n', 'dim': '3 (orientation) or 6 (pose)',
+                'axes': 'rx, ry, rz; the pose task has x, y, z first',
+                'top': f'max(effort limit) / {SATURATING_ERROR:g}',
+                'ceiling': f'max(effort limit) / {SATURATING_ERROR:g}',
+                'lambda_ceiling': MAX_LAMBDA, 'preferred_configuration': ()}
+
+
+def shaping_default(name: str) -> Any:
+    """Return the default of the SHAPING row ``name`` (a scalar's; for the snapshot's fields)."""
+    return row(SHAPING, name).default
+
+
+def shaping_context(n_joints: int) -> dict[str, Any]:
+    """Return the context of the SHAPING rows for ``n_joints`` joints, without a posture."""
+    return {'n': n_joints, 'preferred_configuration': ()}
