@@ -131,7 +131,7 @@ def test_continuous_joints_compose_to_the_forward_kinematics():
 
 
 def _transform(xyz, xyzw):
-    """A decoded-message stand-in for :func:`_compose`: ``translation`` and ``rotation``."""
+    """Return a decoded-message stand-in for :func:`_compose` (``translation``, ``rotation``)."""
     from types import SimpleNamespace as NS
     return NS(translation=NS(x=xyz[0], y=xyz[1], z=xyz[2]),
               rotation=NS(x=xyzw[0], y=xyzw[1], z=xyzw[2], w=xyzw[3]))
