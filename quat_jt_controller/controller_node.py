@@ -12,7 +12,7 @@ from typing import Optional
 from geometry_msgs.msg import PoseStamped
 from quat_jt_controller import diagnostics
 from quat_jt_controller import parameters
-from quat_jt_controller.control_law import Gains, GainsError, Task
+from quat_jt_controller.control_law import Gains, GainsError
 from quat_jt_controller.goal_check import GoalCheckWorker, ModelSpec
 from quat_jt_controller.goal_frames import GoalFrames
 from quat_jt_controller.model import ModelError, RobotModel
@@ -62,6 +62,7 @@ class QuatJtController(Node):
         reg.set_shaping(self.shaping.current)
         self._change_log = parameters.change_log(self, reg)
         self._frames = GoalFrames(model, cfg.task)  # the base and every link of the URDF
+        self._goal_parts = (cfg.task.has_position, cfg.task.has_orientation)  # for the log
         self._check_state = StateCheck(cfg.joints, cfg.max_state_age_s, cfg.state_rate_hz,
                                        model.continuous)
         self._said_estimating = False
@@ -80,8 +81,8 @@ class QuatJtController(Node):
         self._cmd_msg = Float64MultiArray(data=[0.0] * model.n)
         self._cmd_pub = self.create_publisher(
             Float64MultiArray, 'effort_controller/commands', history_qos(self._use_sim_time))
-        self._feedback = Feedback(self, cfg.base_link, cfg.task is Task.POSE)
-        self._goal_pose = GoalPose(self, cfg.base_link, cfg.task is Task.POSE)
+        self._feedback = Feedback(self, cfg.base_link, cfg.task.has_position)
+        self._goal_pose = GoalPose(self, cfg.base_link, cfg.task.has_position)
         self._diagnostics = Diagnostics(
             self, cfg.tip_link, self._cmd_pub.topic_name, self.supervisor, self.stats,
             self.counters, self._goal_checker, self.stall, lambda: (self._last, self._last_qdot))
@@ -214,7 +215,7 @@ class QuatJtController(Node):
                       f' (given in {frame}, placed in {self.config.base_link} at the measured '
                       'joints)')
             line = self._goal_log.line(  # one line per distinct goal, at most 5 a second
-                'goal', lambda: f'new goal: {goal.describe(self.config.task is Task.POSE)}'
+                'goal', lambda: f'new goal: {goal.describe(*self._goal_parts)}'
                 f'{placed}', ' ({} more distinct goals since the last line)')
             if line is not None:
                 self.get_logger().info(line)

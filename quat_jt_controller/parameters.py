@@ -50,9 +50,11 @@ ARMATURE = Spec(
     default_text=JOINT_ZEROS_TEXT)
 STRUCTURE = (
     Spec('task', Kind.STRING, Task.ORIENTATION.value,
-         "What is regulated: 'orientation' (y = e, Eqs. 37/38; the paper's wrist) or 'pose' "
-         '(y = [p_d - p; e], Eqs. 24/32).', read_only=True,
-         constraints="one of 'orientation', 'pose'"),
+         "What is regulated: 'orientation' (y = e, Eqs. 37/38; the paper's wrist), 'pose' "
+         "(y = [p_d - p; e], Eqs. 24/32) or 'position' (y = p_d - p, the position rows of "
+         "Eqs. 24/32: any reachable point, e.g. on an arm of 4 or 5 joints; a goal's "
+         'orientation is not read, so any quaternion, all zeros too, is accepted).',
+         read_only=True, constraints="one of 'orientation', 'pose', 'position'"),
     Spec('joints', Kind.STRING_ARRAY, ['joint1', 'joint2', 'joint3'],
          'Controlled joints, in the order of effort_controller/commands; joint_states are '
          'matched by name.', read_only=True, constraints='non-empty names'),
@@ -92,7 +94,8 @@ STRUCTURE = (
 
 def _per_task(position: Sequence[float], orientation: Sequence[float]) -> Callable:
     return lambda context: list(
-        orientation if context['task'] is Task.ORIENTATION else tuple(position) + orientation)
+        (tuple(position) if context['task'].has_position else ())
+        + (tuple(orientation) if context['task'].has_orientation else ()))
 
 
 # The live parameters that make up a Gains. Context: task, dim, axes, n, top (gain_ceiling).
@@ -104,7 +107,7 @@ GAINS = (
          'Diagonal of K_p, {dim} values ({axes}); N/m for position rows, N m for orientation '
          'rows. Finite, > 0, <= {top}. Live.', constraints='{dim} values in (0, {top}]',
          default_text=f'{markdown_value(paper.KP)} (pose: {markdown_value(DEFAULT_KP_POSITION)} '
-                      'first)'),
+                      'first; position: those alone)'),
     Spec('kv', Kind.DOUBLE_ARRAY, lambda context: [paper.KV[0]] * context['n'],
          'Diagonal of K_v (joint damping), one per joint ({n}), N m s/rad. Finite, > 0, '
          '<= {top}. Live.', constraints='{n} values in (0, {top}]',
@@ -114,7 +117,8 @@ GAINS = (
          f'tanh potential. Finite, > 0, <= {MAX_LAMBDA:g}. Live.',
          constraints=f'{{dim}} values in (0, {MAX_LAMBDA:g}]',
          default_text=f'{markdown_value(paper.LAMBDA)} (pose: '
-                      f'{markdown_value(DEFAULT_LAMBDA_POSITION)} first)'),
+                      f'{markdown_value(DEFAULT_LAMBDA_POSITION)} first; position: those '
+                      'alone)'),
     Spec('gravity_compensation', Kind.BOOL, True,
          'Add g(q) from the URDF model to the torque (Eq. 22). Live.'),
 )
@@ -196,8 +200,10 @@ SHAPING = (
 SHAPING_PARAMETERS = names(SHAPING)
 
 # The context the docs' table is written with (docs/parameters.md): symbols, not one robot.
-DOCS_CONTEXT = {'task': Task.ORIENTATION, 'n': 'n', 'dim': '3 (orientation) or 6 (pose)',
-                'axes': 'rx, ry, rz; the pose task has x, y, z first',
+DOCS_CONTEXT = {'task': Task.ORIENTATION, 'n': 'n',
+                'dim': '3 (orientation, position) or 6 (pose)',
+                'axes': 'rx, ry, rz; the pose task has x, y, z first, the position task x, y, z '
+                        'only',
                 'top': f'max(effort limit) / {SATURATING_ERROR:g}',
                 'preferred_configuration': ()}
 
@@ -240,8 +246,8 @@ class StructuralConfig:
         try:
             task = Task(values['task'])
         except ValueError:
-            raise ValueError(f"task must be 'orientation' or 'pose', got {values['task']!r}"
-                             ) from None
+            raise ValueError(f'task must be one of {[t.value for t in Task]}, got '
+                             f"{values['task']!r}") from None
         joints = tuple(values['joints'])
         if not joints or any(not j for j in joints):
             raise ValueError(f'joints must be a non-empty list of names, got {list(joints)}')
@@ -275,7 +281,8 @@ def declare_structural(node: Node) -> StructuralConfig:
 def gains_context(config: StructuralConfig, effort_limits_nm: Sequence[float]) -> dict:
     """Return the context of the GAINS rows for this robot (sizes, axes, the ceiling)."""
     return {'task': config.task, 'dim': config.task.dim, 'n': len(config.joints),
-            'axes': 'x, y, z, rx, ry, rz' if config.task.dim == 6 else 'rx, ry, rz',
+            'axes': ', '.join((['x', 'y', 'z'] if config.task.has_position else [])
+                              + (['rx', 'ry', 'rz'] if config.task.has_orientation else [])),
             'top': f'{gain_ceiling(effort_limits_nm):g}'}
 
 
@@ -303,7 +310,10 @@ def describe_start(config: StructuralConfig, regulator: Regulator,
             f'{config.tip_link}, potential {gains.potential.value}, kp {list(gains.kp)}, kv '
             f'{list(gains.kv)}, lambda {list(gains.lam)}, effort limits '
             f'{list(regulator.effort_limits_nm)} N m; waiting for joint states on {state_topic}, '
-            'then holding the first pose measured until a goal arrives on ~/target_pose']
+            'then holding the first pose measured until a goal arrives on ~/target_pose'
+            + ('' if config.task.has_orientation else
+               " (the position task: a goal's orientation is not read; any quaternion, all "
+               'zeros too, is accepted)')]
 
 
 def change_log(node: Node, regulator: Regulator) -> ChangeLog:

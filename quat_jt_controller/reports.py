@@ -13,7 +13,6 @@ from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped, Vector3Stamped
 from quat_jt_controller import diagnostics
 from quat_jt_controller import quaternion as quat
-from quat_jt_controller.control_law import Task
 from quat_jt_controller.regulator import Goal, TickOutput
 from quat_jt_controller.supervision import Supervisor
 from quat_jt_runtime.description import LATCHED_QOS
@@ -28,7 +27,8 @@ class Feedback:
     Publishers of the measured pose and the errors, with their messages built once.
 
     ``~/current_pose`` (PoseStamped), ``~/orientation_error`` (e, the last three rows of
-    y_tilde) and, for the pose task, ``~/position_error`` (p_d - p), all in ``base_link``.
+    y_tilde; zeros for the position task, which has no orientation error) and, for the pose and
+    position tasks, ``~/position_error`` (p_d - p), all in ``base_link``.
     """
 
     def __init__(self, node: Node, base_link: str, with_position: bool) -> None:
@@ -49,7 +49,7 @@ class Feedback:
         o.x, o.y, o.z, o.w = quat.to_xyzw(q_tip_base)
         self._pose_pub.publish(pose)
         self._e_o.header.stamp = stamp
-        self._e_o.vector.x, self._e_o.vector.y, self._e_o.vector.z = out.y_tilde[-3:]
+        self._e_o.vector.x, self._e_o.vector.y, self._e_o.vector.z = out.orientation_error
         self._e_o_pub.publish(self._e_o)
         if self._e_p_pub is not None:
             self._e_p.header.stamp = stamp
@@ -128,7 +128,7 @@ class Diagnostics:
                 self._graph_warnings())),
             ('goal', *diagnostics.goal_status(
                 sup.goal_source, regulator.goal, sup.goal_warning, out, qdot,
-                regulator.task is Task.POSE, self._counters, checker.unavailable_reason,
+                regulator.task.has_position, self._counters, checker.unavailable_reason,
                 checker.ready, diagnostics.configuration_state(regulator))),
             ('stall', *self._stall.status()))
         self._pub.publish(diagnostic_array(self._name, self._hardware_id, statuses,

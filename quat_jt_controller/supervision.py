@@ -21,7 +21,6 @@ from dataclasses import dataclass
 from typing import Any, Optional, Sequence
 
 from quat_jt_controller import quaternion as quat
-from quat_jt_controller.control_law import Task
 from quat_jt_controller.goal_check import Posture
 from quat_jt_controller.goal_motion import GoalVelocityEstimator
 from quat_jt_controller.regulator import Goal, Regulator
@@ -61,7 +60,8 @@ class Supervisor:
         self.goal_source = 'none'  # 'none' | 'hold' (initial pose) | 'target_pose'
         self.stopped = False  # commanding zeros after a state timeout
         self.last_state_ns = 0  # the last valid state; 0: none yet
-        self._motion = GoalVelocityEstimator(regulator.task is Task.POSE)
+        self._motion = GoalVelocityEstimator(regulator.task.has_position,
+                                             with_orientation=regulator.task.has_orientation)
         self._goal_velocity_until_ns = 0  # 0: not a stream (a fixed goal)
         self._decimation = 0
         self._published_q: quat.Quaternion = (1.0, 0.0, 0.0, 0.0)
