@@ -530,8 +530,12 @@ def design(model: RobotModel, task: cl.Task, rate_hz: float = 1000.0,
     # inertia) is unstable gets a smaller goal-configuration gain.
     cruise = cruise_fraction * velocity
     guide_cap = np.full(n, np.inf)  # per joint: lowered where the capped damping is too weak
+    # The position rows leave a joint whose axis passes through the tip (a wrist roll) with
+    # little or no task torque; the goal-configuration term alone holds it. Its terms are
+    # sized as if the task asked of it what the orientation rows would: the weakest share.
+    floor = 0.0 if task.has_orientation else float(np.min(cap))
     for _ in range(200):
-        bound = task_torque_bound(lever, kp, task)
+        bound = np.maximum(task_torque_bound(lever, kp, task), floor)
         guide = np.minimum(_cruising_guide(configs, kp, lam, bound, push_max, cruise, b_max,
                                            task),
                            np.maximum(guide_cap, GUIDE_OVER_TASK * bound))
