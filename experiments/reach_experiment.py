@@ -41,7 +41,7 @@ outcomes whichever runner ran them.
 Any arm from its URDF plus what a user knows, instead of ``--robot`` (docs/reach.md, "Any arm"):
 
     python -m experiments.reach_experiment (--urdf FILE | --example-robot NAME)
-        [--base-link L] [--tip-link L] [--task pose|orientation] [--rate HZ]
+        [--base-link L] [--tip-link L] [--task pose|orientation|position] [--rate HZ]
         [--condition ideal armature armature-wrong friction no-velocities]
         [--engine mujoco|pybullet] [--armature A] [--armature-told-scale S]
         [--friction-fraction F] [--cases N] [--potential tanh]
@@ -158,7 +158,7 @@ def cases(model: RobotModel, robot: Robot, count: int, seed: int) -> list:
         q0, qg = rng.uniform(lo, hi), rng.uniform(lo, hi)
         if robot.urdf_path:  # any arm: the goal's task rows away from a singularity
             _, _, J = model.kinematics(qg.tolist())
-            rows = np.array(J)[3:] if robot.task is cl.Task.ORIENTATION else np.array(J)
+            rows = robot.task.rows(np.array(J))
             if np.linalg.svd(rows, compute_uv=False)[-1] < robot.goal_sigma_min:
                 continue
             out.append((q0, qg))
@@ -345,8 +345,9 @@ def report(robot: Robot, potential: str, outcomes: list, elapsed_s: float) -> st
     settled = np.array([o.settled_s for o in outcomes if o.reached])
     pos = np.array([o.position_error_m for o in outcomes])
     ori = np.array([o.orientation_error for o in outcomes])
-    target = (f'||e|| < {robot.orientation_tol:g}' if robot.task is cl.Task.ORIENTATION
-              else f'< {robot.position_tol_m * 1e3:g} mm and ||e|| < {robot.orientation_tol:g}')
+    target = ' and '.join(
+        ([f'< {robot.position_tol_m * 1e3:g} mm'] if robot.task.has_position else [])
+        + ([f'||e|| < {robot.orientation_tol:g}'] if robot.task.has_orientation else []))
     lines = [
         f'{robot.name}, {potential}: {ok}/{n} reached ({100.0 * ok / max(n, 1):.1f}%) '
         f'{target} within {robot.duration_s:g} s; stops touched in {touched} cases; '
@@ -370,18 +371,21 @@ def report(robot: Robot, potential: str, outcomes: list, elapsed_s: float) -> st
                      f'at the end, max_j |q_j - q*_j| median {np.nanmedian(away):.1e}, max '
                      f'{np.nanmax(away):.1e} rad (no q* in '
                      f'{int(np.count_nonzero(np.isnan(away)))})')
-    lines.append(f'  final ||e||: median {np.median(ori):.2e}, max {ori.max():.2e}'
-                 + (f'; final ||p_d - p||: median {np.median(pos) * 1e3:.3f} mm, max '
-                    f'{pos.max() * 1e3:.3f} mm' if robot.task is cl.Task.POSE else '')
-                 + f' ({elapsed_s:.0f} s)')
+    finals = ([f'final ||e||: median {np.median(ori):.2e}, max {ori.max():.2e}']
+              if robot.task.has_orientation else [])
+    if robot.task.has_position:
+        finals.append(f'final ||p_d - p||: median {np.median(pos) * 1e3:.3f} mm, max '
+                      f'{pos.max() * 1e3:.3f} mm')
+    lines.append('  ' + '; '.join(finals) + f' ({elapsed_s:.0f} s)')
     for o in outcomes:
         if not o.reached or o.touched or o.flips_per_s > LIMIT_CYCLE_FLIPS_PER_S:
             lines.append(
                 f'  case {o.index}: start {np.round(o.q_start, 2).tolist()} goal '
                 f'{np.round(o.q_goal, 2).tolist()} end {np.round(o.q_final, 2).tolist()}: '
-                f'||e|| {o.orientation_error:.3g}'
-                + (f', {o.position_error_m * 1e3:.2f} mm' if robot.task is cl.Task.POSE
-                   else '')
+                + ', '.join(([f'||e|| {o.orientation_error:.3g}']
+                             if robot.task.has_orientation else [])
+                            + ([f'{o.position_error_m * 1e3:.2f} mm']
+                               if robot.task.has_position else []))
                 + (', TOUCHED A STOP' if o.touched else '')
                 + (f'; {o.cause}' if o.cause else ''))
     return '\n'.join(lines)
@@ -549,7 +553,7 @@ def run_dds(robot: Robot, count: int, seed: int, progress=print) -> str:
             msg.header.frame_id = model.base_link
             o, p = msg.pose.orientation, msg.pose.position
             o.x, o.y, o.z, o.w = quat.to_xyzw(q_d)
-            if robot.task is cl.Task.POSE:
+            if robot.task.has_position:
                 p.x, p.y, p.z = (float(v) for v in p_d)
             t0 = stamp_s()
             pub.publish(msg)
@@ -558,7 +562,7 @@ def run_dds(robot: Robot, count: int, seed: int, progress=print) -> str:
             p_end, R_end = model.forward_kinematics(q_end)
             _, e = quat.orientation_error(quat.from_rotation_matrix(R_end), q_d)
             err = math.sqrt(sum(c * c for c in e))
-            position = math.dist(p_end, p_d) if robot.task is cl.Task.POSE else 0.0
+            position = math.dist(p_end, p_d) if robot.task.has_position else 0.0
             verdict = ('reached' if ok and err < robot.orientation_tol
                        and position < robot.position_tol_m else 'NOT reached')
             if verdict == 'reached':
@@ -566,7 +570,7 @@ def run_dds(robot: Robot, count: int, seed: int, progress=print) -> str:
             lines.append(f'  DDS case {i}: after {robot.duration_s:g} s (simulated) ||e|| = '
                          f'{err:.3g}'
                          + (f', ||p_d - p|| = {position * 1e3:.3f} mm'
-                            if robot.task is cl.Task.POSE else '')
+                            if robot.task.has_position else '')
                          + f' -> {verdict}' + ('' if verdict == 'reached'
                                                else f' (logs in {work})'))
             progress(lines[-1], flush=True)
@@ -619,7 +623,8 @@ def arm_robot(name: str, urdf_path: str, base_link: Optional[str], tip_link: Opt
     """
     Return the ``Robot`` of an arm from its URDF alone (``experiments.arms`` for the chain).
 
-    The targets are the issue's for any arm: ||e|| < 0.01 and, for a pose task, < 1 mm. The
+    The targets are the issue's for any arm: ||e|| < 0.01 and, for a pose task, < 1 mm; for
+    the position task < 1 mm only (no orientation is asked for). The
     goals' task rows of J keep sigma_min at least a quarter of its median over the arm's
     sampled configurations (a rule for any arm, where a fixed bound in mixed units is not).
     """
@@ -633,10 +638,11 @@ def arm_robot(name: str, urdf_path: str, base_link: Optional[str], tip_link: Opt
     for _ in range(200):
         _, _, J = model.kinematics(rng.uniform(mid - fraction * half, mid + fraction * half)
                                    .tolist())
-        rows = np.array(J)[3:] if task is cl.Task.ORIENTATION else np.array(J)
+        rows = task.rows(np.array(J))
         sigmas.append(np.linalg.svd(rows, compute_uv=False)[-1])
-    return Robot(name, '', '', task, fraction, duration_s, 0.01,
-                 1e-3 if task is cl.Task.POSE else math.inf,
+    return Robot(name, '', '', task, fraction, duration_s,
+                 0.01 if task.has_orientation else math.inf,
+                 1e-3 if task.has_position else math.inf,
                  goal_sigma_min=0.25 * float(np.median(sigmas)), urdf_path=str(urdf_path),
                  base_link=base, tip_link=tip, joints=tuple(joints))
 

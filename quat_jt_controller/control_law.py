@@ -8,10 +8,13 @@ The transpose-Jacobian regulators of Campa and Kelly, Eq. (22), with two potenti
 * either, plus the optional large-error term k_L B(||e||) (docs/lyapunov.md,
   section 3), which keeps the orientation torque from fading towards 180 degrees
 
-Two tasks share one implementation:
+Three tasks share one implementation:
 
 * ``orientation``: y_tilde = e (3-D), J = J_o (3 x n): Eqs. (37) and (38) of the wrist experiment.
 * ``pose``: y_tilde = [p_d - p; e] (6-D), J = J_G = [J_p; J_o] (6 x n): Eqs. (24) and (32).
+* ``position``: y_tilde = p_d - p (3-D), J = J_p (3 x n): the position rows of Eqs. (24) and
+  (32) alone, for an arm that cannot reach a full pose (4 or 5 joints). There is no
+  orientation error: Q is the identity on position rows (Eq. 15), and eta_e is reported as 1.
 
 K_p, K_v and Lambda are diagonal and given as vectors. The law runs at 1 kHz, so it is written
 in plain Python floats over short tuples; the tests check it against numpy and finite
@@ -39,14 +42,51 @@ class Potential(str, enum.Enum):
 
 
 class Task(str, enum.Enum):
-    """What is regulated: orientation only (the wrist, Section 5) or the full pose (Section 4)."""
+    """
+    What is regulated: orientation only (Section 5), the full pose (Section 4), or position.
+
+    The position task keeps the position rows of the pose task (Eq. 9): any reachable point is
+    a goal, whatever the orientation there.
+    """
 
     ORIENTATION = 'orientation'
     POSE = 'pose'
+    POSITION = 'position'
 
     @property
     def dim(self) -> int:
-        return 3 if self is Task.ORIENTATION else 6
+        """Return the number of task rows: 6 (pose) or 3."""
+        return 6 if self is Task.POSE else 3
+
+    @property
+    def has_position(self) -> bool:
+        """Return True if y_tilde has the position rows p_d - p (first)."""
+        return self is not Task.ORIENTATION
+
+    @property
+    def has_orientation(self) -> bool:
+        """Return True if y_tilde has the orientation rows e (last)."""
+        return self is not Task.POSITION
+
+    def rows(self, jacobian):
+        """Return the task's rows of J_G = [J_p; J_o] (Eq. 12): J_o, J_G or J_p."""
+        if self is Task.ORIENTATION:
+            return jacobian[3:]
+        if self is Task.POSITION:
+            return jacobian[:3]
+        return jacobian
+
+
+ZERO3 = (0.0, 0.0, 0.0)
+
+
+def orientation_part(y_tilde: Sequence[float], task: Optional[Task] = None) -> Sequence[float]:
+    """
+    Return e, the orientation rows of ``y_tilde`` (Eq. 10); zeros for the position task.
+
+    ``task`` None: the orientation rows are the last three (the orientation and pose tasks).
+    """
+    return ZERO3 if task is Task.POSITION else y_tilde[-3:]
 
 
 class GainsError(QuatJtError):
@@ -131,10 +171,16 @@ def large_error_gradient_scale(s2: float, k_l: float) -> float:
     return k_l * sqrt(s2) / sqrt(1.0 + LARGE_ERROR_DELTA * LARGE_ERROR_DELTA - s2)
 
 
-def potential_energy(y_tilde: Sequence[float], gains: Gains, k_l: float = 0.0) -> float:
-    """U_a(y_tilde): Eq. (23) (quadratic) or Eq. (31) (log-cosh), + k_L B(||e||) if k_l > 0."""
+def potential_energy(y_tilde: Sequence[float], gains: Gains, k_l: float = 0.0,
+                     task: Optional[Task] = None) -> float:
+    """
+    U_a(y_tilde): Eq. (23) (quadratic) or Eq. (31) (log-cosh), + k_L B(||e||) if k_l > 0.
+
+    ``task`` None: the orientation or pose task, from the size of ``y_tilde``; the position
+    task has no e, so no large-error term.
+    """
     extra = 0.0
-    if k_l > 0.0:
+    if k_l > 0.0 and task is not Task.POSITION:
         e = y_tilde[-3:]
         extra = large_error_energy(sqrt(e[0] * e[0] + e[1] * e[1] + e[2] * e[2]), k_l)
     if gains.potential is Potential.QUADRATIC:
@@ -146,14 +192,18 @@ def potential_energy(y_tilde: Sequence[float], gains: Gains, k_l: float = 0.0) -
     return total
 
 
-def potential_gradient(y_tilde: Sequence[float], gains: Gains,
-                       k_l: float = 0.0) -> tuple[float, ...]:
-    """grad_y U_a: K_p y (Eq. 24) or K_p tanh(Lambda y) (Eq. 32), + the large-error term."""
+def potential_gradient(y_tilde: Sequence[float], gains: Gains, k_l: float = 0.0,
+                       task: Optional[Task] = None) -> tuple[float, ...]:
+    """
+    grad_y U_a: K_p y (Eq. 24) or K_p tanh(Lambda y) (Eq. 32), + the large-error term.
+
+    ``task`` as in :func:`potential_energy`.
+    """
     if gains.potential is Potential.QUADRATIC:
         w = tuple(k * y for k, y in zip(gains.kp, y_tilde))
     else:
         w = tuple(k * tanh(lam * y) for k, lam, y in zip(gains.kp, gains.lam, y_tilde))
-    if k_l <= 0.0:
+    if k_l <= 0.0 or task is Task.POSITION:
         return w
     e = y_tilde[-3:]
     c = large_error_gradient_scale(e[0] * e[0] + e[1] * e[1] + e[2] * e[2], k_l)
@@ -161,23 +211,32 @@ def potential_gradient(y_tilde: Sequence[float], gains: Gains,
 
 
 def task_force(y_tilde: Sequence[float], eta_e: float, gains: Gains,
-               k_l: float = 0.0) -> tuple[float, ...]:
+               k_l: float = 0.0, task: Optional[Task] = None) -> tuple[float, ...]:
     """
     Q(eta_e, e)^T grad U_a(y_tilde), the task-space 'force' that J^T maps to torque.
 
-    ``y_tilde`` is ``e`` (3) or ``[p_tilde, e]`` (6); Q is Eq. (15): identity on the position
-    rows, 1/2 (eta_e I + S(e)) on the orientation rows. ``k_l`` > 0 adds the large-error term.
+    ``y_tilde`` is ``e`` (3) or ``[p_tilde, e]`` (6), or ``p_tilde`` (3) for the position task
+    (``task`` Task.POSITION; None: orientation or pose, from the size); Q is Eq. (15):
+    identity on the position rows, 1/2 (eta_e I + S(e)) on the orientation rows. ``k_l`` > 0
+    adds the large-error term (no effect on the position task).
     """
-    w = potential_gradient(y_tilde, gains, k_l)
+    w = potential_gradient(y_tilde, gains, k_l, task)
+    if task is Task.POSITION:
+        return w
     e = y_tilde[-3:]
     w_o = quat.q_transpose_times(eta_e, e, w[-3:])
     return w_o if len(w) == 3 else (w[0], w[1], w[2]) + w_o
 
 
 def potential_torque(jacobian: Sequence[Sequence[float]], y_tilde: Sequence[float],
-                     eta_e: float, gains: Gains, k_l: float = 0.0) -> list[float]:
-    """J^T Q(eta_e, e)^T grad U_a(y_tilde) = -grad_q U_a(y_tilde(q)) (Eqs. 21-22), in N m."""
-    f = task_force(y_tilde, eta_e, gains, k_l)
+                     eta_e: float, gains: Gains, k_l: float = 0.0,
+                     task: Optional[Task] = None) -> list[float]:
+    """
+    J^T Q(eta_e, e)^T grad U_a(y_tilde) = -grad_q U_a(y_tilde(q)) (Eqs. 21-22), in N m.
+
+    ``jacobian`` has the task's rows (``Task.rows``); ``task`` as in :func:`task_force`.
+    """
+    f = task_force(y_tilde, eta_e, gains, k_l, task)
     n = len(jacobian[0])
     tau = [0.0] * n
     for row, fi in zip(jacobian, f):
@@ -205,7 +264,10 @@ def output_error(p: Sequence[float], R: quat.Matrix3, p_desired: Sequence[float]
     Return the output error y_tilde of Eq. (8) and eta_e, from the measured pose (p, R).
 
     Orientation task: y_tilde = e. Pose task: y_tilde = [p_d - p (Eq. 9); e (Eq. 10)].
+    Position task: y_tilde = p_d - p, and eta_e = 1 (``q_desired`` is not read).
     """
+    if task is Task.POSITION:
+        return (p_desired[0] - p[0], p_desired[1] - p[1], p_desired[2] - p[2]), 1.0
     eta_e, e = quat.orientation_error(quat.from_rotation_matrix(R), q_desired)
     if task is Task.ORIENTATION:
         return e, eta_e

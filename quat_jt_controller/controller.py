@@ -33,7 +33,7 @@ from typing import Any, NamedTuple, Optional, Sequence
 
 from quat_jt_controller import diagnostics
 from quat_jt_controller import quaternion as quat
-from quat_jt_controller.control_law import Gains, Task
+from quat_jt_controller.control_law import Gains
 from quat_jt_controller.goal_check import Posture
 from quat_jt_controller.goal_frames import GoalFrames
 from quat_jt_controller.goal_motion import GoalVelocityEstimator
@@ -125,7 +125,8 @@ class Controller:
         self.regulator = regulator
         model = regulator.model
         self.checker = checker
-        self.pose_task = regulator.task is Task.POSE
+        self.has_position = regulator.task.has_position  # the goal's parts the task reads
+        self.has_orientation = regulator.task.has_orientation
         self.state_timeout_s = state_timeout_s
         self.state_timeout_ns = int(state_timeout_s * 1e9)
         self.state_rate_hz = state_rate_hz
@@ -141,7 +142,8 @@ class Controller:
         self.goal_source = 'none'  # 'none' | 'hold' (initial pose) | 'target_pose'
         self.goal_warning = ''  # the goal check's warning for the goal in force ('' = none)
         self.goal_anchor: Optional[Sequence[float]] = None  # the tip when the goal took force
-        self._motion = GoalVelocityEstimator(self.pose_task)
+        self._motion = GoalVelocityEstimator(self.has_position,
+                                             with_orientation=self.has_orientation)
         self._goal_velocity_until_ns = 0  # 0: not a stream (a fixed goal)
         # the states
         self.last: Optional[TickOutput] = None  # the last tick's output, q and qdot
@@ -349,7 +351,7 @@ class Controller:
         placed = ('' if frame in ('', base) else
                   f' (given in {frame}, placed in {base} at the measured joints)')
         line = self._goal_log.line(  # one line per distinct goal, at most 5 a second
-            'goal', lambda: f'new goal: {goal.describe(self.pose_task)}{placed}',
+            'goal', lambda: f'new goal: {goal.describe(self.has_position, self.has_orientation)}{placed}',
             ' ({} more distinct goals since the last line)')
         return GoalReply(True, True, nu_desired,
                          NO_LOGS if line is None else (LogLine(Severity.INFO, line),))
@@ -402,7 +404,7 @@ class Controller:
             if goal is regulator.goal and verdict != self.goal_warning:
                 self.goal_warning = verdict
                 if verdict:
-                    logs += (LogLine(Severity.WARN, f'goal {goal.describe(False)} accepted '
+                    logs += (LogLine(Severity.WARN, f'goal {goal.describe(not self.has_orientation, self.has_orientation)} accepted '
                                                     f'with a warning: {verdict}'),)
         return logs
 
@@ -423,7 +425,7 @@ class Controller:
                 figures, not self.last_state_ns, self.stopped, self.counters, graph_warnings)),
             ('goal', *diagnostics.goal_status(
                 self.goal_source, regulator.goal, self.goal_warning, self.last, self.last_qdot,
-                self.pose_task, self.counters, unavailable, ready,
+                self.has_position, self.counters, unavailable, ready,
                 diagnostics.configuration_state(regulator))),
             ('stall', *self.stall.status())]
 

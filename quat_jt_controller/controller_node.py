@@ -16,7 +16,7 @@ from typing import Iterable
 from geometry_msgs.msg import PoseStamped
 from quat_jt_controller import diagnostics
 from quat_jt_controller import parameters
-from quat_jt_controller.control_law import Gains, GainsError, Task
+from quat_jt_controller.control_law import Gains, GainsError
 from quat_jt_controller.controller import Command, Controller, GoalRequest, LogLine, Severity
 from quat_jt_controller.goal_check import GoalCheckWorker, ModelSpec
 from quat_jt_controller.model import ModelError, RobotModel
@@ -71,8 +71,8 @@ class QuatJtController(Node):
         self._cmd_msg = Float64MultiArray(data=[0.0] * model.n)
         self._cmd_pub = self.create_publisher(
             Float64MultiArray, 'effort_controller/commands', history_qos(self._use_sim_time))
-        self._feedback = Feedback(self, cfg.base_link, cfg.task is Task.POSE)
-        self._goal_pose = GoalPose(self, cfg.base_link, cfg.task is Task.POSE)
+        self._feedback = Feedback(self, cfg.base_link, cfg.task.has_position)
+        self._goal_pose = GoalPose(self, cfg.base_link, cfg.task.has_position)
         self._diagnostics = Diagnostics(self, cfg.tip_link, self._cmd_pub.topic_name, ctl,
                                         self.stats)
         self._state_sub = self.create_subscription(

@@ -134,16 +134,19 @@ def spectral_radius(M: np.ndarray, K: np.ndarray, D: np.ndarray, delay_ticks: in
     return float(np.abs(np.linalg.eigvals(A)).max())
 
 
-def joint_stiffness(jacobian: np.ndarray, slope: Sequence[float]) -> np.ndarray:
+def joint_stiffness(jacobian: np.ndarray, slope: Sequence[float],
+                    task: cl.Task = cl.Task.POSE) -> np.ndarray:
     """
     K_q = J^T Q^T diag(slope) Q J at the goal (eta_e = 1, e = 0): Q = diag(I, I/2) (Eq. 15).
 
     ``slope`` is k_p (quadratic, Eq. 23) or k_p lambda (log-cosh, Eq. 31), one per task row;
-    ``jacobian`` has one row per task coordinate (J_o, or J_G = [J_p; J_o]).
+    ``jacobian`` has one row per task coordinate (J_o, J_G = [J_p; J_o] or J_p). Q is 1/2 on
+    the orientation rows, the last three unless ``task`` is the position task (Q = I).
     """
     J = np.asarray(jacobian, dtype=float)
     q_diag = np.ones(J.shape[0])
-    q_diag[-3:] = QO
+    if cl.Task(task).has_orientation:
+        q_diag[-3:] = QO
     QJ = q_diag[:, None] * J
     return QJ.T @ np.diag(np.asarray(slope, dtype=float)) @ QJ
 
@@ -163,12 +166,13 @@ def linearized_spectral_radius(model: RobotModel, q_goal_rad: Sequence[float], g
     near the goal. See :func:`spectral_radius`.
     """
     _, _, J = model.kinematics(list(q_goal_rad))
-    rows = np.array(J)[3:] if cl.Task(task) is cl.Task.ORIENTATION else np.array(J)
+    task = cl.Task(task)
+    rows = task.rows(np.array(J))
     slope = np.array(gains.kp)
     if gains.potential is cl.Potential.TANH:
         slope = slope * np.array(gains.lam)
     M = model.mass_matrix(list(q_goal_rad)) if mass_matrix is None else mass_matrix
-    K = joint_stiffness(rows, slope)
+    K = joint_stiffness(rows, slope, task)
     if shaping is not None and shaping.configuration_on:
         K = K + np.diag(configuration_stiffness(shaping))
     return spectral_radius(M, K, np.diag(gains.kv), delay_ticks, dt_s)
@@ -263,7 +267,7 @@ def survey(model: RobotModel, task: cl.Task, seed: int = 0) -> dict:
     for _ in range(REGULAR_TRIES):
         q = _sample(model, rng, 0.9)
         _, _, J = model.kinematics(q.tolist())
-        rows = np.array(J)[3:] if task is cl.Task.ORIENTATION else np.array(J)
+        rows = task.rows(np.array(J))
         sigma = _sigma_min(rows)
         (regular if sigma >= REGULAR_SIGMA_MIN else others).append((sigma, q, rows))
         if len(regular) == SAMPLES:
@@ -300,19 +304,22 @@ def task_torque_bound(lever_max: np.ndarray, kp: Sequence[float], task: cl.Task,
     A-priori bound of the tanh law's potential torque per joint (docs/gain_design.md, 2).
 
     |tau_j| <= ||J_p[:, j]|| ||k_p||_2 + 1/2 (||k_o||_2 + k_L): |tanh| <= 1 per row,
-    ||Q_o^T w|| <= ||w|| / 2, a revolute column of J_o has norm 1. The quadratic law obeys the
-    same bound on the orientation rows (||e|| <= 1) and on the position rows while
-    ||p_d - p|| <= sqrt(3) m.
+    ||Q_o^T w|| <= ||w|| / 2, a revolute column of J_o has norm 1; each term where the task
+    has those rows. The quadratic law obeys the same bound on the orientation rows
+    (||e|| <= 1) and on the position rows while ||p_d - p|| <= sqrt(3) m.
     """
+    task = cl.Task(task)
     kp = np.asarray(kp, dtype=float)
-    k_o = float(np.linalg.norm(kp[-3:]))
-    bound = np.full(lever_max.size, QO * (k_o + large_error_gain))
-    if task is cl.Task.POSE:
+    bound = np.zeros(lever_max.size)
+    if task.has_orientation:
+        bound = bound + QO * (float(np.linalg.norm(kp[-3:])) + large_error_gain)
+    if task.has_position:
         bound = bound + lever_max * float(np.linalg.norm(kp[:3]))
     return bound
 
 
-def _damping(configs, kp: np.ndarray, lam: np.ndarray, extra: np.ndarray) -> np.ndarray:
+def _damping(configs, kp: np.ndarray, lam: np.ndarray, extra: np.ndarray,
+             task: cl.Task = cl.Task.POSE) -> np.ndarray:
     """
     K_v per joint: damping ratio DAMPING_RATIO for the tanh law's stiffness (median).
 
@@ -320,20 +327,21 @@ def _damping(configs, kp: np.ndarray, lam: np.ndarray, extra: np.ndarray) -> np.
     """
     values = []
     for _, rows, M in configs:
-        k_t = np.diag(joint_stiffness(rows, kp * lam)) + extra
+        k_t = np.diag(joint_stiffness(rows, kp * lam, task)) + extra
         values.append(2.0 * DAMPING_RATIO * np.sqrt(np.diag(M) * k_t))
     return np.median(values, axis=0)
 
 
 def _median_damping_ratio(configs, slope: np.ndarray, kv: np.ndarray,
-                          extra: np.ndarray) -> np.ndarray:
+                          extra: np.ndarray, task: cl.Task = cl.Task.POSE) -> np.ndarray:
     """Median over the configurations of k_v / (2 sqrt(M_jj k_jj)), per joint."""
-    zeta = [kv / (2.0 * np.sqrt(np.diag(M) * (np.diag(joint_stiffness(rows, slope)) + extra)))
+    zeta = [kv / (2.0 * np.sqrt(np.diag(M) * (np.diag(joint_stiffness(rows, slope, task))
+                                              + extra)))
             for _, rows, M in configs]
     return np.median(zeta, axis=0)
 
 
-def _worst_rho(configs, kp, kv, lam, extra, delays, dt_s) -> dict:
+def _worst_rho(configs, kp, kv, lam, extra, delays, dt_s, task=cl.Task.POSE) -> dict:
     """
     Worst spectral radius per potential over the configurations, with the margins.
 
@@ -344,7 +352,7 @@ def _worst_rho(configs, kp, kv, lam, extra, delays, dt_s) -> dict:
     for potential, slope in (('quadratic', kp), ('tanh', kp * lam)):
         rho = 0.0
         for _, rows, M in configs:
-            K = joint_stiffness(rows, slope) + np.diag(extra)
+            K = joint_stiffness(rows, slope, task) + np.diag(extra)
             for scale, d in cases:
                 rho = max(rho, spectral_radius(M, scale * K, scale * np.diag(kv), d, dt_s))
         worst[potential] = rho
@@ -352,7 +360,8 @@ def _worst_rho(configs, kp, kv, lam, extra, delays, dt_s) -> dict:
 
 
 def _cruising_guide(configs, kp: np.ndarray, lam: np.ndarray, bound: np.ndarray,
-                    push_max: np.ndarray, cruise: np.ndarray, b_max: np.ndarray) -> np.ndarray:
+                    push_max: np.ndarray, cruise: np.ndarray, b_max: np.ndarray,
+                    task: cl.Task = cl.Task.POSE) -> np.ndarray:
     """
     Return the goal-configuration gains T_j: GUIDE_OVER_TASK x the task bound, or more.
 
@@ -365,7 +374,7 @@ def _cruising_guide(configs, kp: np.ndarray, lam: np.ndarray, bound: np.ndarray,
     guide = GUIDE_OVER_TASK * bound
     ceiling = np.maximum(push_max - bound, guide)
     for _ in range(60):
-        kv = np.minimum(_damping(configs, kp, lam, guide / GUIDE_RAMP_RAD), b_max)
+        kv = np.minimum(_damping(configs, kp, lam, guide / GUIDE_RAMP_RAD, task), b_max)
         slow = ((bound + guide) / kv < cruise) & (guide < ceiling)
         if not slow.any():
             break
@@ -454,7 +463,7 @@ def design(model: RobotModel, task: cl.Task, rate_hz: float = 1000.0,
         raise ValueError(f'expected {n} effort limits and friction values')
     data = survey(model, task, seed)
     configs = data['configurations']
-    lever = data['lever_max'] if task is cl.Task.POSE else np.zeros(n)
+    lever = data['lever_max'] if task.has_position else np.zeros(n)
     if not 0.0 < cruise_fraction <= 1.0:
         raise ValueError(f'cruise_fraction must be in (0, 1], got {cruise_fraction}')
     if preferred_configuration_rad is not None:
@@ -494,6 +503,9 @@ def design(model: RobotModel, task: cl.Task, rate_hz: float = 1000.0,
     unit_o = QO * sqrt(3.0)  # bound per unit isotropic k_o
     if task is cl.Task.ORIENTATION:
         k_o, k_p = float(np.min(cap) / unit_o), 0.0
+    elif task is cl.Task.POSITION:
+        unit_p = lever * sqrt(3.0)
+        k_o, k_p = 0.0, float(np.min(cap[unit_p > 0] / unit_p[unit_p > 0]))
     else:
         unit_p = lever * sqrt(3.0)
         best = (0.0, 0.0, 0.0)
@@ -507,8 +519,10 @@ def design(model: RobotModel, task: cl.Task, rate_hz: float = 1000.0,
         k_o, k_p = best[1], best[2]
     lam_o = LAMBDA_ORIENTATION
     lam_p = 4.0 / POSITION_SATURATION_M
-    kp = np.array(([k_p] * 3 if task is cl.Task.POSE else []) + [k_o] * 3)
-    lam = np.array(([lam_p] * 3 if task is cl.Task.POSE else []) + [lam_o] * 3)
+    kp = np.array(([k_p] * 3 if task.has_position else [])
+                  + ([k_o] * 3 if task.has_orientation else []))
+    lam = np.array(([lam_p] * 3 if task.has_position else [])
+                   + ([lam_o] * 3 if task.has_orientation else []))
 
     # The goal-configuration term (GUIDE_OVER_TASK x the task bound, over a ramp) adds joint
     # stiffness at q*; K_v damps the sum. The sampled-loop check: shrink Lambda (down to 1),
@@ -518,19 +532,24 @@ def design(model: RobotModel, task: cl.Task, rate_hz: float = 1000.0,
     # inertia) is unstable gets a smaller goal-configuration gain.
     cruise = cruise_fraction * velocity
     guide_cap = np.full(n, np.inf)  # per joint: lowered where the capped damping is too weak
+    # The position rows leave a joint whose axis passes through the tip (a wrist roll) with
+    # little or no task torque; the goal-configuration term alone holds it. Its terms are
+    # sized as if the task asked of it what the orientation rows would: the weakest share.
+    floor = 0.0 if task.has_orientation else float(np.min(cap))
     for _ in range(200):
-        bound = task_torque_bound(lever, kp, task)
-        guide = np.minimum(_cruising_guide(configs, kp, lam, bound, push_max, cruise, b_max),
+        bound = np.maximum(task_torque_bound(lever, kp, task), floor)
+        guide = np.minimum(_cruising_guide(configs, kp, lam, bound, push_max, cruise, b_max,
+                                           task),
                            np.maximum(guide_cap, GUIDE_OVER_TASK * bound))
-        kv = np.minimum(_damping(configs, kp, lam, guide / GUIDE_RAMP_RAD), b_max)
+        kv = np.minimum(_damping(configs, kp, lam, guide / GUIDE_RAMP_RAD, task), b_max)
         for j in range(n):
             while _joint_stable(inertia[j], guide[j] / GUIDE_RAMP_RAD, kv[j], delays,
                                 dt_s) >= 1.0:
                 guide[j] *= SHRINK
         extra = guide / GUIDE_RAMP_RAD
-        kv = np.minimum(_damping(configs, kp, lam, extra), b_max)
-        rho = _worst_rho(configs, kp, kv, lam, extra, delays, dt_s)
-        zeta = _median_damping_ratio(configs, kp * lam, kv, extra)
+        kv = np.minimum(_damping(configs, kp, lam, extra, task), b_max)
+        rho = _worst_rho(configs, kp, kv, lam, extra, delays, dt_s, task)
+        zeta = _median_damping_ratio(configs, kp * lam, kv, extra, task)
         if max(rho.values()) < 1.0 and zeta.min() >= DAMPING_RATIO_MIN:
             break
         # A joint whose damping the loop caps, under-damped because of its own
@@ -606,10 +625,11 @@ def design(model: RobotModel, task: cl.Task, rate_hz: float = 1000.0,
     lam_r = tuple(float(f'{v:.4g}') for v in lam)
     extra = configuration_stiffness(shaping)
     final = _worst_rho(configs, np.array(kp_r), np.array(kv_r), np.array(lam_r), extra,
-                       delays, dt_s)
-    ratios = {'quadratic': _median_damping_ratio(configs, np.array(kp_r), np.array(kv_r), extra),
+                       delays, dt_s, task)
+    ratios = {'quadratic': _median_damping_ratio(configs, np.array(kp_r), np.array(kv_r), extra,
+                                                 task),
               'tanh': _median_damping_ratio(configs, np.array(kp_r) * np.array(lam_r),
-                                            np.array(kv_r), extra)}
+                                            np.array(kv_r), extra, task)}
     figures = {
         'effort_limits_nm': effort, 'gravity_max_nm': data['gravity_max'],
         'friction_nm': friction, 'budget_nm': budget, 'task_bound_nm': bound,
@@ -623,7 +643,8 @@ def design(model: RobotModel, task: cl.Task, rate_hz: float = 1000.0,
         'warnings': (friction_warnings(model, friction, learning_limit)
                      + inertia_warnings(model, effort, inertia)),
         'time_to_goal_s': time_to_goal_s(np.array(terminal), configs, np.array(kp_r),
-                                         np.array(kv_r), np.array(lam_r), extra, dt_s),
+                                         np.array(kv_r), np.array(lam_r), extra, dt_s,
+                                         task=task),
         'friction_effort_share': friction_effort_share,
     }
     return Design(task, model.joint_names, model.base_link, model.tip_link, rate_hz, kp_r,
@@ -632,7 +653,7 @@ def design(model: RobotModel, task: cl.Task, rate_hz: float = 1000.0,
 
 def time_to_goal_s(cruise_rad_s: np.ndarray, configs, kp: np.ndarray, kv: np.ndarray,
                    lam: np.ndarray, extra: np.ndarray, dt_s: float,
-                   move_rad: float = 1.0) -> float:
+                   move_rad: float = 1.0, task: cl.Task = cl.Task.POSE) -> float:
     """
     Return the expected time to a goal ``move_rad`` away in every joint (s), roughly.
 
@@ -641,7 +662,7 @@ def time_to_goal_s(cruise_rad_s: np.ndarray, configs, kp: np.ndarray, kv: np.nda
     smaller: a 0.5 rad error down to ~0.5 mrad), at the median of the representative
     configurations, nominal gains and one tick of delay.
     """
-    rhos = sorted(spectral_radius(M, joint_stiffness(rows, kp * lam) + np.diag(extra),
+    rhos = sorted(spectral_radius(M, joint_stiffness(rows, kp * lam, task) + np.diag(extra),
                                   np.diag(kv), 1, dt_s) for _, rows, M in configs)
     settle = np.log(1000.0) * time_constant_s(rhos[len(rhos) // 2], dt_s)
     return float(move_rad / np.min(cruise_rad_s) + settle)
@@ -697,15 +718,17 @@ def friction_warnings(model: RobotModel, friction: np.ndarray,
     return out
 
 
-def _saturation(lam: Sequence[float], pose: bool) -> str:
+def _saturation(lam: Sequence[float], task: cl.Task) -> str:
     """Say from which error the tanh force is 96% of K_p (tanh(x) = 0.96 at x = 1.946)."""
     x96 = float(np.arctanh(0.96))
-    e = x96 / lam[-1]  # ||e|| = sin(theta / 2)
-    text = ('tanh at 96% of K_p from ' + (f'{np.degrees(2.0 * np.arcsin(e)):.0f} deg'
-                                          if e < 1.0 else 'no angle (orientation)'))
-    if pose:
-        text += f' / {x96 / lam[0]:.2g} m'
-    return text
+    parts = []
+    if task.has_orientation:
+        e = x96 / lam[-1]  # ||e|| = sin(theta / 2)
+        parts.append(f'{np.degrees(2.0 * np.arcsin(e)):.0f} deg' if e < 1.0
+                     else 'no angle (orientation)')
+    if task.has_position:
+        parts.append(f'{x96 / lam[0]:.2g} m')
+    return 'tanh at 96% of K_p from ' + ' / '.join(parts)
 
 
 def _regular_note(f: dict) -> str:
@@ -758,8 +781,8 @@ def to_yaml(d: Design, potential: str = 'tanh', command: str = '',
     """
     f = d.figures
     s = d.shaping
-    pose = d.task is cl.Task.POSE
-    axes = 'x, y, z (N/m), rx, ry, rz (N m)' if pose else 'rx, ry, rz (N m)'
+    axes = ', '.join((['x, y, z (N/m)'] if d.task.has_position else [])
+                     + (['rx, ry, rz (N m)'] if d.task.has_orientation else []))
     rho = f['spectral_radius']
     zeta = f['damping_ratio']
     header = [
@@ -810,7 +833,7 @@ def to_yaml(d: Design, potential: str = 'tanh', command: str = '',
         'potential': "'tanh' (Eq. 32/38) or 'quadratic' (Eq. 24/37); one set serves both",
         'kp': f'K_p, {axes}: a-priori torque bound within the budget',
         'kv': f'K_v, N m s/rad: damping ratio {DAMPING_RATIO:.2f} (tanh), from M(q)',
-        'lambda': f'Lambda: {_saturation(d.lam, pose)}',
+        'lambda': f'Lambda: {_saturation(d.lam, d.task)}',
         'gravity_compensation': '+ g(q) from the URDF',
         'joint_limit_margin': 'rad, band inside each limit (joints with less than a full turn)',
         'joint_limit_gain': f'N m/rad: {LIMIT_OVER_TASK:g} x the task bound at the stop',
@@ -931,8 +954,9 @@ def main(argv: Optional[list] = None) -> int:
                         help='the link whose pose is regulated (default: tool0, the wrist)')
     parser.add_argument('--joints', nargs='+', help='controlled joints (default: all movable)')
     parser.add_argument('--task', choices=[t.value for t in cl.Task], default='orientation',
-                        help="'orientation' (y = e, Eqs. 37/38) or 'pose' (y = [p_d - p; e], "
-                             'Eqs. 24/32)')
+                        help="'orientation' (y = e, Eqs. 37/38), 'pose' (y = [p_d - p; e], "
+                             "Eqs. 24/32) or 'position' (y = p_d - p: any reachable point, e.g. "
+                             'on an arm of 4 or 5 joints)')
     parser.add_argument('--effort-limits', type=positive, nargs='+',
                         help='N m per joint (default: the URDF effort limits)')
     parser.add_argument('--armature', type=_real, nargs='+',

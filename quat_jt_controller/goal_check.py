@@ -7,7 +7,9 @@ regulator most likely ends on), then from the middle of the ranges, then from se
 configurations; joints whose range spans a full turn are wrapped, not clamped. The work is
 bounded by a number of starts and of iterations, never by wall time, so the same start and goal
 give the same verdict on any host. At the solution, the smallest singular value of J_o
-(orientation task) or J_G (pose task) tells whether it is singular.
+(orientation task), J_G (pose task) or J_p (position task) tells whether it is singular. The
+position task's residual is p_d - p alone: its self-motion is larger, and q* is the solution
+nearest the measured joints along it (:func:`posture`).
 
 The verdict is advice for the user. The same inverse kinematics also gives, on request, the
 goal configuration q* that the goal-configuration term pulls towards
@@ -42,8 +44,10 @@ POLISH_ITERATIONS = 12
 
 def _pose_residual(model: RobotModel, q: np.ndarray, q_desired: Sequence[float],
                    p_desired: Sequence[float], task: Task) -> tuple[np.ndarray, np.ndarray]:
-    """Residual (rotation vector of q_d * conj(q), and p_d - p for the pose) and its J."""
+    """Residual (rotation vector of q_d * conj(q) and/or p_d - p, per task) and its J."""
     p, R, rows = model.kinematics(q.tolist())
+    if task is Task.POSITION:
+        return np.subtract(p_desired, p), np.array(rows)[:3]
     rot = np.array(quat.rotation_vector(*quat.orientation_error(quat.from_rotation_matrix(R),
                                                                 q_desired)))
     J = np.array(rows)
@@ -55,7 +59,7 @@ def _pose_residual(model: RobotModel, q: np.ndarray, q_desired: Sequence[float],
 def _sigma_min(model: RobotModel, q: np.ndarray, task: Task) -> float:
     """Return the smallest singular value of the task Jacobian at ``q``."""
     _, _, rows = model.kinematics(q.tolist())
-    J = np.array(rows) if task is Task.POSE else np.array(rows)[3:]
+    J = Task(task).rows(np.array(rows))
     return float(np.linalg.svd(J, compute_uv=False)[-1])
 
 
@@ -348,14 +352,12 @@ def configuration_velocity(model: RobotModel, q_star: Sequence[float],
     """
     Return qdot*_d with J(q*) qdot*_d = nu_d: the joint velocity of a moving goal at q*.
 
-    ``nu_desired`` is the goal's task velocity in the task's rows (``[v; omega]`` or
-    ``omega``, base frame). Least squares: the minimum-norm solution for a redundant arm. It
+    ``nu_desired`` is the goal's task velocity in the task's rows (``[v; omega]``, ``omega``
+    or ``v``, base frame). Least squares: the minimum-norm solution for a redundant arm. It
     runs in the worker, so the tick never inverts a Jacobian (docs/lyapunov.md, section 7).
     """
     _, _, rows = model.kinematics(list(q_star))
-    J = np.array(rows)
-    if task is Task.ORIENTATION:
-        J = J[3:]
+    J = Task(task).rows(np.array(rows))
     return np.linalg.lstsq(J, np.asarray(nu_desired, dtype=float), rcond=None)[0]
 
 

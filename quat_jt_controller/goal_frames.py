@@ -11,7 +11,9 @@ kinematics at the last measured joints q, once, when the goal arrives:
 (``*`` the quaternion product, (p_F, R_F) the link's pose in the base from the URDF), and the
 goal is then held fixed in the base frame, as any other: the robot moving towards it does not
 move it. A link goal before any joint state, or a frame the URDF does not have, is refused
-with the reason and, for the latter, the frames accepted. ROS-free.
+with the reason and, for the latter, the frames accepted. The position task reads only the
+position: the quaternion is not read, so any orientation (all zeros too) is accepted; a goal
+in a link is the point ``p_F(q) + R_F(q) p_d^F``. ROS-free.
 """
 from typing import Optional, Sequence
 
@@ -37,16 +39,20 @@ class GoalFrames:
         Validate a goal request and return it in the base frame; raise ValueError saying why not.
 
         The quaternion is checked as tf2 does and the position must be finite, in the frame
-        they are given in (``Goal.from_xyzw``); the orientation task ignores the position. As
-        in tf2 for ROS 2, a leading slash is not accepted.
+        they are given in (``Goal.from_xyzw``); the orientation task ignores the position, the
+        position task the quaternion (``Goal.at_position``: any, unread). As in tf2 for ROS 2,
+        a leading slash is not accepted.
         """
-        with_position = self._task is cl.Task.POSE
+        with_position = self._task.has_position
         zero = (0.0, 0.0, 0.0)
+        position_only = self._task is cl.Task.POSITION
         if frame_id in ('', self.base_link):
+            if position_only:
+                return Goal.at_position(position)
             return Goal.from_xyzw(*xyzw, position if with_position else zero)
         if frame_id not in self._links:
             raise ValueError(self._unknown(frame_id))
-        given = Goal.from_xyzw(*xyzw, position)
+        given = Goal.at_position(position) if position_only else Goal.from_xyzw(*xyzw, position)
         if q_measured is None:
             raise ValueError(
                 f"header.frame_id '{frame_id}' is a link of the robot, placed with the measured "
@@ -60,7 +66,7 @@ class GoalFrames:
         p = given.p_desired_base
         p_base = tuple(p_link[i] + R_link[i][0] * p[0] + R_link[i][1] * p[1]
                        + R_link[i][2] * p[2] for i in range(3))
-        return Goal(q_base, p_base)
+        return Goal.at_position(p_base) if position_only else Goal(q_base, p_base)
 
     def _unknown(self, frame_id: str) -> str:
         if frame_id.lstrip('/') in self._links or frame_id.lstrip('/') == self.base_link:

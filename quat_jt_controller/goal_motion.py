@@ -27,15 +27,18 @@ MIN_HOLD_S = 0.05  # and at least this long: a fast stream's publisher jitters b
 
 class GoalVelocityEstimator:
     """
-    The task velocity of a stream of goals: ``[v; omega]`` (pose) or ``omega`` (orientation).
+    The task velocity of a stream of goals: ``[v; omega]``, ``omega`` or ``v``, per task.
 
+    ``[v; omega]`` for the pose task, ``omega`` for the orientation task (``with_position``
+    False), ``v`` for the position task (``with_orientation`` False).
     ``omega`` is the angular velocity in the base frame (rad/s) of ``q_d``, ``v`` the velocity
     of ``p_d`` (m/s); in the task's rows, as ``J qdot`` gives them.
     """
 
     def __init__(self, with_position: bool, min_span_s: float = MIN_SPAN_S,
-                 max_gap_s: float = MAX_GAP_S) -> None:
+                 max_gap_s: float = MAX_GAP_S, with_orientation: bool = True) -> None:
         self._with_position = with_position
+        self._with_orientation = with_orientation
         self._min_span_s = min_span_s
         self._max_gap_s = max_gap_s
         # (stamp s, quaternion, position): the newest, and older ones back to the span
@@ -63,12 +66,15 @@ class GoalVelocityEstimator:
         span = stamp_s - t_ref
         if span < self._min_span_s:
             return None
+        v = ((p_desired[0] - p_ref[0]) / span, (p_desired[1] - p_ref[1]) / span,
+             (p_desired[2] - p_ref[2]) / span)
+        if not self._with_orientation:
+            return v
         w = quat.rotation_vector(*quat.orientation_error(q_ref, q_desired))
         omega = (w[0] / span, w[1] / span, w[2] / span)
         if not self._with_position:
             return omega
-        return ((p_desired[0] - p_ref[0]) / span, (p_desired[1] - p_ref[1]) / span,
-                (p_desired[2] - p_ref[2]) / span) + omega
+        return v + omega
 
     def hold_s(self) -> float:
         """Return how long after the last goal its velocity stays in force (s)."""

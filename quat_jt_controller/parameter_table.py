@@ -41,8 +41,11 @@ ARMATURE = Spec(
     default_text=JOINT_ZEROS_TEXT)
 STRUCTURE = (
     Spec('task', Kind.STRING, Task.ORIENTATION.value,
-         "What is regulated: 'orientation' (y = e, Eqs. 37/38; the paper's wrist) or 'pose' "
-         '(y = [p_d - p; e], Eqs. 24/32).', read_only=True, choices=tuple(t.value for t in Task)),
+         "What is regulated: 'orientation' (y = e, Eqs. 37/38; the paper's wrist), 'pose' "
+         "(y = [p_d - p; e], Eqs. 24/32) or 'position' (y = p_d - p, the position rows of "
+         "Eqs. 24/32: any reachable point, e.g. on an arm of 4 or 5 joints; a goal's "
+         'orientation is not read, so any quaternion, all zeros too, is accepted).',
+         read_only=True, choices=tuple(t.value for t in Task)),
     Spec('joints', Kind.STRING_ARRAY, ['joint1', 'joint2', 'joint3'],
          'Controlled joints, in the order of effort_controller/commands; joint_states are '
          'matched by name.', read_only=True, constraints='non-empty names'),
@@ -82,7 +85,8 @@ STRUCTURE = (
 
 def _per_task(position: Sequence[float], orientation: Sequence[float]) -> Callable:
     return lambda context: list(
-        orientation if context['task'] is Task.ORIENTATION else tuple(position) + orientation)
+        (tuple(position) if context['task'].has_position else ())
+        + (tuple(orientation) if context['task'].has_orientation else ()))
 
 
 # The live parameters that make up a Gains (checked by Gains.create). Context: task, dim, axes,
@@ -100,7 +104,7 @@ GAINS = (
          'rows. Finite, > 0, <= {top}. Live.', size='dim', bounds=(0.0, 'ceiling'), strict=True,
          why=CEILING_WHY,
          default_text=f'{markdown_value(paper.KP)} (pose: {markdown_value(DEFAULT_KP_POSITION)} '
-                      'first)'),
+                      'first; position: those alone)'),
     Spec('kv', Kind.DOUBLE_ARRAY, lambda context: [paper.KV[0]] * context['n'],
          'Diagonal of K_v (joint damping), one per joint ({n}), N m s/rad. Finite, > 0, '
          '<= {top}. Live.', size='n', bounds=(0.0, 'ceiling'), strict=True, why=CEILING_WHY,
@@ -111,7 +115,8 @@ GAINS = (
          bounds=(0.0, 'lambda_ceiling'), strict=True,
          why='tanh(lambda y) would switch like sign(y) within sensor noise (chatter)',
          default_text=f'{markdown_value(paper.LAMBDA)} (pose: '
-                      f'{markdown_value(DEFAULT_LAMBDA_POSITION)} first)'),
+                      f'{markdown_value(DEFAULT_LAMBDA_POSITION)} first; position: those '
+                      'alone)'),
     Spec('gravity_compensation', Kind.BOOL, True,
          'Add g(q) from the URDF model to the torque (Eq. 22). Live.'),
 )
@@ -193,8 +198,10 @@ SHAPING = (
 )
 
 # The context the docs' table is written with (docs/parameters.md): symbols, not one robot.
-DOCS_CONTEXT = {'task': Task.ORIENTATION, 'n': 'n', 'dim': '3 (orientation) or 6 (pose)',
-                'axes': 'rx, ry, rz; the pose task has x, y, z first',
+DOCS_CONTEXT = {'task': Task.ORIENTATION, 'n': 'n',
+                'dim': '3 (orientation, position) or 6 (pose)',
+                'axes': 'rx, ry, rz; the pose task has x, y, z first, the position task x, y, z '
+                        'only',
                 'top': f'max(effort limit) / {SATURATING_ERROR:g}',
                 'ceiling': f'max(effort limit) / {SATURATING_ERROR:g}',
                 'lambda_ceiling': MAX_LAMBDA, 'preferred_configuration': ()}

@@ -95,7 +95,8 @@ def gains_context(config: StructuralConfig, effort_limits_nm: Sequence[float]) -
     """Return the context of the GAINS rows for this robot (sizes, axes, the ceilings)."""
     ceiling = gain_ceiling(effort_limits_nm)
     return {'task': config.task, 'dim': config.task.dim, 'n': len(config.joints),
-            'axes': 'x, y, z, rx, ry, rz' if config.task.dim == 6 else 'rx, ry, rz',
+            'axes': ', '.join((['x', 'y', 'z'] if config.task.has_position else [])
+                              + (['rx', 'ry', 'rz'] if config.task.has_orientation else [])),
             'top': f'{ceiling:g}', 'ceiling': ceiling, 'lambda_ceiling': MAX_LAMBDA}
 
 
@@ -123,7 +124,10 @@ def describe_start(config: StructuralConfig, regulator: Regulator,
             f'{config.tip_link}, potential {gains.potential.value}, kp {list(gains.kp)}, kv '
             f'{list(gains.kv)}, lambda {list(gains.lam)}, effort limits '
             f'{list(regulator.effort_limits_nm)} N m; waiting for joint states on {state_topic}, '
-            'then holding the first pose measured until a goal arrives on ~/target_pose']
+            'then holding the first pose measured until a goal arrives on ~/target_pose'
+            + ('' if config.task.has_orientation else
+               " (the position task: a goal's orientation is not read; any quaternion, all "
+               'zeros too, is accepted)')]
 
 
 def change_log(node: Node, regulator: Regulator) -> ChangeLog:

@@ -119,7 +119,7 @@ class ClosedLoop:
 class SampledRun:
     t_s: np.ndarray  # (N,)
     position_error_m: np.ndarray  # ||p_d - p|| (N,), zeros for the orientation task
-    orientation_error: np.ndarray  # ||e|| of Eq. (10) (N,)
+    orientation_error: np.ndarray  # ||e|| of Eq. (10) (N,), zeros for the position task
     max_abs_torque_nm: np.ndarray  # max_j |tau_j| applied (N,)
     saturated_ticks: int
     all_finite: bool
@@ -189,9 +189,9 @@ def run_sampled(loop: ClosedLoop, sim, duration_s: float, delay_ticks: int = 1,
         history.append((sim.q_rad.tolist(), sim.qdot_rad_s.tolist()))
         del history[0]
         y, _, _ = loop.error(history[-1][0])
-        if loop.task is cl.Task.POSE:
+        if loop.task.has_position:
             pos[k] = np.linalg.norm(y[:3])
-        ori[k] = np.linalg.norm(y[-3:])
+        ori[k] = np.linalg.norm(cl.orientation_part(y, loop.task))
         tau_max[k] = np.abs(applied).max()
         qs[k] = sim.q_rad
         taus[k] = applied

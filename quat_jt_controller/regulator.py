@@ -11,7 +11,8 @@ docs/lyapunov.md) it is
 :class:`Regulator` owns the robot model, the task, the effort limits and immutable snapshots of
 the gains (:class:`~quat_jt_controller.control_law.Gains`) and of the goal (:class:`Goal`).
 :meth:`Regulator.update` is the tick: kinematics, output error (Eqs. 8-10), the law of the
-chosen potential (Eq. 24/32, orientation task Eq. 37/38), gravity, the finite check and the
+chosen potential (Eq. 24/32, orientation task Eq. 37/38, position task the position rows of
+Eq. 24/32), gravity, the finite check and the
 clamp. The controller node, the reference and sampled loops, the benchmark and the tests all
 call it, so what is simulated and timed is what ships. ROS-free (numpy-free in the tick too).
 
@@ -37,7 +38,8 @@ class Goal:
     A constant desired pose (p_d, R_d) in the base frame, Eq. (2)-(3).
 
     ``q_desired_base`` is the unit quaternion (eta_d, eps_d) of R_d, scalar first (Eq. 6);
-    ``p_desired_base`` the tip position in m (Eq. 9), ignored by the orientation task.
+    ``p_desired_base`` the tip position in m (Eq. 9), ignored by the orientation task. The
+    position task ignores the quaternion (:meth:`at_position` sets the identity).
     """
 
     q_desired_base: quat.Quaternion
@@ -64,12 +66,26 @@ class Goal:
             raise ValueError(f'non-finite position {p}')
         return cls(q, p)
 
-    def describe(self, with_position: bool = True) -> str:
-        """Return the goal for a log line, in ROS order, rounded."""
-        text = f'quaternion (x, y, z, w) {tuple(round(c, 4) for c in self.xyzw())}'
+    @classmethod
+    def at_position(cls, p_desired_base: Sequence[float]) -> 'Goal':
+        """
+        Validate a position goal (the position task); raise ValueError if it is not finite.
+
+        The orientation is not part of the goal: the quaternion is the identity, unread.
+        """
+        p = tuple(float(c) for c in p_desired_base)
+        if len(p) != 3 or not all(isfinite(c) for c in p):
+            raise ValueError(f'position {p} must be 3 finite values')
+        return cls((1.0, 0.0, 0.0, 0.0), p)
+
+    def describe(self, with_position: bool = True, with_orientation: bool = True) -> str:
+        """Return the goal for a log line, in ROS order, rounded (the parts the task reads)."""
+        parts = []
+        if with_orientation:
+            parts.append(f'quaternion (x, y, z, w) {tuple(round(c, 4) for c in self.xyzw())}')
         if with_position:
-            text += f', position {tuple(round(c, 4) for c in self.p_desired_base)} m'
-        return text
+            parts.append(f'position {tuple(round(c, 4) for c in self.p_desired_base)} m')
+        return ', '.join(parts)
 
     def xyzw(self) -> tuple[float, float, float, float]:
         """Return the quaternion in ROS order (x, y, z, w)."""
@@ -80,25 +96,32 @@ class TickOutput(NamedTuple):
     """What one tick gives: the command and what feedback and diagnostics need."""
 
     tau_nm: list[float]  # clamped to the effort limits; zeros if the law was not finite
-    y_tilde: tuple[float, ...]  # e (3) or [p_d - p; e] (6), Eq. (8)
-    eta_e: float  # scalar part of q_d * conj(q), after Eq. (13)
+    y_tilde: tuple[float, ...]  # e (3), [p_d - p; e] (6) or p_d - p (3, position), Eq. (8)
+    eta_e: float  # scalar part of q_d * conj(q), after Eq. (13); 1 for the position task
     p_tip_base: list[float]  # measured tip position, m
     R_tip_base: list[list[float]]  # measured tip rotation
     saturated: bool  # an entry was clamped
     finite: bool  # False: the law gave NaN/Inf (e.g. from extreme gains); tau_nm is zero
     # -grad of the potentials (U_a and U_lim), N m: what moves the robot towards the goal
     tau_potential_nm: tuple[float, ...] = ()
+    # what y_tilde holds; None: the orientation or pose task, told by its size
+    task: Optional[cl.Task] = None
+
+    @property
+    def orientation_error(self) -> tuple[float, ...]:
+        """Return e of Eq. (10); zeros for the position task, which has none."""
+        return tuple(cl.orientation_part(self.y_tilde, self.task))
 
     @property
     def orientation_error_norm(self) -> float:
-        """||e|| of Eq. (10)."""
-        e = self.y_tilde[-3:]
+        """||e|| of Eq. (10); 0 for the position task."""
+        e = cl.orientation_part(self.y_tilde, self.task)
         return sqrt(e[0] * e[0] + e[1] * e[1] + e[2] * e[2])
 
     @property
     def position_error_norm_m(self) -> float:
         """||p_d - p|| of Eq. (9); 0 for the orientation task."""
-        if len(self.y_tilde) == 3:
+        if len(self.y_tilde) == 3 and self.task is not cl.Task.POSITION:
             return 0.0
         p = self.y_tilde
         return sqrt(p[0] * p[0] + p[1] * p[1] + p[2] * p[2])
@@ -132,7 +155,8 @@ class Regulator:
     The transpose-Jacobian unit-quaternion regulator of Eq. (22) for one robot and task.
 
     :param model: the robot (URDF), joints in the order of q, qdot and tau.
-    :param task: ``orientation`` (y = e, J = J_o) or ``pose`` (y = [p_d - p; e], J = J_G).
+    :param task: ``orientation`` (y = e, J = J_o), ``pose`` (y = [p_d - p; e], J = J_G) or
+        ``position`` (y = p_d - p, J = J_p).
     :param gains: the initial gains; sizes must fit the task and the joints.
     :param effort_limits_nm: clamp per joint; default the URDF's. Pass ``[inf] * n`` for the
         ideal loop of the paper's analysis (no saturation).
@@ -152,7 +176,6 @@ class Regulator:
         self.n = model.n
         self.effort_limits_nm = _limits(model, effort_limits_nm)
         self._zero = [0.0] * self.n
-        self._orientation_only = self.task is cl.Task.ORIENTATION
         # where the cubic damping turns linear: the URDF velocity limits (2 pi rad/s if none)
         self._speed_cap = [v if isfinite(v) and v > 0.0 else sh.DEFAULT_SPEED_CAP_RAD_S
                            for v in model.velocity_limits]
@@ -314,12 +337,13 @@ class Regulator:
         """
         Return ``(y_tilde, eta_e, rows, p, R)`` at ``q`` towards ``goal`` (default: in force).
 
-        ``rows`` is the Jacobian of the task, J_o (orientation) or J_G (pose), Eq. (12).
+        ``rows`` is the Jacobian of the task, J_o (orientation), J_G (pose) or J_p
+        (position), Eq. (12).
         """
         goal = self._target.goal if goal is None else goal
         p, R, J = self.model.kinematics(q)
         y, eta_e = cl.output_error(p, R, goal.p_desired_base, goal.q_desired_base, self.task)
-        return y, eta_e, (J[3:] if self._orientation_only else J), p, R
+        return y, eta_e, self.task.rows(J), p, R
 
     def update(self, q: Sequence[float], qdot: Sequence[float], dt_s: float = 0.0) -> TickOutput:
         """
@@ -339,7 +363,7 @@ class Regulator:
         qdot_goal = self._goal_joint_velocity
         y, eta_e, rows, p, R = self.error(q, goal)
         n = self.n
-        tau_p = cl.potential_torque(rows, y, eta_e, gains, shaping.large_error_gain)
+        tau_p = cl.potential_torque(rows, y, eta_e, gains, shaping.large_error_gain, self.task)
         if band is not None:
             band.add_torque(q, tau_p)
         if q_star is not None and shaping.configuration_on:
@@ -357,7 +381,7 @@ class Regulator:
             for j in range(n):
                 tau[j] += g[j]
         if shaping.friction_on:
-            phi = sh.fade(y, shaping)
+            phi = sh.fade(y, shaping, self.task is cl.Task.POSITION)
             if phi > 0.0:  # else the compensation is zero (near the goal)
                 learned = self._learned_friction_nm if shaping.learning_on else None
                 fc = sh.friction_compensation(tau_p, qdot, phi, shaping, learned, self._stuck)
@@ -367,12 +391,13 @@ class Regulator:
         for t in tau:
             total += t
         if total - total != 0.0:  # NaN or Inf somewhere (inf - inf is NaN)
-            return TickOutput(list(self._zero), y, eta_e, p, R, False, False, tuple(self._zero))
+            return TickOutput(list(self._zero), y, eta_e, p, R, False, False, tuple(self._zero),
+                              self.task)
         if shaping.learning_on and dt_s > 0.0:  # only from a finite tick: never poisoned
             sh.learn_friction(self._learned_friction_nm, self._stuck, phi, shaping,
                               dt_s if dt_s < MAX_LEARNING_STEP_S else MAX_LEARNING_STEP_S)
         saturated = cl.saturate(tau, self.effort_limits_nm)
-        return TickOutput(tau, y, eta_e, p, R, saturated, True, tuple(tau_p))
+        return TickOutput(tau, y, eta_e, p, R, saturated, True, tuple(tau_p), self.task)
 
     def potential_energy(self, q: Sequence[float]) -> float:
         """
@@ -384,7 +409,8 @@ class Regulator:
         gains, shaping, band = self._law
         goal, q_star = self._target
         band = self._band_at(band, q_star)
-        u = cl.potential_energy(self.error(q, goal)[0], gains, shaping.large_error_gain)
+        u = cl.potential_energy(self.error(q, goal)[0], gains, shaping.large_error_gain,
+                                self.task)
         if band is not None:
             u += band.energy(q)
         if q_star is not None and shaping.configuration_on:

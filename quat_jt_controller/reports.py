@@ -28,7 +28,8 @@ class Feedback:
     Publishers of the measured pose and the errors, with their messages built once.
 
     ``~/current_pose`` (PoseStamped), ``~/orientation_error`` (e, the last three rows of
-    y_tilde) and, for the pose task, ``~/position_error`` (p_d - p), all in ``base_link``.
+    y_tilde; zeros for the position task, which has no orientation error) and, for the pose and
+    position tasks, ``~/position_error`` (p_d - p), all in ``base_link``.
     """
 
     def __init__(self, node: Node, base_link: str, with_position: bool) -> None:
@@ -49,7 +50,7 @@ class Feedback:
         o.x, o.y, o.z, o.w = quat.to_xyzw(q_tip_base)
         self._pose_pub.publish(pose)
         self._e_o.header.stamp = stamp
-        self._e_o.vector.x, self._e_o.vector.y, self._e_o.vector.z = out.y_tilde[-3:]
+        self._e_o.vector.x, self._e_o.vector.y, self._e_o.vector.z = out.orientation_error
         self._e_o_pub.publish(self._e_o)
         if self._e_p_pub is not None:
             self._e_p.header.stamp = stamp

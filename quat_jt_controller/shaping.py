@@ -250,15 +250,20 @@ class LimitBand:
         return out
 
 
-def fade(y_tilde: Sequence[float], shaping: Shaping) -> float:
+def fade(y_tilde: Sequence[float], shaping: Shaping, position_only: bool = False) -> float:
     """
     phi(y_tilde): 1 outside the error band, 0 well inside it, C1 in between.
 
     ``r = max(||e|| / friction_error_band, ||p_d - p|| / friction_position_band)``; phi is 0
-    for r <= 1/2, 1 for r >= 1 and the cubic smoothstep in between.
+    for r <= 1/2, 1 for r >= 1 and the cubic smoothstep in between. ``position_only``:
+    ``y_tilde`` is p_d - p alone (the position task), with no e, so r is its position part.
     """
-    e = y_tilde[-3:]
-    r = sqrt(e[0] * e[0] + e[1] * e[1] + e[2] * e[2]) / shaping.friction_error_band
+    if position_only:
+        r = sqrt(y_tilde[0] ** 2 + y_tilde[1] ** 2 + y_tilde[2] ** 2)
+        r /= shaping.friction_position_band_m
+    else:
+        e = y_tilde[-3:]
+        r = sqrt(e[0] * e[0] + e[1] * e[1] + e[2] * e[2]) / shaping.friction_error_band
     if len(y_tilde) == 6:
         p = sqrt(y_tilde[0] ** 2 + y_tilde[1] ** 2 + y_tilde[2] ** 2)
         r = max(r, p / shaping.friction_position_band_m)

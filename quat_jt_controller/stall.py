@@ -15,7 +15,6 @@ from typing import Optional, Sequence
 
 import numpy as np
 
-from quat_jt_controller import control_law as cl
 from quat_jt_controller.diagnostics import NEAR_180_ETA_E, OK, Status, WARN
 from quat_jt_controller.model import SINGULAR_SIGMA_MIN
 from quat_jt_controller.regulator import Regulator, TickOutput
@@ -24,7 +23,7 @@ PERIOD_S = 0.1  # evaluation period (10 Hz)
 HOLD_S = 0.5  # at rest and off the goal for longer than this: a stall
 REST_SPEED_RAD_S = 0.02  # max |qdot| below this: at rest
 ORIENTATION_TOLERANCE = 0.01  # ||e|| above this: off the goal
-POSITION_TOLERANCE_M = 0.001  # ||p_d - p|| above this: off the goal (pose task)
+POSITION_TOLERANCE_M = 0.001  # ||p_d - p|| above this: off the goal (pose, position tasks)
 NEAR_LIMIT_RAD = 0.05  # a joint this close to a URDF limit (or inside the band) is at a limit
 # With no friction estimate, a potential torque below this share of a joint's effort limit
 # (or below what the joint may learn, if more) is within a geared drive's plausible friction
@@ -103,7 +102,7 @@ class StallDetector:
                 causes.append('potential torque below the friction estimate ('
                               + ', '.join(weak) + ')')
         _, _, J = model.kinematics(list(q))
-        rows = np.array(J)[3:] if reg.task is cl.Task.ORIENTATION else np.array(J)
+        rows = reg.task.rows(np.array(J))
         self.sigma_min = float(np.linalg.svd(rows, compute_uv=False)[-1])
         if self.sigma_min < SINGULAR_SIGMA_MIN:
             causes.append(f'near-singular: sigma_min(J) = {self.sigma_min:.3g} < '
@@ -146,12 +145,14 @@ class StallDetector:
                   ('error_norm', f'{self.error_norm:.6g}'),
                   ('sigma_min', f'{self.sigma_min:.4g}'),
                   ('causes', '; '.join(self.causes))]
-        if self.regulator.task is cl.Task.POSE:
+        task = self.regulator.task
+        if task.has_position:
             values.insert(3, ('position_error_m', f'{self.position_error_m:.6g}'))
         if not self.stalled:
             return OK, 'not stalled', values
-        where = f'||e|| = {self.error_norm:.4g}'
-        if self.regulator.task is cl.Task.POSE:
-            where += f', ||p_d - p|| = {self.position_error_m * 1e3:.2f} mm'
+        where = ', '.join(
+            ([f'||e|| = {self.error_norm:.4g}'] if task.has_orientation else [])
+            + ([f'||p_d - p|| = {self.position_error_m * 1e3:.2f} mm'] if task.has_position
+               else []))
         return (WARN, f'stalled for {self.stalled_for_s:.1f} s at rest, {where}: '
                 + '; '.join(self.causes), values)

@@ -304,9 +304,18 @@ def test_pose_task_has_six_gains_and_a_position_error_topic(make_node):
     assert ok.successful, ok.reason
 
 
+def test_position_task_has_three_gains_and_a_position_error_topic(make_node):
+    node = make_node({'task': 'position'})
+    assert len(node.gains.kp) == 3 and len(node.gains.lam) == 3
+    assert len(node.get_publishers_info_by_topic('/quat_jt_controller/position_error')) == 1
+    assert not node.set_parameters([Parameter('kp', value=[100.0] * 6)])[0].successful
+    ok = node.set_parameters([Parameter('kp', value=[100.0] * 3)])[0]
+    assert ok.successful, ok.reason
+
+
 @pytest.mark.parametrize('overrides, error, words', [
     ({'kp': [1.0, 2.0]}, GainsError, 'kp must have 3 values'),
-    ({'task': 'position'}, ValueError, 'task must be'),
+    ({'task': 'velocity'}, ValueError, 'task must be'),
     ({'joints': ['joint1', 'jointX', 'joint3']}, ModelError, 'jointX'),
     ({'tip_link': 'nowhere'}, ModelError, 'nowhere'),
     ({'state_rate': 50.0}, Exception, 'state_rate out of range'),

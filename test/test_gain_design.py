@@ -271,7 +271,8 @@ def run_main(argv, capsys) -> tuple[int, list[str]]:
     (['--delays', '-1'], 2, 'argument --delays: -1 is not an integer in [0, inf)'),
     (['--cruise-fraction', '1.5'], 2, 'argument --cruise-fraction: 1.5 is not a finite number '
      'in (0, 1]'),
-    (['--task', 'position'], 2, "argument --task: invalid choice: 'position'"),
+    (['--task', 'velocity'], 2, "argument --task: invalid choice: 'velocity'"),
+    (['--task', 'position'], 1, 'the position task Jacobian is singular'),
     (['--effort-limits', '0.1', '0.1', '0.1'], 1, 'no design: no torque left for the '
      "potential on joints ['joint2']"),
     (['--out', 'no/such/folder/x.yaml'], 1, 'cannot write no/such/folder/x.yaml: No such file'),
