@@ -350,8 +350,9 @@ class Controller:
         frame, base = request.frame_id, self._frames.base_link
         placed = ('' if frame in ('', base) else
                   f' (given in {frame}, placed in {base} at the measured joints)')
+        parts = (self.has_position, self.has_orientation)
         line = self._goal_log.line(  # one line per distinct goal, at most 5 a second
-            'goal', lambda: f'new goal: {goal.describe(self.has_position, self.has_orientation)}{placed}',
+            'goal', lambda: f'new goal: {goal.describe(*parts)}{placed}',
             ' ({} more distinct goals since the last line)')
         return GoalReply(True, True, nu_desired,
                          NO_LOGS if line is None else (LogLine(Severity.INFO, line),))
@@ -404,8 +405,9 @@ class Controller:
             if goal is regulator.goal and verdict != self.goal_warning:
                 self.goal_warning = verdict
                 if verdict:
-                    logs += (LogLine(Severity.WARN, f'goal {goal.describe(not self.has_orientation, self.has_orientation)} accepted '
-                                                    f'with a warning: {verdict}'),)
+                    said = goal.describe(not self.has_orientation, self.has_orientation)
+                    logs += (LogLine(Severity.WARN,
+                                     f'goal {said} accepted with a warning: {verdict}'),)
         return logs
 
     # -- reports --------------------------------------------------------------------------
