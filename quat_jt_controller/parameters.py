@@ -154,12 +154,15 @@ SHAPING = (
          bounds=(1e-6, 1.0)),
     Spec('friction_learning_limit', Kind.DOUBLE_ARRAY, joint_zeros,
          'The most (N m) the friction compensation may learn on top of the estimate, one per '
-         'joint ({n}): it grows while a joint is stuck away from the goal, stops once the '
-         'joint moves, and leaks away near the goal. Zeros = off. Live.',
+         'joint ({n}): it grows while a joint stays stuck away from the goal with the push not '
+         'taken by its damping, stops once the joint moves, holds while a friction takes the '
+         'push, and leaks away where the damping takes it and near the goal. Zeros = off. '
+         'Live.',
          constraints='{n} finite values >= 0', default_text=JOINT_ZEROS_TEXT),
     Spec('friction_learning_time', Kind.DOUBLE, _DEFAULT_SHAPING.friction_learning_time_s,
          'Time (s) to learn friction_learning_limit while stuck; the learned part leaks with '
-         'this time constant near the goal. Live.', bounds=(0.01, 1000.0)),
+         'this time constant near the goal, and 5x faster where the damping takes the push. '
+         'Live.', bounds=(0.01, 1000.0)),
     Spec('configuration_gain', Kind.DOUBLE_ARRAY, joint_zeros,
          'Most torque (N m) the goal-configuration term asks of each joint ({n}); it pulls '
          'towards a goal configuration within the limits found by the goal check. Zeros = '
