@@ -165,10 +165,11 @@ _DESIGNS = {}
 
 
 def _pose_design(model):
-    """Return design_gains' pose design of a model, computed once per URDF and joints."""
+    """Return design_gains' pose design of a model (learning a friction nobody measured)."""
     key = (model.tip_link, model.joint_names, model.continuous)
     if key not in _DESIGNS:
-        _DESIGNS[key] = gd.design(model, cl.Task.POSE)
+        _DESIGNS[key] = gd.design(model, cl.Task.POSE,
+                                  friction_effort_share=gd.FRICTION_EFFORT_SHARE)
     return _DESIGNS[key]
 
 
