@@ -52,8 +52,9 @@ FULL_TURN_RAD = 2.0 * pi - 1e-6
 # t_p = tanh(tau_p / (TORQUE_BAND_FRACTION f)): the breakaway reaches 76% of f when the
 # potential torque is 0.1% of f, and changes sign smoothly (C-infinity) through tau_p = 0.
 TORQUE_BAND_FRACTION = 0.001
-# The learning goes on while a joint held by a friction slides slower than this x v_eps
-LEARNING_SPEED_FACTOR = 4.0
+# The learning goes on while a joint held by a friction slides slower than this x v_eps (a
+# wider gate, 4, lets an oscillation's slow turning points in on a weak potential: the SO-100)
+LEARNING_SPEED_FACTOR = 1.0
 # The learning low-passes how stuck a joint is with this fraction of the learning time, and
 # learns only once the filtered value is above 1/2 (learn_friction).
 HOLD_TIME_FRACTION = 0.2
