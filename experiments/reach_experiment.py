@@ -648,18 +648,26 @@ def arm_robot(name: str, urdf_path: str, base_link: Optional[str], tip_link: Opt
 
 
 @functools.lru_cache(maxsize=16)
-def arm_design(robot: Robot, told_armature: float, rate_hz: float):
-    """Return ``(model, design)``: ``design_gains``' Python API on the URDF + the armature."""
+def arm_design(robot: Robot, told_armature: float, rate_hz: float,
+               friction_effort_share: Optional[float] = None):
+    """
+    Return ``(model, design)``: ``design_gains``' Python API on the URDF + the armature.
+
+    ``friction_effort_share`` is design_gains' ``--friction-effort-share`` (None: its default).
+    """
     from quat_jt_controller import gain_design
     urdf = robot_urdf(robot)
     model = RobotModel(urdf, robot.base_link, robot.tip_link, list(robot.joints),
                        [told_armature] * len(robot.joints))
-    return model, gain_design.design(model, robot.task, rate_hz)
+    share = (gain_design.DEFAULT_FRICTION_EFFORT_SHARE if friction_effort_share is None
+             else friction_effort_share)
+    return model, gain_design.design(model, robot.task, rate_hz, friction_effort_share=share)
 
 
 def run_arm(robot: Robot, cond: Condition, potential: str, count: int, seed: int,
             rate_hz: float = 1000.0, engine: str = 'mujoco', progress=print,
-            workers: Optional[int] = None, ray_address: Optional[str] = None) -> list:
+            workers: Optional[int] = None, ray_address: Optional[str] = None,
+            friction_effort_share: Optional[float] = None) -> list:
     """
     Run ``count`` cases of an arm from its URDF in condition ``cond``; their outcomes.
 
@@ -668,7 +676,7 @@ def run_arm(robot: Robot, cond: Condition, potential: str, count: int, seed: int
     hidden), with ``cond``'s rotor inertia and Coulomb friction; the control period is
     1 / ``rate_hz``.
     """
-    model, d = arm_design(robot, cond.told_armature, float(rate_hz))
+    model, d = arm_design(robot, cond.told_armature, float(rate_hz), friction_effort_share)
     gains, shaping = d.gains(potential), d.shaping
     n = model.n
     sim_params = {'viscous_friction': [0.0] * n,
@@ -761,6 +769,8 @@ def main(argv: Optional[list] = None) -> int:
                      help="'armature-wrong': the design is told this x the rotor inertia")
     arm.add_argument('--friction-fraction', type=float, default=0.01,
                      help="'friction': untold Coulomb friction, x each effort limit")
+    arm.add_argument('--friction-effort-share', type=float, default=None,
+                     help="design_gains' --friction-effort-share (default: its default)")
     args = parser.parse_args(argv)
     if args.workers is not None and args.workers < 1:
         parser.error(f'--workers must be >= 1, got {args.workers}')
@@ -810,7 +820,8 @@ def main_arm(parser: argparse.ArgumentParser, args) -> int:
             raise ValueError(f'--urdf {path}: no such file')
         for name, value in (('--armature', args.armature), ('--rate', args.rate),
                             ('--armature-told-scale', args.armature_told_scale),
-                            ('--friction-fraction', args.friction_fraction)):
+                            ('--friction-fraction', args.friction_fraction),
+                            ('--friction-effort-share', args.friction_effort_share or 0.0)):
             if not (math.isfinite(value) and value >= 0.0):
                 raise ValueError(f'{name} must be finite and >= 0, got {value}')
         robot = arm_robot(args.example_robot or Path(path).stem, str(path), args.base_link,
@@ -826,7 +837,8 @@ def main_arm(parser: argparse.ArgumentParser, args) -> int:
             t0 = time.monotonic()
             outcomes = run_arm(robot, cond, potential, args.cases or 20, args.seed, args.rate,
                                args.engine, workers=args.workers,
-                               ray_address=args.ray_address)
+                               ray_address=args.ray_address,
+                               friction_effort_share=args.friction_effort_share)
             text.append(report(robot, f'{potential}, {cond.describe()}, {args.engine}',
                                outcomes, time.monotonic() - t0))
             print(text[-1], flush=True)

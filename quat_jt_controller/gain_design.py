@@ -71,8 +71,8 @@ FRICTION_POSITION_BAND_M = 0.0005
 FRICTION_LEARNING = 2.0
 # ... and with no estimate (0), when asked (--friction-effort-share), a share of the joint's
 # effort limit: a friction nobody measured up to this much is still broken (docs/lyapunov.md,
-# section 4). This is the share measured; the default is none, because on an arm whose
-# potential is weak near the goal the learning over-pushes (docs/gain_design.md).
+# section 4). This is the share measured; the default is none: on the Panda's ideal plant the
+# learning left torque sign changes at the end of most cases (docs/gain_design.md).
 FRICTION_EFFORT_SHARE = 0.03
 DEFAULT_FRICTION_EFFORT_SHARE = 0.0
 FRICTION_LEARNING_TIME_S = 1.0
@@ -443,8 +443,8 @@ def design(model: RobotModel, task: cl.Task, rate_hz: float = 1000.0,
     joint (default zeros: no friction compensation); ``delays`` the ticks of delay the
     sampled loop must be stable with; ``friction_learning`` how much more than the estimate
     (x the estimate) the regulator may learn at rest, and on a joint without an estimate
-    ``friction_effort_share`` of its effort limit (at most what its damping balances at the
-    cruising speed); ``cruise_fraction`` of the velocity
+    ``friction_effort_share`` of its effort limit (at most what its damping takes at the
+    velocity limit); ``cruise_fraction`` of the velocity
     limits the speed far from the goal that the goal-configuration gain is raised towards and
     the cubic damping holds (``_cruising_guide``); ``preferred_configuration_rad`` the
     posture a redundant arm's q* leans to (default: the middle of the ranges). Raises
@@ -604,9 +604,12 @@ def design(model: RobotModel, task: cl.Task, rate_hz: float = 1000.0,
             f = v * (1.0 + (v / damping_speed[j]) ** 2 if damping_speed[j] > 0 else 1.0)
             lo_v, hi_v = (v, hi_v) if f < push[j] / kv[j] else (lo_v, v)
         terminal.append(0.5 * (lo_v + hi_v))
-    # The effort share of what may be learned is held to what the joint's damping balances at
-    # its cruising speed: a fully learned over-compensation alone drives it no faster.
-    learning_limit = np.where(friction > 0.0, learning, np.minimum(learning, kv * cruise))
+    # The effort share of what may be learned is held to the damping torque (linear and cubic)
+    # at the joint's velocity limit: a fully learned over-compensation alone, with no friction
+    # left to take it, drives the joint no faster than that limit.
+    at_limit = kv * velocity * (1.0 + np.divide(velocity ** 2, damping_speed ** 2,
+                                                out=np.zeros(n), where=damping_speed > 0.0))
+    learning_limit = np.where(friction > 0.0, learning, np.minimum(learning, at_limit))
     shaping = Shaping.create(
         n, joint_limit_margin=margin, joint_limit_gain=limit_gain.round(3).tolist(),
         friction_compensation=friction.tolist(), friction_velocity=FRICTION_VELOCITY_RAD_S,
@@ -800,7 +803,7 @@ def to_yaml(d: Design, potential: str = 'tanh', command: str = '',
         f'{_fmt(d.armature or [0.0] * len(d.joints))} kg m^2;',
         f'  at rest the regulator may learn {f["friction_learning"]:g} x the estimates more, '
         f'and without an estimate {f.get("friction_effort_share", 0.0):g} x the effort limit (a '
-        'friction nobody measured; at most k_v x the cruising speed), in '
+        'friction nobody measured; at most the damping at the velocity limit), in '
         f'{FRICTION_LEARNING_TIME_S:g} s;',
         f'  budget {TORQUE_SHARE:g} x (effort - gravity - friction - learnable friction) = '
         f'{_fmt(f["budget_nm"])}, of which the task potential may ask at most (a-priori '

@@ -146,12 +146,15 @@ SHAPING = (
          default_text=JOINT_ZEROS_TEXT, field='friction_compensation_nm', **PER_JOINT),
     Spec('friction_learning_limit', Kind.DOUBLE_ARRAY, joint_zeros,
          'The most (N m) the friction compensation may learn on top of the estimate, one per '
-         'joint ({n}): it grows while a joint is stuck away from the goal, stops once the '
-         'joint moves, and leaks away near the goal. Zeros = off. Live.',
+         'joint ({n}): it grows while a joint stays stuck away from the goal with the push not '
+         'taken by its damping, stops once the joint moves, holds while a friction takes the '
+         'push, and leaks away where the damping takes it and near the goal. Zeros = off. '
+         'Live.',
          default_text=JOINT_ZEROS_TEXT, field='friction_learning_limit_nm', **PER_JOINT),
     Spec('friction_learning_time', Kind.DOUBLE, 1.0,
          'Time (s) to learn friction_learning_limit while stuck; the learned part leaks with '
-         'this time constant near the goal. Live.', bounds=(0.01, 1000.0),
+         'this time constant near the goal, and 5x faster where the damping takes the push. '
+         'Live.', bounds=(0.01, 1000.0),
          field='friction_learning_time_s'),
     Spec('friction_velocity', Kind.DOUBLE, 0.05,
          'v_eps (rad/s) of the velocity part, f tanh(qdot / v_eps). Live.',

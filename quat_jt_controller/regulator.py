@@ -189,7 +189,12 @@ class Regulator:
         # a, the part of the friction estimate learned at rest (N m per joint): the one state
         # the tick keeps, advanced only by ticks given a time step (shaping.learn_friction)
         self._learned_friction_nm = [0.0] * self.n
-        self._stuck = [0.0] * self.n  # this tick's (1 - |t_v|) |t_p|, for the learning
+        # this tick's (1 - |t_v|) |t_p| w and w (the share of the push the damping does not
+        # take), and the damping torque they are computed from: for the learning, filled in place
+        self._stuck = [0.0] * self.n
+        self._unmet = [0.0] * self.n
+        self._damping = [0.0] * self.n
+        self._held = [0.0] * self.n  # how stuck each joint has stayed (learn_friction's h)
         # the limit band ending at q* (LimitBand.ending_at), cached for (band, q*): derived
         self._band_at_goal: tuple = (None, None, None)
 
@@ -376,17 +381,23 @@ class Regulator:
             g_v = shaping.goal_velocity_gain  # damping on qdot - g_v qdot*_d
             for j in range(n):
                 tau[j] += kv[j] * g_v * qdot_goal[j]
+        if shaping.friction_on:
+            phi = sh.fade(y, shaping, self.task is cl.Task.POSITION)
+            if phi > 0.0:  # else the compensation is zero (near the goal)
+                learning = shaping.learning_on
+                damping = self._damping if learning else None
+                if learning:  # the damping terms so far: tau = tau_p + damping
+                    for j in range(n):
+                        damping[j] = tau[j] - tau_p[j]
+                fc = sh.friction_compensation(
+                    tau_p, qdot, phi, shaping, self._learned_friction_nm if learning else None,
+                    self._stuck, damping, self._unmet)
+                for j in range(n):
+                    tau[j] += fc[j]
         if gains.gravity_compensation:
             g = self.model.gravity(q)
             for j in range(n):
                 tau[j] += g[j]
-        if shaping.friction_on:
-            phi = sh.fade(y, shaping, self.task is cl.Task.POSITION)
-            if phi > 0.0:  # else the compensation is zero (near the goal)
-                learned = self._learned_friction_nm if shaping.learning_on else None
-                fc = sh.friction_compensation(tau_p, qdot, phi, shaping, learned, self._stuck)
-                for j in range(n):
-                    tau[j] += fc[j]
         total = 0.0
         for t in tau:
             total += t
@@ -395,7 +406,8 @@ class Regulator:
                               self.task)
         if shaping.learning_on and dt_s > 0.0:  # only from a finite tick: never poisoned
             sh.learn_friction(self._learned_friction_nm, self._stuck, phi, shaping,
-                              dt_s if dt_s < MAX_LEARNING_STEP_S else MAX_LEARNING_STEP_S)
+                              dt_s if dt_s < MAX_LEARNING_STEP_S else MAX_LEARNING_STEP_S,
+                              self._unmet, self._held)
         saturated = cl.saturate(tau, self.effort_limits_nm)
         return TickOutput(tau, y, eta_e, p, R, saturated, True, tuple(tau_p), self.task)
 

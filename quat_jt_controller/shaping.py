@@ -32,9 +32,10 @@ The law of Eq. (22) becomes
   friction cannot feed a limit cycle at the goal. Its size never
   exceeds ``f_j + a_j``, which is what keeps dV/dt <= -qdot^T K_v qdot against a Coulomb
   friction of at least that. ``a_j`` in ``[0, a_max,j]`` is the learned part of the estimate
-  (:func:`learn_friction`): it grows while the joint is stuck outside the error band, which
-  happens only while ``f_j + a_j`` is below the friction that holds it, and leaks away inside
-  the band.
+  (:func:`learn_friction`): it grows while the joint stays stuck outside the error band with
+  the push not taken by its damping (held by a friction, not slowed by its damping), which
+  happens only while ``f_j + a_j`` is below the friction that holds it; it leaks away where
+  the damping takes the push and inside the band.
 
 All are off by default (:class:`Shaping` ()), which gives the paper's law exactly. Plain
 floats: the functions here run in the 1 kHz tick.
@@ -53,6 +54,12 @@ FULL_TURN_RAD = 2.0 * pi - 1e-6
 # t_p = tanh(tau_p / (TORQUE_BAND_FRACTION f)): the breakaway reaches 76% of f when the
 # potential torque is 0.1% of f, and changes sign smoothly (C-infinity) through tau_p = 0.
 TORQUE_BAND_FRACTION = 0.001
+# The learning goes on while a joint held by a friction slides slower than this x v_eps (a
+# wider gate, 4, lets an oscillation's slow turning points in on a weak potential: the SO-100)
+LEARNING_SPEED_FACTOR = 1.0
+# The learning low-passes how stuck a joint is with this fraction of the learning time, and
+# learns only once the filtered value is above 1/2 (learn_friction).
+HOLD_TIME_FRACTION = 0.2
 # The cubic damping turns linear above the URDF velocity limit, or above this without one.
 DEFAULT_SPEED_CAP_RAD_S = 2.0 * pi
 
@@ -277,7 +284,9 @@ def fade(y_tilde: Sequence[float], shaping: Shaping, position_only: bool = False
 
 def friction_compensation(tau_potential: Sequence[float], qdot: Sequence[float], phi: float,
                           shaping: Shaping, learned_nm: Optional[Sequence[float]] = None,
-                          stuck_out: Optional[list[float]] = None) -> list[float]:
+                          stuck_out: Optional[list[float]] = None,
+                          damping_nm: Optional[Sequence[float]] = None,
+                          unmet_out: Optional[list[float]] = None) -> list[float]:
     """
     tau_fc per joint: phi (f + a) t_p [max(0, t_v t_p) + 1 - |t_v|], never above f + a in size.
 
@@ -289,8 +298,15 @@ def friction_compensation(tau_potential: Sequence[float], qdot: Sequence[float],
     brakes the overshoot. So the compensation does positive work only while the potential
     does. ``phi`` (:func:`fade`) turns all of it off near the goal. ``learned_nm`` is ``a``,
     the part of the estimate learned at rest (:func:`learn_friction`; None = zeros).
-    ``stuck_out``, if given, receives ``(1 - |t_v|) |t_p|`` per joint (how stuck and pushed
-    each joint is, for :func:`learn_friction`); it is left alone when ``phi`` is 0.
+
+    For the learning, ``unmet_out``, if given, receives per joint the share of the push
+    ``u = tau_p + tau_fc`` that the damping torque ``damping_nm`` (the joint damping terms of
+    the law, ``-K_v qdot`` and the rest) does not take: ``w = max(0, 1 - |d| / |u|)``. In a
+    joint that the push moves freely against its damping (a slow approach) ``w`` is near 0;
+    in one held by stiction it is 1 (no damping at rest); one moving against the push gets
+    ``(1 - |t_v|) w`` (it is not held); with ``damping_nm`` None, ``w`` is 1.
+    ``stuck_out``, if given, receives ``(1 - |t_v|) |t_p| w`` (how stuck, pushed and unmoved
+    by the push each joint is). Both are left alone when ``phi`` is 0.
     """
     out = [0.0] * len(qdot)
     if phi <= 0.0:
@@ -302,34 +318,73 @@ def friction_compensation(tau_potential: Sequence[float], qdot: Sequence[float],
         tv = tanh(qdot[j] / v_eps)
         tp = tanh(tau_potential[j] / scale)
         rest = 1.0 - abs(tv)
-        if stuck_out is not None:
-            stuck_out[j] = rest * abs(tp)
         size = f if learned_nm is None else f + learned_nm[j]
         along = tv * tp
         out[j] = phi * size * tp * ((along if along > 0.0 else 0.0) + rest)
+        if stuck_out is not None or unmet_out is not None:
+            slow = 1.0 - abs(tanh(qdot[j] / (LEARNING_SPEED_FACTOR * v_eps)))
+            w = 1.0
+            if damping_nm is not None:
+                signed = tau_potential[j] + out[j]
+                push = abs(signed)
+                left = push - abs(damping_nm[j])
+                w = left / push if left > 0.0 else 0.0
+                if qdot[j] * signed < 0.0:  # moving against the push: it is not held
+                    w *= slow
+            if stuck_out is not None:
+                stuck_out[j] = slow * abs(tp) * w
+            if unmet_out is not None:
+                unmet_out[j] = w
     return out
 
 
 def learn_friction(learned_nm: list[float], stuck: Sequence[float], phi: float,
-                   shaping: Shaping, dt_s: float) -> None:
+                   shaping: Shaping, dt_s: float,
+                   unmet: Optional[Sequence[float]] = None,
+                   held: Optional[list[float]] = None) -> None:
     """
     Advance ``a``, the learned part of the friction estimate, by one tick of ``dt_s``, in place.
 
-    ``da/dt = (a_max / T) phi (1 - |t_v|) |t_p| - (1 - phi) a / T`` (``T`` the learning time),
-    clipped to ``[0, a_max]``; ``stuck`` is ``(1 - |t_v|) |t_p|`` per joint, as
-    :func:`friction_compensation` gave it this tick (unread when ``phi`` is 0). It grows only
-    while the joint is at rest (``t_v`` ~ 0) and pushed (``t_p``) outside the error band
-    (``phi`` > 0), that is while the compensation is still below the friction that holds the
-    joint; it stops growing once the joint breaks away, and leaks away within the band
-    (docs/lyapunov.md, section 4).
+    ``da/dt = (a_max / T) phi s - [(1 - phi) + phi (1 - w) / c] a / T`` (``T`` the learning
+    time, ``c = HOLD_TIME_FRACTION``), clipped to ``[0, a_max]``. ``stuck`` (``(1 - |t_v|)
+    |t_p| w``) and ``unmet`` (``w``) are per joint as :func:`friction_compensation` gave them
+    this tick (unread when ``phi`` is 0; ``unmet`` None: ``w`` = 1). ``held``, if given, is
+    ``h`` per joint, advanced here in place: ``stuck`` low-passed with the time constant
+    ``c T``; ``s`` is ``stuck`` times a ramp of ``h`` from 0 at ``h = 1/2`` to 1 at ``3/4``,
+    so a joint must stay stuck for a while (about ``0.7 c T``) before anything is learned,
+    which the turning point of a swing does not, and stops learning at once when it moves.
+    Without ``held``, ``s`` is ``stuck``.
+
+    So ``a`` grows only while a joint stays at rest, pushed and not moved by the push, outside
+    the error band (``phi`` > 0): while the compensation is still below the friction that holds
+    it. It holds while a friction takes the push of a moving joint (``w`` ~ 1), leaks in
+    ``c T`` while the damping takes it (``w`` ~ 0: nothing to compensate), and in ``T``
+    within the band (docs/lyapunov.md, section 4).
     """
     rate = dt_s / shaping.friction_learning_time_s
+    hold_rate = rate / HOLD_TIME_FRACTION
+    if hold_rate > 1.0:
+        hold_rate = 1.0
     for j, (_, a_max, _) in enumerate(shaping.friction_table):
         if a_max <= 0.0:
             continue
         a = learned_nm[j]
-        grow = a_max * phi * stuck[j] if phi > 0.0 else 0.0
-        a += rate * (grow - (1.0 - phi) * a)
+        if phi > 0.0:
+            s = stuck[j]
+            if held is not None:
+                h = held[j] + hold_rate * (s - held[j])
+                held[j] = h
+                if h < 0.75:  # not stuck for long enough: s = 0 below h = 1/2
+                    s = s * (4.0 * h - 2.0) if h > 0.5 else 0.0
+            # leaks in T within the band, in HOLD_TIME_FRACTION T where the damping takes the push
+            leak = 1.0 - phi
+            if unmet is not None:
+                leak += phi * (1.0 - unmet[j]) / HOLD_TIME_FRACTION
+            a += rate * (a_max * phi * s - leak * a)
+        else:
+            if held is not None:
+                held[j] -= hold_rate * held[j]
+            a -= rate * a
         learned_nm[j] = a_max if a > a_max else (a if a > 0.0 else 0.0)
 
 

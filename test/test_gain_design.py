@@ -368,6 +368,7 @@ def test_with_no_friction_estimate_a_share_of_the_effort_may_be_learned():
     unmeasured = gd.design(model, cl.Task.ORIENTATION,
                            friction_effort_share=gd.FRICTION_EFFORT_SHARE)
     effort = np.array(model.effort_limits)
+    # the wrist's damping at its velocity limits holds far more than the share
     np.testing.assert_allclose(unmeasured.shaping.friction_learning_limit_nm,
                                gd.FRICTION_EFFORT_SHARE * effort)
     assert unmeasured.shaping.friction_compensation_nm == (0.0, 0.0, 0.0)

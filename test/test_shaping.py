@@ -209,6 +209,90 @@ def test_friction_learning_grows_only_while_stuck_off_the_goal_and_leaks_at_it()
     assert learned[0] == pytest.approx(0.5 * math.exp(-1.0), rel=2e-3)
 
 
+def _learning_tick(shaping, learned, held, tau_p, qdot, damping, phi=1.0):
+    """One tick of the learning as the regulator runs it, with the damping torque given."""
+    n = len(qdot)
+    stuck, unmet = [0.0] * n, [0.0] * n
+    sh.friction_compensation(tau_p, qdot, phi, shaping, learned, stuck, damping, unmet)
+    sh.learn_friction(learned, stuck, phi, shaping, 1e-3, unmet, held)
+
+
+def test_friction_learning_tells_a_stuck_joint_from_a_slow_approach_and_a_turning_point():
+    """
+    Held by stiction it learns; slowed by its damping, or only turning round, it does not.
+
+    Joint 0 is at rest and pushed (no damping torque at rest): held. Joint 1 moves slowly the
+    way it is pushed, its damping taking the whole push (an approach). Joint 2 swings: at rest
+    for 20 ms at each turning point, pushed back, then moving at speed.
+    """
+    kv = 0.5
+    shaping = sh.Shaping.create(3, friction_learning_limit=(0.5, 0.5, 0.5),
+                                friction_learning_time=1.0)
+    learned, held = [0.0] * 3, [0.0] * 3
+    for k in range(1000):
+        swing = 0.0 if k % 200 < 20 else (0.4 if (k // 200) % 2 else -0.4)
+        tau_p = [0.3, 0.3, 0.3 if (k // 200) % 2 else -0.3]
+        qdot = [0.0, 0.3 / kv * 0.01, swing]
+        damping = [-kv * v for v in qdot]
+        tau_p[1] = kv * qdot[1]  # the push the damping balances: a slow, steady approach
+        _learning_tick(shaping, learned, held, tau_p, qdot, damping)
+    assert learned[0] > 0.5 * 0.5 * (1.0 - 2.0 * sh.HOLD_TIME_FRACTION)  # stiction: learns
+    assert learned[1] == 0.0 and learned[2] == 0.0
+    # a held joint starts learning only after it has stayed held a while (no turning point)
+    learned, held = [0.0], [0.0]
+    one = sh.Shaping.create(1, friction_learning_limit=(0.5,))
+    for _ in range(int(0.5 * sh.HOLD_TIME_FRACTION * 1000)):
+        _learning_tick(one, learned, held, [0.3], [0.0], [0.0])
+    assert learned == [0.0]
+    for _ in range(int(2.0 * sh.HOLD_TIME_FRACTION * 1000)):
+        _learning_tick(one, learned, held, [0.3], [0.0], [0.0])
+    assert learned[0] > 0.0
+
+
+def test_learned_friction_holds_against_a_friction_and_leaks_where_the_damping_takes_it():
+    """Sliding with friction taking the push, ``a`` holds; moving freely it leaks fast."""
+    shaping = sh.Shaping.create(1, friction_learning_limit=(1.0,), friction_velocity=0.05)
+    kv, friction = 1.0, 0.895
+    learned, held = [0.8], [1.0]
+    for _ in range(300):  # sliding at 5 mm/s: the friction takes nearly all of the push
+        push = 0.1 + learned[0]
+        qdot = (push - friction) / kv
+        _learning_tick(shaping, learned, held, [0.1], [qdot], [-kv * qdot])
+    assert learned[0] > 0.7
+    learned = [0.8]
+    for _ in range(300):  # released: nothing holds it, the damping takes the push
+        qdot = (0.1 + learned[0]) / kv
+        _learning_tick(shaping, learned, held, [0.1], [qdot], [-kv * qdot])
+    assert learned[0] < 0.8 * math.exp(-0.3 / (sh.HOLD_TIME_FRACTION * 1.0)) * 1.5
+    for _ in range(1000):  # near the goal (phi 0) it leaks with the learning time
+        _learning_tick(shaping, learned, held, [0.0], [0.0], [0.0], phi=0.0)
+    assert learned[0] < 0.1
+
+
+def test_regulator_releases_a_stuck_joint_then_forgets_what_nothing_holds():
+    """A joint held off the goal: the regulator learns to push it; moving freely, it stops."""
+    model = wrist_model()
+    gains = cl.Gains.create('tanh', (8.0,) * 3, (1.5, 1.2, 0.8), (4.0,) * 3, ORI, 3)
+    shaping = sh.Shaping.create(3, friction_learning_limit=(1.5, 0.9, 0.6))
+    reg = Regulator(model, ORI, gains, None, None, shaping)
+    q_held = [0.0, 0.5, 0.0]
+    reg.hold(q_held)
+    reg.set_goal(reg.pose([0.2, 0.6, 0.1]))
+    push = [abs(t) for t in reg.update(q_held, [0.0] * 3).tau_potential_nm]
+    for _ in range(1000):  # held at rest for 1 s: the learned push grows
+        out = reg.update(q_held, [0.0] * 3, 1e-3)
+    learned = reg.learned_friction_nm
+    assert all(a > 0.1 * a_max for a, a_max in zip(learned, shaping.friction_learning_limit_nm))
+    gravity = model.gravity(q_held)
+    assert all(abs(t - g) > p for t, g, p in zip(out.tau_nm, gravity, push))  # pushes harder
+    # released: it moves the way it is pushed, as fast as its damping lets the push drive it
+    qdot = [(p + a) / k * math.copysign(1.0, t)
+            for p, a, k, t in zip(push, learned, gains.kv, out.tau_potential_nm)]
+    for _ in range(int(3 * sh.HOLD_TIME_FRACTION * 1000)):
+        reg.update(q_held, qdot, 1e-3)
+    assert all(a < 0.1 * a0 for a, a0 in zip(reg.learned_friction_nm, learned))
+
+
 def test_regulator_learns_friction_only_from_ticks_with_a_time_step():
     model = wrist_model()
     gains = cl.Gains.create('tanh', (8.0,) * 3, (1.5, 1.2, 0.8), (4.0,) * 3, ORI, 3)
@@ -220,7 +304,7 @@ def test_regulator_learns_friction_only_from_ticks_with_a_time_step():
     for _ in range(100):
         reg.update([0.0, 0.5, 0.0], [0.0] * 3)  # re-evaluations: no time passes
     assert reg.learned_friction_nm == (0.0, 0.0, 0.0)
-    for _ in range(100):
+    for _ in range(int(2.0 * sh.HOLD_TIME_FRACTION * 1000)):  # stuck for a while
         reg.update([0.0, 0.5, 0.0], [0.0] * 3, 1e-3)
     assert all(a > 0.0 for a in reg.learned_friction_nm)
     reg.set_shaping(dataclasses.replace(shaping, friction_learning_limit_nm=()))
