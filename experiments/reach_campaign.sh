@@ -1,0 +1,30 @@
+#!/usr/bin/env bash
+# The any-arm campaign of docs/reach.md: every arm, every condition, the same seed.
+# Usage: bash experiments/reach_campaign.sh OUT_DIR [extra reach_experiment arguments]
+# (e.g. --cases 100 --workers 8, or --ray-address auto). One log per arm in OUT_DIR; the
+# table rows are the lines that start with '|'.
+set -euo pipefail
+out=${1:?usage: reach_campaign.sh OUT_DIR [reach_experiment arguments]}
+shift
+mkdir -p "$out"
+python=${PYTHON:-python}
+# What a user of each arm knows: its URDF, and for some the flange to regulate and the task.
+arms=(
+  'ur3|--example-robot ur3'
+  'ur10|--example-robot ur10'
+  'panda|--example-robot panda'
+  'so100|--example-robot so100 --tip-link gripper'
+  'wrist|--urdf urdf/spherical_wrist.urdf --tip-link tool0 --task orientation'
+  'ur5|--example-robot ur5'
+  'z1|--example-robot z1 --tip-link link06'
+  'xarm7|--example-robot xarm7'
+  'so101|--example-robot so101 --tip-link gripper_link'
+  'talos_left_arm|--example-robot talos_left_arm --tip-link arm_left_7_link'
+)
+for entry in "${arms[@]}"; do
+  name=${entry%%|*}
+  # shellcheck disable=SC2086
+  $python -m experiments.reach_experiment ${entry#*|} --potential tanh "$@" \
+    > "$out/$name.log" 2>&1 || echo "$name: exit $?" >> "$out/failures.txt"
+  grep '^| ' "$out/$name.log" | grep -v '^| arm' || true
+done
