@@ -2,12 +2,12 @@
 Transpose-Jacobian pose regulators with unit quaternions (Campa and Kelly).
 
 The ROS-free core (numpy and Pinocchio only, never rclpy): ``regulator`` (the control tick,
-written once), ``quaternion``, ``control_law``, ``shaping``, ``model``, ``goal_check``,
-``gain_design``, ``stall``, ``diagnostics``, ``supervision``, ``reference_sim``, ``paper``,
-``goal_motion`` and ``controller_config``. The node (``controller_node``, with ``parameters``
-and ``reports``) is ROS marshalling around it. Below it, the runtime shared with the simulator
-(``quat_jt_runtime``); above both nodes, ``quat_jt_bringup`` (console scripts, composed). The
-experiments and benchmarks live outside the installed package, in the repository's
-``experiments/``, and use the nodes. See docs/ for the errata, the model and the stability
-arguments.
+written once), ``quaternion``, ``control_law``, ``shaping``, ``model``, ``inverse_kinematics``,
+``goal_check``, ``gain_design``, ``stall``, ``diagnostics``, ``supervision``, ``reference_sim``,
+``paper``, ``goal_motion`` and ``controller_config``. The node (``controller_node``, with
+``parameters`` and ``reports``) is ROS marshalling around it. Below it, the runtime shared
+with the simulator (``quat_jt_runtime``); above both nodes, ``quat_jt_bringup`` (console
+scripts, composed). The experiments and benchmarks live outside the installed package, in the
+repository's ``experiments/``, and use the nodes. See docs/ for the errata, the model and the
+stability arguments.
 """
