@@ -11,7 +11,6 @@ thread.
 """
 from dataclasses import dataclass
 import json
-from math import pi
 import os
 import queue
 import signal
@@ -24,50 +23,56 @@ from typing import Callable, NamedTuple, Optional, Sequence
 import numpy as np
 
 from quat_jt_controller.control_law import Task
-from quat_jt_controller.inverse_kinematics import configuration_velocity, goal_configuration
-from quat_jt_controller.inverse_kinematics import MAX_STARTS, RESIDUAL_TOLERANCE
-from quat_jt_controller.inverse_kinematics import SINGULAR_SIGMA_MIN, solve_ik
+from quat_jt_controller.inverse_kinematics import configuration_velocity, MAX_STARTS
+from quat_jt_controller.inverse_kinematics import RESIDUAL_TOLERANCE, search_goal_configuration
+from quat_jt_controller.inverse_kinematics import Search, SINGULAR_SIGMA_MIN, solve_ik, starts
 from quat_jt_controller.model import RobotModel
 from quat_jt_runtime.realtime import start_at_normal_scheduling
 
 
+def singular_warning(q: Sequence[float], sigma_min: float) -> str:
+    """Return the warning for a goal reached only at the near-singular ``q`` (A2)."""
+    q_text = [round(float(x), 4) for x in q]
+    return (f'it is reached only near a singular configuration q = {q_text} (sigma_min(J) = '
+            f'{sigma_min:.3g} < {SINGULAR_SIGMA_MIN}): assumption A2 of the paper does not '
+            'hold; the regulator may drift along the self-motion')
+
+
+def unreached_warning(best_q: Sequence[float], best_residual: float, starts: int) -> str:
+    """Return the warning for a goal no IK start reached within the limits (A1)."""
+    q_text = [round(float(x), 4) for x in best_q]
+    return (f'no joint configuration within the limits was found that reaches it from {starts} '
+            f'IK starts (best residual {best_residual:.3g} m and rad at q = {q_text}): '
+            'assumption A1 may not hold')
+
+
 def check_goal(model: RobotModel, q_measured: Optional[Sequence[float]],
-               q_desired: Sequence[float], p_desired: Sequence[float], task: Task,
+               quat_desired: Sequence[float], p_desired: Sequence[float], task: Task,
                max_starts: int = MAX_STARTS, seed: int = 0) -> str:
     """
     Return a warning if the goal breaks assumption A1 or A2, or '' if it is fine.
 
-    Tries the measured q (nudged off an exact singularity), then the middle of the joint
-    ranges, then random configurations within the limits (seeded), until one reaches the goal
-    at a regular configuration or ``max_starts`` starts are spent. A goal reached only at a
-    singular configuration violates A2; a goal no start reaches may violate A1 (it is not
-    proven unreachable). Deterministic: the same arguments give the same verdict.
+    Tries the IK :func:`~quat_jt_controller.inverse_kinematics.starts` (the measured q, the
+    middle of the joint ranges, then seeded random configurations within the limits) until one
+    reaches the goal at a regular configuration or ``max_starts`` starts are spent. A goal
+    reached only at a singular configuration violates A2; a goal no start reaches may violate
+    A1 (it is not proven unreachable). Deterministic: the same arguments give the same verdict.
     """
-    lower = np.maximum(np.array(model.position_lower), -pi)
-    upper = np.minimum(np.array(model.position_upper), pi)
-    rng = np.random.default_rng(seed)
-    starts = [np.zeros(model.n) if q_measured is None else np.asarray(q_measured, float),
-              0.5 * (lower + upper)]
     best = None
     singular = None
-    for _ in range(max_starts):
-        q_start = starts.pop(0) if starts else rng.uniform(lower, upper)
-        q, residual, J = solve_ik(model, q_start + 1e-3, q_desired, p_desired, task)
+    for _, q_start in zip(range(max_starts), starts(model, q_measured, seed)):
+        q, residual, J = solve_ik(model, q_start, quat_desired, p_desired, task)
         if best is None or residual < best[1]:
             best = (q, residual)
         if residual < RESIDUAL_TOLERANCE:
-            sigma_min = float(np.linalg.svd(J, compute_uv=False)[-1])
-            if sigma_min >= SINGULAR_SIGMA_MIN:
+            sigma = float(np.linalg.svd(J, compute_uv=False)[-1])
+            if sigma >= SINGULAR_SIGMA_MIN:
                 return ''
-            singular = (q, sigma_min)
+            if singular is None or sigma > singular[1]:
+                singular = (q, sigma)
     if singular is not None:
-        q_text = [round(float(x), 4) for x in singular[0]]
-        return (f'it is reached at a singular configuration q = {q_text} (sigma_min(J) = '
-                f'{singular[1]:.3g} < {SINGULAR_SIGMA_MIN}): assumption A2 of the paper does '
-                'not hold; the regulator may drift along the self-motion')
-    q_text = [round(float(x), 4) for x in best[0]]
-    return (f'no joint configuration within the limits was found that reaches it (best IK '
-            f'residual {best[1]:.3g} at q = {q_text}): assumption A1 may not hold')
+        return singular_warning(*singular)
+    return unreached_warning(best[0], best[1], max_starts)
 
 
 class Posture(NamedTuple):
@@ -306,6 +311,22 @@ class GoalCheckWorker:
                 self._proc.wait()
 
 
+def configuration_verdict(search: Search) -> str:
+    """
+    Return the goal check's verdict from the search for q* ('' if A1 and A2 hold).
+
+    A regular q* within the limits reaches the goal: A1 and A2 hold, and no further check is
+    needed. A q* only near a singularity breaks A2. Without q*, the goal may break A1, and the
+    goal-configuration term has nothing to pull towards for this goal.
+    """
+    if search.regular:
+        return ''
+    if search.q_star is not None:
+        return singular_warning(search.q_star, search.sigma_min)
+    return (unreached_warning(search.best_q, search.best_residual, search.starts)
+            + '; no goal configuration q*: the goal-configuration term does not act on it')
+
+
 def _serve() -> None:
     """Worker process: a spec line, then one verdict line per request line, until EOF."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the node stops it (closes its stdin)
@@ -327,20 +348,21 @@ def _serve() -> None:
         configuration = velocity = None
         try:
             margin = request.get('configuration_margin')
-            if margin is not None:
-                q_star = goal_configuration(
+            if margin is None:
+                verdict = check_goal(model, request['q_measured'], request['q_desired'],
+                                     request['p_desired'], task)
+            else:
+                search = search_goal_configuration(
                     model, request['q_measured'], request['q_desired'], request['p_desired'],
                     task, float(margin), q_warm=q_last,
                     q_preferred=request.get('preferred_configuration'),
                     posture_weight=float(request.get('posture_weight', 0.0)))
+                verdict = configuration_verdict(search)
+                q_star = search.q_star
                 configuration = q_last = None if q_star is None else q_star.tolist()
                 if q_star is not None and request.get('nu_desired') is not None:
                     velocity = configuration_velocity(model, q_star, request['nu_desired'],
                                                       task).tolist()
-            # A q* is a regular configuration within the limits that reaches the goal: A1 and
-            # A2 hold, and the full check is not needed.
-            verdict = '' if configuration is not None else check_goal(
-                model, request['q_measured'], request['q_desired'], request['p_desired'], task)
         except Exception as exc:  # noqa: B902 - reported to the node, which logs it
             verdict = f'the goal check failed: {exc!r}'
         sys.stdout.write(json.dumps({'id': request['id'], 'verdict': verdict,

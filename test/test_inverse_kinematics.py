@@ -138,9 +138,9 @@ def test_an_arm_without_self_motion_keeps_its_solution():
 def test_a_full_turn_joint_keeps_away_from_its_stop_when_it_can():
     """Of q*_j and q*_j -/+ 2 pi, both within the range, the one away from the stop is taken."""
     import numpy as np
-    from quat_jt_controller.inverse_kinematics import _representative
+    from quat_jt_controller.inverse_kinematics import representative
     lower, upper = np.array([-2.0 * math.pi]), np.array([2.0 * math.pi])
     near_stop = np.array([6.21])  # 0.07 from the stop, 2.86 from the measured 3.35
-    assert _representative(near_stop, np.array([3.35]), lower, upper)[0] == pytest.approx(6.21)
-    away = _representative(near_stop, np.array([3.35]), lower, upper, margin_rad=0.2)
+    assert representative(near_stop, np.array([3.35]), lower, upper)[0] == pytest.approx(6.21)
+    away = representative(near_stop, np.array([3.35]), lower, upper, margin_rad=0.2)
     assert away[0] == pytest.approx(6.21 - 2.0 * math.pi)
