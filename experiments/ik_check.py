@@ -21,9 +21,8 @@ from pathlib import Path
 import time
 from typing import Optional
 
-import numpy as np
-
 from experiments import arms
+import numpy as np
 from quat_jt_controller import quaternion as quat
 from quat_jt_controller.control_law import Task
 from quat_jt_controller.inverse_kinematics import goal_configuration, SINGULAR_SIGMA_MIN

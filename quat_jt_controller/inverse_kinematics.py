@@ -107,7 +107,7 @@ def solve_ik(model: RobotModel, q_start: Sequence[float], quat_desired: Sequence
         free = ~held
         J_free = J[:, free]
         normal = J_free.T @ J_free
-        normal[np.diag_indices_from(normal)] += lam * lam
+        normal.flat[::normal.shape[0] + 1] += lam * lam
         step = np.zeros_like(q_rad)
         step[free] = np.linalg.solve(normal, J_free.T @ r)
         largest = float(np.abs(step).max())

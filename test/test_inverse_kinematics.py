@@ -144,3 +144,116 @@ def test_a_full_turn_joint_keeps_away_from_its_stop_when_it_can():
     assert representative(near_stop, np.array([3.35]), lower, upper)[0] == pytest.approx(6.21)
     away = representative(near_stop, np.array([3.35]), lower, upper, margin_rad=0.2)
     assert away[0] == pytest.approx(6.21 - 2.0 * math.pi)
+
+
+def assert_reaches_within_limits(model, task, q_star, q_d, p_d):
+    """q* lies within the joint limits and reaches the goal to the model's precision."""
+    import numpy as np
+    from quat_jt_controller.inverse_kinematics import POLISHED_TOLERANCE
+    assert q_star is not None
+    assert np.all(q_star >= np.array(model.position_lower))
+    assert np.all(q_star <= np.array(model.position_upper))
+    p, R = model.forward_kinematics(q_star.tolist())
+    _, e = quat.orientation_error(quat.from_rotation_matrix(R), q_d)
+    assert np.linalg.norm(e) < POLISHED_TOLERANCE
+    if task is POSE:
+        assert np.linalg.norm(np.subtract(p, p_d)) < POLISHED_TOLERANCE
+
+
+def ur3_model():
+    """Return UR3: 6 joints spanning +-2 pi (the elbow +-pi), five of them full turns."""
+    from quat_jt_controller.model import RobotModel
+    from robots import example_robot_data_urdf
+    urdf = example_robot_data_urdf('ur_description/urdf/ur3_robot.urdf').read_text()
+    return RobotModel(urdf, 'world', 'wrist_3_link')
+
+
+def so100_model():
+    """Return the SO-100's 5 joints: a pose goal's J_G has more rows than columns."""
+    from quat_jt_controller.model import RobotModel
+    from robots import example_robot_data_urdf
+    urdf = example_robot_data_urdf('so_arm_description/urdf/so100.urdf').read_text()
+    return RobotModel(urdf, 'base', 'gripper', ('shoulder_pan', 'shoulder_lift', 'elbow_flex',
+                                                'wrist_flex', 'wrist_roll'))
+
+
+def small_five_joint_model():
+    """Return a 5-joint arm of two continuous and three revolute (+-2 rad) joints."""
+    from quat_jt_controller.model import RobotModel
+    from robots import small_arm_urdf
+    return RobotModel(small_arm_urdf(), 'base_link', 'tool')
+
+
+@pytest.mark.parametrize('make_model', [ur3_model, so100_model, small_five_joint_model])
+def test_the_pose_of_any_configuration_within_the_limits_is_found(make_model):
+    """
+    Goals that are the forward kinematics of random configurations, from random starts.
+
+    Each is exactly reachable within the limits, so q* is found, within the limits, to the
+    model's precision: on full-turn ranges (starts and goals up to 2 pi apart) and on 5-joint
+    arms, where the pose's six rows are met in least squares.
+    """
+    import numpy as np
+    from quat_jt_controller.inverse_kinematics import goal_configuration, sampling_box
+    model = make_model()
+    lo, hi = sampling_box(model)
+    rng = np.random.default_rng(3)
+    for _ in range(6):
+        q_goal, q_start = rng.uniform(lo, hi), rng.uniform(lo, hi)
+        q_d, p_d = goal_at(model, q_goal.tolist())
+        q_star = goal_configuration(model, q_start, q_d, p_d, POSE, 0.1)
+        assert_reaches_within_limits(model, POSE, q_star, q_d, p_d)
+
+
+def test_the_search_holds_a_joint_at_its_stop_and_moves_the_others():
+    """A goal whose configuration has a joint at its stop: the search reaches it from afar."""
+    import numpy as np
+    from quat_jt_controller.inverse_kinematics import RESIDUAL_TOLERANCE, solve_ik
+    model = small_five_joint_model()
+    q_goal = np.array([0.4, 2.0, -1.0, 0.3, -0.6])  # joint 2 at its upper stop
+    q_d, p_d = goal_at(model, q_goal.tolist())
+    q, residual, _ = solve_ik(model, [0.1, 1.2, -0.2, 0.0, 0.0], q_d, p_d, POSE)
+    assert residual < RESIDUAL_TOLERANCE
+    assert np.all(q >= np.array(model.position_lower))
+    assert np.all(q <= np.array(model.position_upper))
+
+
+def test_a_full_turn_joint_ends_on_the_turn_nearest_the_start():
+    """solve_ik wraps a +-2 pi joint to the angle within its range nearest where it started."""
+    import numpy as np
+    from quat_jt_controller.inverse_kinematics import solve_ik
+    model = ur3_model()
+    q_goal = np.array([4.5, -1.2, 1.0, -1.5, 1.3, -5.0])
+    q_d, p_d = goal_at(model, q_goal.tolist())
+    q, residual, _ = solve_ik(model, q_goal + 0.05, q_d, p_d, POSE)
+    assert residual < 1e-4
+    assert np.abs(q - q_goal).max() < 1e-3  # not q_goal - 2 pi: the same angles, nearest
+
+
+def test_a_goal_reached_only_at_a_singularity_gets_q_star_and_the_a2_warning():
+    """Rz(0.8) is reached only at the wrist's q2 = 0: q* is given, and A2 is said not to hold."""
+    from quat_jt_controller.goal_check import configuration_verdict
+    from quat_jt_controller.inverse_kinematics import search_goal_configuration
+    model = wrist_model()
+    rz = (math.cos(0.4), 0.0, 0.0, math.sin(0.4))
+    search = search_goal_configuration(model, [0.5, 0.5, 0.5], rz, (0, 0, 0), ORI, 0.1)
+    assert_reaches_within_limits(model, ORI, search.q_star, rz, (0, 0, 0))
+    assert not search.regular and search.sigma_min < 0.05
+    verdict = configuration_verdict(search)
+    assert 'singular' in verdict and 'A2' in verdict, verdict
+
+
+def test_an_unreachable_goal_gets_no_q_star_and_a_message_that_says_so():
+    """A position past the arm's reach: no q*, and the verdict says what was tried and found."""
+    from quat_jt_controller.goal_check import configuration_verdict
+    from quat_jt_controller.inverse_kinematics import search_goal_configuration
+    model = xarm6_model()
+    q_d, _ = goal_at(model, [0.0, -0.5, -1.0, 0.0, 1.5, 0.0])
+    search = search_goal_configuration(model, [0.0, -0.5, -1.0, 0.0, 1.5, 0.0], q_d,
+                                       (1.2, 0.0, 0.5), POSE, 0.1, starts_range=(4, 4))
+    assert search.q_star is None and search.starts == 4
+    assert search.best_residual > 0.1  # 1.2 m out: the nearest pose is far
+    verdict = configuration_verdict(search)
+    assert 'no joint configuration within the limits' in verdict, verdict
+    assert 'from 4 IK starts' in verdict and 'A1' in verdict, verdict
+    assert 'no goal configuration q*' in verdict, verdict
