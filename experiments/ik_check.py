@@ -8,7 +8,8 @@ controller's worker solves it (``inverse_kinematics.goal_configuration``, joint-
 ``--margin``). Printed per arm: the fraction solved, the fraction of those at a regular
 configuration (``sigma_min >= SINGULAR_SIGMA_MIN``), the largest residual of q* (position m and
 orientation ``||e||``) and whether every q* lies within the limits, and the time per solve
-(median and max, wall time on this host).
+(median and max: the process's CPU time, which other jobs on a shared host disturb less than
+the wall time; the worker is niced, so its wall time is longer on a busy host).
 
 The arms come from example-robot-data (``experiments/arms.py``; ``name`` or ``name:tip_link``)
 and the package's own wrist (``wrist``: ``urdf/spherical_wrist.urdf``, orientation task)::
@@ -65,9 +66,9 @@ def check_arm(model: RobotModel, task: Task, cases: int, seed: int, margin_rad: 
         q_goal, q_start = rng.uniform(lo, hi), rng.uniform(lo, hi)
         p_d, R_d = model.forward_kinematics(q_goal.tolist())
         q_d = quat.from_rotation_matrix(R_d)
-        t0 = time.perf_counter()
+        t0 = time.process_time()
         q_star = goal_configuration(model, q_start, q_d, p_d, task, margin_rad)
-        times.append(time.perf_counter() - t0)
+        times.append(time.process_time() - t0)
         if q_star is None:
             continue
         solved += 1
@@ -86,7 +87,7 @@ def check_arm(model: RobotModel, task: Task, cases: int, seed: int, margin_rad: 
 
 
 HEADER = ('| arm | task | joints | solved | of them regular | largest residual | '
-          'within the limits | time per solve: median / max s |\n'
+          'within the limits | CPU time per solve: median / max s |\n'
           '|---|---|---|---|---|---|---|---|')
 
 

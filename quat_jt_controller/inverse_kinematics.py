@@ -101,10 +101,11 @@ def solve_ik(model: RobotModel, q_start: Sequence[float], quat_desired: Sequence
         if cost < target or (len(costs) > IK_STALL_STEPS and cost > (
                 1.0 - IK_STALL_SHARE) * costs[-1 - IK_STALL_STEPS]):
             break
-        gradient = J.T @ r  # the descent direction of 1/2 ||r||^2 in q
-        held = bounded & (((q_rad <= lower) & (gradient < 0.0))
-                          | ((q_rad >= upper) & (gradient > 0.0)))
-        free = ~held
+        descent = J.T @ r  # minus the gradient of 1/2 ||r||^2 in q
+        free = ~(bounded & (((q_rad <= lower) & (descent < 0.0))
+                            | ((q_rad >= upper) & (descent > 0.0))))
+        if not free.any():  # every joint held at a stop: nothing can move
+            break
         J_free = J[:, free]
         normal = J_free.T @ J_free
         normal.flat[::normal.shape[0] + 1] += lam * lam
@@ -292,6 +293,7 @@ def representative(q: np.ndarray, near: np.ndarray, lower: np.ndarray,
 CONFIGURATION_STARTS = (MAX_STARTS, 48)  # at least / at most, for goal_configuration
 WARM_STEP_RAD = 0.5  # a warm-started q* this close (every joint) to the last one is taken as is
 SAME_SOLUTION_RAD = 1e-3  # two IK solutions this close (every joint) are one branch
+HOP_RAD = 0.3  # spread of the starts about the closest miss (each joint, standard deviation)
 
 
 class Search(NamedTuple):
@@ -324,9 +326,11 @@ def search_goal_configuration(model: RobotModel, q_measured: Optional[Sequence[f
     The goal-configuration potential (docs/lyapunov.md, section 5) pulls towards it.
 
     :func:`solve_ik` runs from the :func:`starts` (a robot has several IK branches, so at
-    least ``starts_range[0]`` of them, and more, up to ``starts_range[1]``, until a solution
-    outside the joint-limit bands is found; a goal near a singularity is near one on every
-    branch, and more starts would not change that). Each solution is polished, its full-turn
+    least ``starts_range[0]`` of them, and more, up to ``starts_range[1]``, until a regular
+    solution outside the joint-limit bands is found). While none has reached the goal past
+    ``starts_range[0]``, every other start is drawn about the closest miss so far (normal,
+    ``HOP_RAD`` on each joint): a branch in a narrow corner of the limits is rarely hit by a
+    uniform draw, but often by a hop from a configuration that nearly reached it. Each solution is polished, its full-turn
     joints moved by whole turns to the angle nearest the measured one, but ``margin_rad`` from
     their stops when a whole turn allows (the joint box is convex: the way there stays within
     the limits). Among them it prefers the regular ones (``sigma_min(J) >=
@@ -389,10 +393,13 @@ def search_goal_configuration(model: RobotModel, q_measured: Optional[Sequence[f
                 np.abs(found[1] - warm)) <= WARM_STEP_RAD:
             return Search(found[1], found[2], count, found[1], 0.0)
     best = None
+    hop = np.random.default_rng([seed, 1])  # the nearby starts' own stream
     for k, q_start in enumerate(starts(model, q_now, seed)):
         if k >= starts_range[1] or (k >= starts_range[0] and best is not None
-                                    and not best[0][1]):
+                                    and not any(best[0][:2])):
             break
+        if best is None and k >= starts_range[0] and k % 2:  # near the closest miss
+            q_start = np.clip(best_try[0] + hop.normal(0.0, HOP_RAD, q_now.size), lo, hi)
         count += 1
         found = accept(*solve_ik(model, q_start, quat_desired, p_desired, task))
         if found is not None and (best is None or found[0] < best[0]):
