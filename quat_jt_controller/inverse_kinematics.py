@@ -330,14 +330,15 @@ def search_goal_configuration(model: RobotModel, q_measured: Optional[Sequence[f
     solution outside the joint-limit bands is found). While none has reached the goal past
     ``starts_range[0]``, every other start is drawn about the closest miss so far (normal,
     ``HOP_RAD`` on each joint): a branch in a narrow corner of the limits is rarely hit by a
-    uniform draw, but often by a hop from a configuration that nearly reached it. Each solution is polished, its full-turn
-    joints moved by whole turns to the angle nearest the measured one, but ``margin_rad`` from
-    their stops when a whole turn allows (the joint box is convex: the way there stays within
-    the limits). Among them it prefers the regular ones (``sigma_min(J) >=
-    SINGULAR_SIGMA_MIN``), then those outside the joint-limit bands (``margin_rad``), then the
-    nearest to ``q_measured``. A goal reached only near a singularity still gets the least
-    singular q* found: A2 does not hold there, which the goal check reports, but the goal is
-    reached. Deterministic.
+    uniform draw, but often by a hop from a configuration that nearly reached it.
+
+    Each solution is polished, its full-turn joints moved by whole turns to the angle nearest
+    the measured one, but ``margin_rad`` from their stops when a whole turn allows (the joint
+    box is convex: the way there stays within the limits). Among them it prefers the regular
+    ones (``sigma_min(J) >= SINGULAR_SIGMA_MIN``), then those outside the joint-limit bands
+    (``margin_rad``), then the nearest to ``q_measured``. A goal reached only near a
+    singularity still gets the least singular q* found: A2 does not hold there, which the goal
+    check reports, but the goal is reached. Deterministic.
 
     ``q_warm`` (the last goal's q*, for a stream of goals) is tried first: a solution from it
     that is regular, within the limits, outside the bands and within ``WARM_STEP_RAD`` of it on
