@@ -21,7 +21,7 @@ import numpy as np
 from quat_jt_controller import control_law as cl
 from quat_jt_controller import paper
 from quat_jt_controller import shaping as sh
-from quat_jt_controller.goal_check import goal_configuration
+from quat_jt_controller.inverse_kinematics import goal_configuration
 from quat_jt_controller.reference_sim import ClosedLoop, run_sampled, SampledRun
 from quat_jt_runtime.resources import default_urdf_xml
 

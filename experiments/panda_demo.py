@@ -6,8 +6,9 @@ friction of ``config/panda_sim.yaml``) is sent through ``GOALS_Q_RAD``: the flan
 of these joint configurations, one goal every ``--hold`` seconds. What runs is the node's tick
 (``Regulator.update``, Eq. 24/32 + g(q) + the extensions, clamped to the effort limits) on the
 PyBullet simulator core, sampled at 1 kHz with one tick of delay; each goal's q* comes from the
-goal check (``goal_check.goal_configuration``, slid along the self-motion to the posture nearest
-the arm) 0.1 s after the goal, as the node's worker gives it. NOT the nodes over DDS.
+goal check (``inverse_kinematics.goal_configuration``, slid along the self-motion to the
+posture nearest the arm) 0.1 s after the goal, as the node's worker gives it. NOT the nodes
+over DDS.
 
 It writes, to ``--out`` (default ``results/panda``): an MCAP with ``/joint_states``,
 ``/robot_description``, ``/tf_static`` and ``/tf`` (the arm and the goal frame), an animated GIF
@@ -33,7 +34,7 @@ import pybullet_data
 from quat_jt_controller import control_law as cl
 from quat_jt_controller import quaternion as quat
 from quat_jt_controller.controller_config import controller_from_package_config
-from quat_jt_controller.goal_check import goal_configuration
+from quat_jt_controller.inverse_kinematics import goal_configuration
 from quat_jt_controller.model import RobotModel
 from quat_jt_controller.regulator import Goal
 from quat_jt_runtime.resources import config_parameters

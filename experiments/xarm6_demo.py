@@ -32,7 +32,7 @@ import pybullet_data
 from quat_jt_controller import control_law as cl
 from quat_jt_controller import quaternion as quat
 from quat_jt_controller.controller_config import controller_from_package_config
-from quat_jt_controller.goal_check import goal_configuration
+from quat_jt_controller.inverse_kinematics import goal_configuration
 from quat_jt_controller.model import RobotModel
 from quat_jt_controller.reference_sim import ClosedLoop
 from quat_jt_runtime.resources import config_parameters

@@ -96,7 +96,7 @@ GAIN_MARGIN = 1.5  # ... and with the gains (stiffness and damping) this many ti
 # the loop, which changes none of its gains; docs/lyapunov.md, section 7)
 GOAL_VELOCITY_GAIN = 1.0
 # Of the preferred posture against the distance to the measured joints, in the choice of a
-# redundant arm's q* (goal_check.posture): nearest first, the posture breaks near-ties
+# redundant arm's q* (inverse_kinematics.posture): nearest first, the posture breaks near-ties
 POSTURE_WEIGHT = 0.1
 QO = 0.5  # |Q| on the orientation rows (Eq. 15)
 ENGINES = ('pybullet', 'mujoco')  # the simulator's engine parameter (sim_yaml)

@@ -4,10 +4,10 @@ The velocity of a streamed goal, estimated from its stamps (docs/lyapunov.md, se
 A teleoperation device, a visual-servoing loop or a planner streams goals at 30 to 1000 Hz, each
 stamped when it was made. The regulator damps the joint velocity towards the goal's own (the
 goal-check worker maps this task velocity to the joints at q*,
-``goal_check.configuration_velocity``), so it needs that velocity: the motion between the newest
-goal and the newest one at least ``min_span_s`` older, divided by the difference of their stamps
-(not of their arrival times, which the network jitters). The span smooths the difference of
-nearly equal goals at high rates.
+``inverse_kinematics.configuration_velocity``), so it needs that velocity: the motion between the
+newest goal and the newest one at least ``min_span_s`` older, divided by the difference of their
+stamps (not of their arrival times, which the network jitters). The span smooths the difference
+of nearly equal goals at high rates.
 
 A goal that is not stamped, not newer than the last, or more than ``max_gap_s`` after it starts
 a new stream: a fixed goal until a later one gives a span. Past :meth:`hold_s` after the last

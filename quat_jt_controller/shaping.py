@@ -105,7 +105,8 @@ class Shaping:
     friction_learning_limit_nm: tuple[float, ...] = ()
     # s: a_max is learned in this time while stuck, and leaks with it inside the band
     friction_learning_time_s: float = _default('friction_learning_time')
-    # the goal check's choice of q* along a redundant arm's self-motion (goal_check.posture):
+    # the goal check's choice of q* along a redundant arm's self-motion
+    # (inverse_kinematics.posture):
     # nearest the measured q, then this posture (rad per joint; empty: the middle of the
     # ranges) with this weight. Not read by the tick.
     preferred_configuration_rad: tuple[float, ...] = ()

@@ -6,8 +6,8 @@ import pytest
 from quat_jt_controller import paper
 from quat_jt_controller import quaternion as quat
 from quat_jt_controller.control_law import Task
-from quat_jt_controller.goal_check import configuration_velocity, goal_configuration
 from quat_jt_controller.goal_motion import GoalVelocityEstimator, MAX_GAP_S, MIN_HOLD_S
+from quat_jt_controller.inverse_kinematics import configuration_velocity, goal_configuration
 from robots import wrist_model, xarm6_model
 
 pytestmark = pytest.mark.unit

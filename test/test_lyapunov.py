@@ -148,7 +148,7 @@ def test_a_redundant_arm_comes_to_rest_at_the_goal_configuration_elbow_included(
     self-motion is an equilibrium). With U_c, V never increases and the arm ends at q*.
     """
     from quat_jt_controller.controller_config import controller_from_package_config
-    from quat_jt_controller.goal_check import polish
+    from quat_jt_controller.inverse_kinematics import polish
     from quat_jt_controller.regulator import Regulator
     from robots import PANDA_URDF
     controller = controller_from_package_config('panda_controller.yaml',

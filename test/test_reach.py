@@ -11,7 +11,7 @@ from experiments import reach_experiment as rx
 import numpy as np
 import pytest
 from quat_jt_controller import quaternion as quat
-from quat_jt_controller.goal_check import goal_configuration
+from quat_jt_controller.inverse_kinematics import goal_configuration
 from quat_jt_controller.reference_sim import ClosedLoop, run_sampled
 from wrist_sim.simulator import WristSimulator
 

@@ -5,7 +5,7 @@ import pytest
 
 from quat_jt_controller import control_law as cl
 from quat_jt_controller import gain_design as gd
-from quat_jt_controller.goal_check import goal_configuration
+from quat_jt_controller.inverse_kinematics import goal_configuration
 from quat_jt_controller.model import ModelError, RobotModel
 from robots import assert_jacobian_matches_finite_differences, example_robot_data_urdf
 from robots import small_arm_urdf

@@ -1,0 +1,126 @@
+"""
+How often the goal check's inverse kinematics finds q* for goals that are known to be reachable.
+
+For each arm, ``--cases`` seeded random joint configurations within the limits (a joint without
+stops in [-pi, pi]) give the goals (their forward kinematics: exactly reachable), and as many
+random configurations within the limits the measured starts. Each goal is solved as the
+controller's worker solves it (``inverse_kinematics.goal_configuration``, joint-limit margin
+``--margin``). Printed per arm: the fraction solved, the fraction of those at a regular
+configuration (``sigma_min >= SINGULAR_SIGMA_MIN``), the largest residual of q* (position m and
+orientation ``||e||``) and whether every q* lies within the limits, and the time per solve
+(median and max: the process's CPU time, which other jobs on a shared host disturb less than
+the wall time; the worker is niced, so its wall time is longer on a busy host).
+
+The arms come from example-robot-data (``experiments/arms.py``; ``name`` or ``name:tip_link``)
+and the package's own wrist (``wrist``: ``urdf/spherical_wrist.urdf``, orientation task)::
+
+    PYTHONPATH=$PWD python -m experiments.ik_check
+    PYTHONPATH=$PWD python -m experiments.ik_check --arms ur3 so100:gripper --cases 50
+"""
+import argparse
+from pathlib import Path
+import time
+from typing import Optional
+
+from experiments import arms
+import numpy as np
+from quat_jt_controller import quaternion as quat
+from quat_jt_controller.control_law import Task
+from quat_jt_controller.inverse_kinematics import goal_configuration, SINGULAR_SIGMA_MIN
+from quat_jt_controller.model import RobotModel
+
+DEFAULT_ARMS = ('ur3', 'ur5', 'ur10', 'panda', 'so100:gripper', 'z1', 'xarm7', 'talos_left_arm',
+                'wrist')
+WRIST_URDF = Path(__file__).resolve().parent.parent / 'urdf' / 'spherical_wrist.urdf'
+
+
+def arm_model(spec: str) -> tuple[RobotModel, Task]:
+    """Return the model and task of ``name`` or ``name:tip_link`` (``wrist``: orientation)."""
+    name, _, tip = spec.partition(':')
+    if name == 'wrist':
+        urdf = WRIST_URDF.read_text()
+        task = Task.ORIENTATION
+    else:
+        urdf = arms.example_robot_urdf(name).read_text()
+        task = Task.POSE
+    base, tip_link, joints = arms.arm_links(urdf, None, tip or None)
+    return RobotModel(urdf, base, tip_link, joints), task
+
+
+def sampling_box(model: RobotModel) -> tuple[np.ndarray, np.ndarray]:
+    """Return the limits to draw from: a joint without stops in [-pi, pi]."""
+    lower = np.array(model.position_lower, dtype=float)
+    upper = np.array(model.position_upper, dtype=float)
+    return np.where(np.isfinite(lower), lower, -np.pi), np.where(np.isfinite(upper), upper, np.pi)
+
+
+def check_arm(model: RobotModel, task: Task, cases: int, seed: int, margin_rad: float) -> dict:
+    """Solve ``cases`` random reachable goals; return the figures of :func:`row`."""
+    rng = np.random.default_rng(seed)
+    lo, hi = sampling_box(model)
+    lower, upper = np.array(model.position_lower), np.array(model.position_upper)
+    solved = regular = within = 0
+    residual = 0.0
+    times = []
+    for _ in range(cases):
+        q_goal, q_start = rng.uniform(lo, hi), rng.uniform(lo, hi)
+        p_d, R_d = model.forward_kinematics(q_goal.tolist())
+        q_d = quat.from_rotation_matrix(R_d)
+        t0 = time.process_time()
+        q_star = goal_configuration(model, q_start, q_d, p_d, task, margin_rad)
+        times.append(time.process_time() - t0)
+        if q_star is None:
+            continue
+        solved += 1
+        p, R, J = model.kinematics(q_star.tolist())
+        _, e = quat.orientation_error(quat.from_rotation_matrix(R), q_d)
+        error = float(np.linalg.norm(e))
+        if task is Task.POSE:
+            error = max(error, float(np.linalg.norm(np.subtract(p, p_d))))
+        residual = max(residual, error)
+        rows = np.array(J) if task is Task.POSE else np.array(J)[3:]
+        regular += bool(np.linalg.svd(rows, compute_uv=False)[-1] >= SINGULAR_SIGMA_MIN)
+        within += bool(np.all(q_star >= lower) and np.all(q_star <= upper))
+    return {'cases': cases, 'solved': solved, 'regular': regular, 'within': within,
+            'residual': residual, 'median_s': float(np.median(times)),
+            'max_s': float(np.max(times))}
+
+
+HEADER = ('| arm | task | joints | solved | of them regular | largest residual | '
+          'within the limits | CPU time per solve: median / max s |\n'
+          '|---|---|---|---|---|---|---|---|')
+
+
+def row(spec: str, model: RobotModel, task: Task, f: dict) -> str:
+    """Return the markdown table row of one arm (``HEADER``'s columns)."""
+    return (f"| {spec} | {task.value} | {model.n} | {f['solved']}/{f['cases']} "
+            f"({100.0 * f['solved'] / f['cases']:.1f}%) | {f['regular']} | "
+            f"{f['residual']:.1e} | {f['within']}/{f['solved']} | "
+            f"{f['median_s']:.3f} / {f['max_s']:.3f} |")
+
+
+def main(argv: Optional[list] = None) -> int:
+    parser = argparse.ArgumentParser(description=__doc__.split('\n')[1])
+    parser.add_argument('--arms', nargs='+', default=list(DEFAULT_ARMS),
+                        help='example-robot-data names, name:tip_link, or wrist')
+    parser.add_argument('--cases', type=int, default=200)
+    parser.add_argument('--seed', type=int, default=0)
+    parser.add_argument('--margin', type=float, default=0.1,
+                        help='joint-limit margin of q* (rad), as the design gives it')
+    args = parser.parse_args(argv)
+    if args.cases < 1:
+        parser.error(f'--cases must be at least 1, not {args.cases}')
+    print(HEADER, flush=True)
+    for spec in args.arms:
+        try:
+            model, task = arm_model(spec)
+        except ValueError as exc:
+            print(f'| {spec} | skipped: {exc} |', flush=True)
+            continue
+        print(row(spec, model, task, check_arm(model, task, args.cases, args.seed,
+                                               args.margin)), flush=True)
+    return 0
+
+
+if __name__ == '__main__':
+    raise SystemExit(main())
