@@ -1,13 +1,13 @@
 """
 Check a goal against the paper's assumptions A1 (reachable) and A2 (no self-motion there).
 
-:func:`check_goal` runs the inverse kinematics of :mod:`quat_jt_controller.inverse_kinematics`
-from a fixed number of starts: a goal no start reaches may break A1; a goal reached only where
-the smallest singular value of J_o (orientation task), J_G (pose task) or J_p (position task)
-is small breaks A2. The verdict is advice for the user. :class:`GoalCheckWorker` runs it, and on
-request the goal configuration q* (:func:`~quat_jt_controller.inverse_kinematics.goal_configuration`),
-in a separate process (:func:`_serve`, JSON lines over its stdin and stdout), never on the
-control thread.
+:func:`check_goal` runs the inverse kinematics of :mod:`quat_jt_controller.inverse_kinematics` from
+a fixed number of starts: a goal no start reaches may break A1; a goal reached only where the
+smallest singular value of J_o (orientation task), J_G (pose task) or J_p (position task) is small
+breaks A2. The verdict is advice for the user. :class:`GoalCheckWorker` runs it, and on request the
+goal configuration q* (:func:`~quat_jt_controller.inverse_kinematics.goal_configuration`), in a
+separate process (:func:`_serve`, JSON lines over its stdin and stdout), never on the control
+thread.
 """
 from dataclasses import dataclass
 import json

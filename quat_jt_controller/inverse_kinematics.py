@@ -8,13 +8,13 @@ for a redundant arm a slide along the self-motion to the best posture (:func:`po
 goal-configuration term pulls towards (docs/lyapunov.md section 5), and
 :func:`configuration_velocity` maps a moving goal's velocity to the joints there.
 
-The goal is a unit quaternion ``quat_desired`` (w, x, y, z) and, for the pose and position
-tasks, a position ``p_desired`` (m), both in the base frame (the position task reads the
-position alone: its residual is p_d - p, its self-motion larger); joint configurations are ``q`` (rad). The work is
-bounded by a number of starts and of iterations, never by wall time, so the same start and
-goal give the same answer on any host. It costs milliseconds to a few tenths of a second: the
-controller runs it in the goal-check worker (:mod:`quat_jt_controller.goal_check`), never on
-the control thread.
+The goal is a unit quaternion ``quat_desired`` (w, x, y, z) and, for the pose and position tasks, a
+position ``p_desired`` (m), both in the base frame (the position task reads the position alone: its
+residual is p_d - p, its self-motion larger); joint configurations are ``q`` (rad). The work is
+bounded by a number of starts and of iterations, never by wall time, so the same start and goal
+give the same answer on any host. It costs milliseconds to a few tenths of a second: the controller
+runs it in the goal-check worker (:mod:`quat_jt_controller.goal_check`), never on the control
+thread.
 """
 from math import pi
 from typing import Iterator, NamedTuple, Optional, Sequence

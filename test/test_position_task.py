@@ -18,8 +18,8 @@ from quat_jt_controller import control_law as cl
 from quat_jt_controller import gain_design as gd
 from quat_jt_controller import shaping as sh
 from quat_jt_controller.goal_check import check_goal
-from quat_jt_controller.inverse_kinematics import goal_configuration
 from quat_jt_controller.goal_frames import GoalFrames
+from quat_jt_controller.inverse_kinematics import goal_configuration
 from quat_jt_controller.model import RobotModel
 from quat_jt_controller.reference_sim import ClosedLoop
 from quat_jt_controller.regulator import Goal, Regulator
