@@ -55,6 +55,10 @@ DAMPING_RATIO = sqrt(0.5)  # of the tanh law's linearised loop (the quadratic's:
 # Where the sampled loop caps K_v, the stiffness is lowered until the tanh law keeps this much
 DAMPING_RATIO_MIN = 0.5
 CRUISE_FRACTION = 0.6  # of the URDF velocity limit: the speed far from the goal (default)
+# ... and the most that steady speed may be, whatever the cruise aimed at: the push far from
+# the goal meets the damping (linear and cubic) at or below this share of the limit
+SPEED_MARGIN = 0.8
+NEGLIGIBLE_CUBIC = 100.0  # a v_c this many times the velocity limit: no cubic term
 CRUISE_STEP = 1.1  # the goal-configuration gain of a joint slower than that grows by this
 DEFAULT_VELOCITY = 2.0 * pi  # rad/s, for a joint whose URDF gives no velocity limit
 DAMPER_SAFETY = 0.5  # of the largest damping the sampled loop tolerates on a joint
@@ -371,6 +375,43 @@ def _cruising_guide(configs, kp: np.ndarray, lam: np.ndarray, bound: np.ndarray,
     return guide
 
 
+def cruising_speed(push_nm: np.ndarray, kv: np.ndarray, damping_speed_rad_s: np.ndarray,
+                   speed_cap_rad_s: np.ndarray) -> np.ndarray:
+    """
+    Return the steady speed per joint where the damping meets a constant ``push_nm``.
+
+    The damping is the regulator's (``shaping.add_speed_damping``): ``k_v v (1 + min(v, v_m)^2
+    / v_c^2)``, ``v_m`` = ``speed_cap_rad_s``, no cubic part where ``v_c`` is 0. It rises
+    monotonically with ``v``; the speed is found by bisection.
+    """
+    out = np.zeros(len(push_nm))
+    for j, (push, k, v_c, v_m) in enumerate(zip(push_nm, kv, damping_speed_rad_s,
+                                                speed_cap_rad_s)):
+        lo_v, hi_v = 0.0, push / k
+        for _ in range(60):
+            v = 0.5 * (lo_v + hi_v)
+            f = k * v * (1.0 + (min(v, v_m) / v_c) ** 2 if v_c > 0.0 else 1.0)
+            lo_v, hi_v = (v, hi_v) if f < push else (lo_v, v)
+        out[j] = 0.5 * (lo_v + hi_v)
+    return out
+
+
+def holding_damping(push_nm: np.ndarray, kv: np.ndarray, b_max: np.ndarray,
+                    ceiling_rad_s: np.ndarray, speed_cap_rad_s: np.ndarray) -> np.ndarray:
+    """
+    Return K_v per joint, raised where needed so the damping holds ``push_nm`` at the ceiling.
+
+    The cubic damping's slope, ``k_v (1 + 3 v^2 / v_c^2)`` up to ``v_m`` (``speed_cap_rad_s``),
+    may reach ``b_max`` at most (docs/gain_design.md, section 5), so at a speed ``v = a v_m``
+    it brakes with at most ``v (k_v + a^2 (b_max - k_v) / 3)``: a third of ``b_max v`` at
+    ``v_m`` if ``k_v`` is small. Where that is below the push, the linear part must carry
+    more: ``k_v = (push / v - a^2 b_max / 3) / (1 - a^2 / 3)``, at most ``b_max``.
+    """
+    a2 = np.minimum(ceiling_rad_s / speed_cap_rad_s, 1.0) ** 2
+    needed = (push_nm / ceiling_rad_s - a2 * b_max / 3.0) / (1.0 - a2 / 3.0)
+    return np.minimum(np.maximum(kv, needed), np.maximum(kv, b_max))
+
+
 def configuration_stiffness(shaping: Shaping) -> np.ndarray:
     """Joint stiffness (N m/rad) of the goal-configuration term at q* (0 with a dead zone)."""
     if shaping.configuration_radius_rad > 0.0 or not shaping.configuration_gain:
@@ -485,7 +526,9 @@ def design(model: RobotModel, task: cl.Task, rate_hz: float = 1000.0,
     b_max = np.array([DAMPER_SAFETY * _largest_stable_damping(inertia[j],
                                                               _checked_delays(delays), dt_s)
                       for j in range(n)])
-    push_max = np.minimum(budget, b_max * velocity)
+    limited_speed = np.array([isfinite(v) and v > 0.0 for v in model.velocity_limits])
+    ceiling = np.where(limited_speed, SPEED_MARGIN * velocity, velocity)
+    push_max = np.minimum(budget, b_max * ceiling)
     cap = push_max / (1.0 + GUIDE_OVER_TASK)  # what the task potential may ask of a joint
 
     # K_p: the largest gains within the a-priori bound (pose: the largest k_p k_o).
@@ -527,6 +570,8 @@ def design(model: RobotModel, task: cl.Task, rate_hz: float = 1000.0,
                 guide[j] *= SHRINK
         extra = guide / GUIDE_RAMP_RAD
         kv = np.minimum(_damping(configs, kp, lam, extra), b_max)
+        kv = np.where(limited_speed, holding_damping(bound + guide, kv, b_max, ceiling,
+                                                     velocity), kv)
         rho = _worst_rho(configs, kp, kv, lam, extra, delays, dt_s)
         zeta = _median_damping_ratio(configs, kp * lam, kv, extra)
         if max(rho.values()) < 1.0 and zeta.min() >= DAMPING_RATIO_MIN:
@@ -573,16 +618,11 @@ def design(model: RobotModel, task: cl.Task, rate_hz: float = 1000.0,
     for j in range(n):
         if push[j] / kv[j] <= cruise[j] or b_max[j] <= kv[j]:
             continue  # linear damping alone keeps it slow enough, or nothing more is stable
-        v_c = sqrt(cruise[j] ** 3 / (push[j] / kv[j] - cruise[j]))
-        damping_speed[j] = max(v_c, velocity[j] * sqrt(3.0 * kv[j] / (b_max[j] - kv[j])))
-    terminal = []
-    for j in range(n):  # v (1 + v^2 / v_c^2) = push / k_v, by bisection
-        lo_v, hi_v = 0.0, push[j] / kv[j]
-        for _ in range(60):
-            v = 0.5 * (lo_v + hi_v)
-            f = v * (1.0 + (v / damping_speed[j]) ** 2 if damping_speed[j] > 0 else 1.0)
-            lo_v, hi_v = (v, hi_v) if f < push[j] / kv[j] else (lo_v, v)
-        terminal.append(0.5 * (lo_v + hi_v))
+        v_c = max(sqrt(cruise[j] ** 3 / (push[j] / kv[j] - cruise[j])),
+                  velocity[j] * sqrt(3.0 * kv[j] / (b_max[j] - kv[j])))
+        if v_c < NEGLIGIBLE_CUBIC * velocity[j]:  # else it brakes < 1e-4 of k_v v: none
+            damping_speed[j] = v_c
+    terminal = cruising_speed(push, kv, damping_speed, velocity)
     # The effort share of what may be learned is held to what the joint's damping balances at
     # its cruising speed: a fully learned over-compensation alone drives it no faster.
     learning_limit = np.where(friction > 0.0, learning, np.minimum(learning, kv * cruise))
@@ -620,6 +660,7 @@ def design(model: RobotModel, task: cl.Task, rate_hz: float = 1000.0,
         'regular_sigma_min': data['regular_sigma_min'],
         'warnings': (friction_warnings(model, friction, learning_limit)
                      + inertia_warnings(model, effort, inertia)),
+        'speed_ceiling_rad_s': np.where(limited_speed, ceiling, np.inf),
         'time_to_goal_s': time_to_goal_s(np.array(terminal), configs, np.array(kp_r),
                                          np.array(kv_r), np.array(lam_r), extra, dt_s),
         'friction_effort_share': friction_effort_share,
