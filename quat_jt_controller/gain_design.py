@@ -18,7 +18,8 @@ compensation. In short:
    within the part of the budget left to the task potential;
 3. Lambda from where the tanh force should saturate; K_v for critical damping of the
    linearised loop at the geometric mean of the two potentials' stiffnesses, from M(q) at
-   representative configurations;
+   representative configurations, raised where the damping (with its cubic part) would not
+   hold the potentials' largest push at ``SPEED_MARGIN`` x the URDF velocity limit;
 4. the sampled loop linearised at those configurations must have spectral radius < 1, for
    both potentials, with every delay asked for plus one more tick (``DELAY_MARGIN``), and at
    ``GAIN_MARGIN`` x the gains; the stiffness of the limit band, of the goal-configuration
@@ -518,8 +519,10 @@ def design(model: RobotModel, task: cl.Task, rate_hz: float = 1000.0,
                          f'{[model.joint_names[j] for j in np.flatnonzero(budget <= 0.0)]}: '
                          f'effort {effort.tolist()}, gravity up to '
                          f'{np.round(data["gravity_max"], 3).tolist()}')
-    # Speed rule: never ask a joint for more than its damping can hold at its velocity limit
-    # (the largest damping the sampled loop tolerates on its smallest inertia, halved).
+    # Speed rule: never ask a joint for more than its damping can hold at SPEED_MARGIN x its
+    # velocity limit (b_max: the largest damping the sampled loop tolerates on its smallest
+    # inertia, halved); K_v is raised below (holding_damping) where the cubic part cannot.
+    # A joint without a URDF velocity limit keeps DEFAULT_VELOCITY as its cap.
     inertia = data['inertia_min']
     velocity = np.array(model.velocity_limits, dtype=float)
     velocity = np.where(np.isfinite(velocity) & (velocity > 0), velocity, DEFAULT_VELOCITY)
@@ -815,7 +818,8 @@ def to_yaml(d: Design, potential: str = 'tanh', command: str = '',
         f'damping ratios tanh {_fmt(zeta["tanh"])}, quadratic {_fmt(zeta["quadratic"])};',
         f'  cruising speeds far from the goal {_fmt(f["terminal_speed_rad_s"])} rad/s '
         f'(velocity limits {_fmt(f["velocity_limits_rad_s"])}, aimed at '
-        f'{f["cruise_fraction"]:g} x them).',
+        f'{f["cruise_fraction"]:g} x them, at most {SPEED_MARGIN:g} x them: K_v is raised where '
+        'the cubic damping cannot hold the push there).',
         f'Expected time to a goal: about {f["time_to_goal_s"]:.2g} s for a 1 rad move of every '
         'joint (the slowest cruise, then ln(1000) time constants of the slowest linear mode).',
     ]
@@ -834,7 +838,7 @@ def to_yaml(d: Design, potential: str = 'tanh', command: str = '',
         '(Eq. 24/37); one set serves both',
         f'    kp: {_fmt(d.kp)}  # K_p, {axes}: a-priori torque bound within the budget',
         f'    kv: {_fmt(d.kv)}  # K_v, N m s/rad: damping ratio {DAMPING_RATIO:.2f} (tanh), '
-        'from M(q)',
+        'from M(q), or more to hold the speed',
         f'    lambda: {_fmt(d.lam)}  # Lambda: {_saturation(d.lam, pose)}',
         '    gravity_compensation: true   # + g(q) from the URDF',
         f'    joint_limit_margin: {_float(s.joint_limit_margin_rad)}   # rad, band inside each '
