@@ -59,6 +59,9 @@ CRUISE_FRACTION = 0.6  # of the URDF velocity limit: the speed far from the goal
 # ... and the most that steady speed may be, whatever the cruise aimed at: the push far from
 # the goal meets the damping (linear and cubic) at or below this share of the limit
 SPEED_MARGIN = 0.8
+# ... where K_v is raised to hold it, at most to this share of b_max: near rest a light joint
+# keeps much of the delay margin its own (small) K_v leaves; the cubic part brakes the rest
+SPEED_DAMPING_SHARE = 0.75
 NEGLIGIBLE_CUBIC = 100.0  # a v_c this many times the velocity limit: no cubic term
 CRUISE_STEP = 1.1  # the goal-configuration gain of a joint slower than that grows by this
 DEFAULT_VELOCITY = 2.0 * pi  # rad/s, for a joint whose URDF gives no velocity limit
@@ -398,19 +401,34 @@ def cruising_speed(push_nm: np.ndarray, kv: np.ndarray, damping_speed_rad_s: np.
 
 
 def holding_damping(push_nm: np.ndarray, kv: np.ndarray, b_max: np.ndarray,
-                    ceiling_rad_s: np.ndarray, speed_cap_rad_s: np.ndarray) -> np.ndarray:
+                    ceiling_rad_s: np.ndarray, speed_cap_rad_s: np.ndarray,
+                    share: float = SPEED_DAMPING_SHARE) -> np.ndarray:
     """
     Return K_v per joint, raised where needed so the damping holds ``push_nm`` at the ceiling.
 
     The cubic damping's slope, ``k_v (1 + 3 v^2 / v_c^2)`` up to ``v_m`` (``speed_cap_rad_s``),
     may reach ``b_max`` at most (docs/gain_design.md, section 5), so at a speed ``v = a v_m``
-    it brakes with at most ``v (k_v + a^2 (b_max - k_v) / 3)``: a third of ``b_max v`` at
-    ``v_m`` if ``k_v`` is small. Where that is below the push, the linear part must carry
-    more: ``k_v = (push / v - a^2 b_max / 3) / (1 - a^2 / 3)``, at most ``b_max``.
+    it brakes with at most ``v (k_v + a^2 (b_max - k_v) / 3)``: a fifth of ``b_max v`` at
+    ``a = 0.8`` if ``k_v`` is small. Where that is below the push, the linear part must carry
+    more: ``k_v = (push / v - a^2 b_max / 3) / (1 - a^2 / 3)``, at most ``share b_max`` (a
+    push within :func:`holding_limit` needs no more).
     """
     a2 = np.minimum(ceiling_rad_s / speed_cap_rad_s, 1.0) ** 2
     needed = (push_nm / ceiling_rad_s - a2 * b_max / 3.0) / (1.0 - a2 / 3.0)
-    return np.minimum(np.maximum(kv, needed), np.maximum(kv, b_max))
+    return np.minimum(np.maximum(kv, needed), np.maximum(kv, share * b_max))
+
+
+def holding_limit(b_max: np.ndarray, ceiling_rad_s: np.ndarray, speed_cap_rad_s: np.ndarray,
+                  share: float = SPEED_DAMPING_SHARE) -> np.ndarray:
+    """
+    Return the largest push per joint the damping can hold at the ceiling (N m).
+
+    With ``k_v = share b_max`` and the cubic part at its slope limit (:func:`holding_damping`):
+    ``v (k_v + a^2 (b_max - k_v) / 3)`` at ``v`` = the ceiling, ``a = v / v_m``.
+    """
+    a2 = np.minimum(ceiling_rad_s / speed_cap_rad_s, 1.0) ** 2
+    kv = share * b_max
+    return ceiling_rad_s * (kv + a2 * (b_max - kv) / 3.0)
 
 
 def configuration_stiffness(shaping: Shaping) -> np.ndarray:
@@ -520,9 +538,9 @@ def design(model: RobotModel, task: cl.Task, rate_hz: float = 1000.0,
                          f'effort {effort.tolist()}, gravity up to '
                          f'{np.round(data["gravity_max"], 3).tolist()}')
     # Speed rule: never ask a joint for more than its damping can hold at SPEED_MARGIN x its
-    # velocity limit (b_max: the largest damping the sampled loop tolerates on its smallest
-    # inertia, halved); K_v is raised below (holding_damping) where the cubic part cannot.
-    # A joint without a URDF velocity limit keeps DEFAULT_VELOCITY as its cap.
+    # velocity limit (holding_limit; b_max: the largest damping the sampled loop tolerates on
+    # its smallest inertia, halved); K_v is raised below (holding_damping) where the cubic
+    # part alone cannot. A joint without a URDF velocity limit: b_max x DEFAULT_VELOCITY.
     inertia = data['inertia_min']
     velocity = np.array(model.velocity_limits, dtype=float)
     velocity = np.where(np.isfinite(velocity) & (velocity > 0), velocity, DEFAULT_VELOCITY)
@@ -531,7 +549,9 @@ def design(model: RobotModel, task: cl.Task, rate_hz: float = 1000.0,
                       for j in range(n)])
     limited_speed = np.array([isfinite(v) and v > 0.0 for v in model.velocity_limits])
     ceiling = np.where(limited_speed, SPEED_MARGIN * velocity, velocity)
-    push_max = np.minimum(budget, b_max * ceiling)
+    push_max = np.minimum(budget, np.where(limited_speed,
+                                           holding_limit(b_max, ceiling, velocity),
+                                           b_max * velocity))
     cap = push_max / (1.0 + GUIDE_OVER_TASK)  # what the task potential may ask of a joint
 
     # K_p: the largest gains within the a-priori bound (pose: the largest k_p k_o).

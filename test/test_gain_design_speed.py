@@ -46,11 +46,14 @@ def test_the_damping_holds_the_largest_push_below_the_speed_ceiling(arm, which):
     # with the values as written to the file (rounded), through the regulator's own law
     assert np.all(_brake_nm(d, ceiling, limits) >= push * (1.0 - 1e-3))
     assert np.all(f['terminal_speed_rad_s'] <= ceiling * (1.0 + 1e-3))
-    # the damping is never raised past what the sampled loop takes (the per-joint check)
+    # the linear damping is raised to at most SPEED_DAMPING_SHARE of what the sampled loop
+    # takes (b_max, the per-joint check) unless the design's own K_v was already above that
     for j, inertia in enumerate(f['inertia_min']):
         b_max = gd.DAMPER_SAFETY * gd._largest_stable_damping(
             inertia, gd._checked_delays(f['delays']), 1.0 / d.rate_hz)
         assert d.kv[j] <= b_max * (1.0 + 1e-3)
+        if f['damping_ratio']['tanh'][j] > 1.1 * gd.DAMPING_RATIO:  # raised by the rule
+            assert d.kv[j] <= gd.SPEED_DAMPING_SHARE * b_max * (1.0 + 1e-3)
     assert max(f['spectral_radius'].values()) < 1.0
 
 
@@ -75,13 +78,17 @@ def test_holding_damping_is_the_least_that_holds_the_push_within_the_slope_limit
     """K_v raised just enough: with v_c at the slope limit the brake at the ceiling is the push."""
     b_max, cap = np.array([4.0, 4.0, 4.0]), np.array([3.0, 3.0, 3.0])
     ceiling = 0.8 * cap
-    push = np.array([1.0, 6.0, 4.0 * 2.4])  # light, raised, the most the slope limit allows
+    limit = gd.holding_limit(b_max, ceiling, cap)  # the most push the rule can hold
+    push = np.array([1.0, 0.8 * limit[1], limit[2]])  # light, raised, the most it allows
     kv = gd.holding_damping(push, np.array([1.0, 0.5, 0.5]), b_max, ceiling, cap)
     assert kv[0] == 1.0  # already enough
-    assert 0.5 < kv[1] < b_max[1]
-    assert kv[2] == pytest.approx(b_max[2])
-    v_c = cap[1] * np.sqrt(3.0 * kv[1] / (b_max[1] - kv[1]))  # slope k_v (1 + 3 v_m^2/v_c^2)
-    assert kv[1] * ceiling[1] * (1.0 + (ceiling[1] / v_c) ** 2) == pytest.approx(push[1])
+    assert 0.5 < kv[1] < gd.SPEED_DAMPING_SHARE * b_max[1]
+    assert kv[2] == pytest.approx(gd.SPEED_DAMPING_SHARE * b_max[2])
+    for j in (1, 2):
+        v_c = cap[j] * np.sqrt(3.0 * kv[j] / (b_max[j] - kv[j]))  # slope k_v (1 + 3 v^2/v_c^2)
+        assert kv[j] * ceiling[j] * (1.0 + (ceiling[j] / v_c) ** 2) == pytest.approx(push[j])
+    # more push than that is never asked: the design's push_max stops at holding_limit
+    assert np.all(limit < b_max * ceiling)
 
 
 def test_an_arm_without_velocity_limits_is_designed_without_the_rule():
