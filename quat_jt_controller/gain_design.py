@@ -18,7 +18,8 @@ compensation. In short:
    within the part of the budget left to the task potential;
 3. Lambda from where the tanh force should saturate; K_v for critical damping of the
    linearised loop at the geometric mean of the two potentials' stiffnesses, from M(q) at
-   representative configurations;
+   representative configurations, raised where the damping (with its cubic part) would not
+   hold the potentials' largest push at ``SPEED_MARGIN`` x the URDF velocity limit;
 4. the sampled loop linearised at those configurations must have spectral radius < 1, for
    both potentials, with every delay asked for plus one more tick (``DELAY_MARGIN``), and at
    ``GAIN_MARGIN`` x the gains; the stiffness of the limit band, of the goal-configuration
@@ -56,6 +57,13 @@ DAMPING_RATIO = sqrt(0.5)  # of the tanh law's linearised loop (the quadratic's:
 # Where the sampled loop caps K_v, the stiffness is lowered until the tanh law keeps this much
 DAMPING_RATIO_MIN = 0.5
 CRUISE_FRACTION = 0.6  # of the URDF velocity limit: the speed far from the goal (default)
+# ... and the most that steady speed may be, whatever the cruise aimed at: the push far from
+# the goal meets the damping (linear and cubic) at or below this share of the limit
+SPEED_MARGIN = 0.8
+# ... where K_v is raised to hold it, at most to this share of b_max: near rest a light joint
+# keeps much of the delay margin its own (small) K_v leaves; the cubic part brakes the rest
+SPEED_DAMPING_SHARE = 0.75
+NEGLIGIBLE_CUBIC = 100.0  # a v_c this many times the velocity limit: no cubic term
 CRUISE_STEP = 1.1  # the goal-configuration gain of a joint slower than that grows by this
 DEFAULT_VELOCITY = 2.0 * pi  # rad/s, for a joint whose URDF gives no velocity limit
 DAMPER_SAFETY = 0.5  # of the largest damping the sampled loop tolerates on a joint
@@ -382,6 +390,58 @@ def _cruising_guide(configs, kp: np.ndarray, lam: np.ndarray, bound: np.ndarray,
     return guide
 
 
+def cruising_speed(push_nm: np.ndarray, kv: np.ndarray, damping_speed_rad_s: np.ndarray,
+                   speed_cap_rad_s: np.ndarray) -> np.ndarray:
+    """
+    Return the steady speed per joint where the damping meets a constant ``push_nm``.
+
+    The damping is the regulator's (``shaping.add_speed_damping``): ``k_v v (1 + min(v, v_m)^2
+    / v_c^2)``, ``v_m`` = ``speed_cap_rad_s``, no cubic part where ``v_c`` is 0. It rises
+    monotonically with ``v``; the speed is found by bisection.
+    """
+    out = np.zeros(len(push_nm))
+    for j, (push, k, v_c, v_m) in enumerate(zip(push_nm, kv, damping_speed_rad_s,
+                                                speed_cap_rad_s)):
+        lo_v, hi_v = 0.0, push / k
+        for _ in range(60):
+            v = 0.5 * (lo_v + hi_v)
+            f = k * v * (1.0 + (min(v, v_m) / v_c) ** 2 if v_c > 0.0 else 1.0)
+            lo_v, hi_v = (v, hi_v) if f < push else (lo_v, v)
+        out[j] = 0.5 * (lo_v + hi_v)
+    return out
+
+
+def holding_damping(push_nm: np.ndarray, kv: np.ndarray, b_max: np.ndarray,
+                    ceiling_rad_s: np.ndarray, speed_cap_rad_s: np.ndarray,
+                    share: float = SPEED_DAMPING_SHARE) -> np.ndarray:
+    """
+    Return K_v per joint, raised where needed so the damping holds ``push_nm`` at the ceiling.
+
+    The cubic damping's slope, ``k_v (1 + 3 v^2 / v_c^2)`` up to ``v_m`` (``speed_cap_rad_s``),
+    may reach ``b_max`` at most (docs/gain_design.md, section 5), so at a speed ``v = a v_m``
+    it brakes with at most ``v (k_v + a^2 (b_max - k_v) / 3)``: a fifth of ``b_max v`` at
+    ``a = 0.8`` if ``k_v`` is small. Where that is below the push, the linear part must carry
+    more: ``k_v = (push / v - a^2 b_max / 3) / (1 - a^2 / 3)``, at most ``share b_max`` (a
+    push within :func:`holding_limit` needs no more).
+    """
+    a2 = np.minimum(ceiling_rad_s / speed_cap_rad_s, 1.0) ** 2
+    needed = (push_nm / ceiling_rad_s - a2 * b_max / 3.0) / (1.0 - a2 / 3.0)
+    return np.minimum(np.maximum(kv, needed), np.maximum(kv, share * b_max))
+
+
+def holding_limit(b_max: np.ndarray, ceiling_rad_s: np.ndarray, speed_cap_rad_s: np.ndarray,
+                  share: float = SPEED_DAMPING_SHARE) -> np.ndarray:
+    """
+    Return the largest push per joint the damping can hold at the ceiling (N m).
+
+    With ``k_v = share b_max`` and the cubic part at its slope limit (:func:`holding_damping`):
+    ``v (k_v + a^2 (b_max - k_v) / 3)`` at ``v`` = the ceiling, ``a = v / v_m``.
+    """
+    a2 = np.minimum(ceiling_rad_s / speed_cap_rad_s, 1.0) ** 2
+    kv = share * b_max
+    return ceiling_rad_s * (kv + a2 * (b_max - kv) / 3.0)
+
+
 def configuration_stiffness(shaping: Shaping) -> np.ndarray:
     """Joint stiffness (N m/rad) of the goal-configuration term at q* (0 with a dead zone)."""
     if shaping.configuration_radius_rad > 0.0 or not shaping.configuration_gain:
@@ -488,15 +548,21 @@ def design(model: RobotModel, task: cl.Task, rate_hz: float = 1000.0,
                          f'{[model.joint_names[j] for j in np.flatnonzero(budget <= 0.0)]}: '
                          f'effort {effort.tolist()}, gravity up to '
                          f'{np.round(data["gravity_max"], 3).tolist()}')
-    # Speed rule: never ask a joint for more than its damping can hold at its velocity limit
-    # (the largest damping the sampled loop tolerates on its smallest inertia, halved).
+    # Speed rule: never ask a joint for more than its damping can hold at SPEED_MARGIN x its
+    # velocity limit (holding_limit; b_max: the largest damping the sampled loop tolerates on
+    # its smallest inertia, halved); K_v is raised below (holding_damping) where the cubic
+    # part alone cannot. A joint without a URDF velocity limit: b_max x DEFAULT_VELOCITY.
     inertia = data['inertia_min']
     velocity = np.array(model.velocity_limits, dtype=float)
     velocity = np.where(np.isfinite(velocity) & (velocity > 0), velocity, DEFAULT_VELOCITY)
     b_max = np.array([DAMPER_SAFETY * _largest_stable_damping(inertia[j],
                                                               _checked_delays(delays), dt_s)
                       for j in range(n)])
-    push_max = np.minimum(budget, b_max * velocity)
+    limited_speed = np.array([isfinite(v) and v > 0.0 for v in model.velocity_limits])
+    ceiling = np.where(limited_speed, SPEED_MARGIN * velocity, velocity)
+    push_max = np.minimum(budget, np.where(limited_speed,
+                                           holding_limit(b_max, ceiling, velocity),
+                                           b_max * velocity))
     cap = push_max / (1.0 + GUIDE_OVER_TASK)  # what the task potential may ask of a joint
 
     # K_p: the largest gains within the a-priori bound (pose: the largest k_p k_o).
@@ -548,6 +614,8 @@ def design(model: RobotModel, task: cl.Task, rate_hz: float = 1000.0,
                 guide[j] *= SHRINK
         extra = guide / GUIDE_RAMP_RAD
         kv = np.minimum(_damping(configs, kp, lam, extra, task), b_max)
+        kv = np.where(limited_speed, holding_damping(bound + guide, kv, b_max, ceiling,
+                                                     velocity), kv)
         rho = _worst_rho(configs, kp, kv, lam, extra, delays, dt_s, task)
         zeta = _median_damping_ratio(configs, kp * lam, kv, extra, task)
         if max(rho.values()) < 1.0 and zeta.min() >= DAMPING_RATIO_MIN:
@@ -594,16 +662,11 @@ def design(model: RobotModel, task: cl.Task, rate_hz: float = 1000.0,
     for j in range(n):
         if push[j] / kv[j] <= cruise[j] or b_max[j] <= kv[j]:
             continue  # linear damping alone keeps it slow enough, or nothing more is stable
-        v_c = sqrt(cruise[j] ** 3 / (push[j] / kv[j] - cruise[j]))
-        damping_speed[j] = max(v_c, velocity[j] * sqrt(3.0 * kv[j] / (b_max[j] - kv[j])))
-    terminal = []
-    for j in range(n):  # v (1 + v^2 / v_c^2) = push / k_v, by bisection
-        lo_v, hi_v = 0.0, push[j] / kv[j]
-        for _ in range(60):
-            v = 0.5 * (lo_v + hi_v)
-            f = v * (1.0 + (v / damping_speed[j]) ** 2 if damping_speed[j] > 0 else 1.0)
-            lo_v, hi_v = (v, hi_v) if f < push[j] / kv[j] else (lo_v, v)
-        terminal.append(0.5 * (lo_v + hi_v))
+        v_c = max(sqrt(cruise[j] ** 3 / (push[j] / kv[j] - cruise[j])),
+                  velocity[j] * sqrt(3.0 * kv[j] / (b_max[j] - kv[j])))
+        if v_c < NEGLIGIBLE_CUBIC * velocity[j]:  # else it brakes < 1e-4 of k_v v: none
+            damping_speed[j] = v_c
+    terminal = cruising_speed(push, kv, damping_speed, velocity)
     # The effort share of what may be learned is held to the damping torque (linear and cubic)
     # at the joint's velocity limit: a fully learned over-compensation alone, with no friction
     # left to take it, drives the joint no faster than that limit.
@@ -645,6 +708,7 @@ def design(model: RobotModel, task: cl.Task, rate_hz: float = 1000.0,
         'regular_sigma_min': data['regular_sigma_min'],
         'warnings': (friction_warnings(model, friction, learning_limit)
                      + inertia_warnings(model, effort, inertia)),
+        'speed_ceiling_rad_s': np.where(limited_speed, ceiling, np.inf),
         'time_to_goal_s': time_to_goal_s(np.array(terminal), configs, np.array(kp_r),
                                          np.array(kv_r), np.array(lam_r), extra, dt_s,
                                          task=task),
@@ -820,7 +884,8 @@ def to_yaml(d: Design, potential: str = 'tanh', command: str = '',
         f'damping ratios tanh {_fmt(zeta["tanh"])}, quadratic {_fmt(zeta["quadratic"])};',
         f'  cruising speeds far from the goal {_fmt(f["terminal_speed_rad_s"])} rad/s '
         f'(velocity limits {_fmt(f["velocity_limits_rad_s"])}, aimed at '
-        f'{f["cruise_fraction"]:g} x them).',
+        f'{f["cruise_fraction"]:g} x them, at most {SPEED_MARGIN:g} x them: K_v is raised where '
+        'the cubic damping cannot hold the push there).',
         f'Expected time to a goal: about {f["time_to_goal_s"]:.2g} s for a 1 rad move of every '
         'joint (the slowest cruise, then ln(1000) time constants of the slowest linear mode).',
     ]
@@ -835,7 +900,8 @@ def to_yaml(d: Design, potential: str = 'tanh', command: str = '',
         'task': 'read-only',
         'potential': "'tanh' (Eq. 32/38) or 'quadratic' (Eq. 24/37); one set serves both",
         'kp': f'K_p, {axes}: a-priori torque bound within the budget',
-        'kv': f'K_v, N m s/rad: damping ratio {DAMPING_RATIO:.2f} (tanh), from M(q)',
+        'kv': f'K_v, N m s/rad: damping ratio {DAMPING_RATIO:.2f} (tanh), from M(q), or '
+              'more to hold the speed',
         'lambda': f'Lambda: {_saturation(d.lam, d.task)}',
         'gravity_compensation': '+ g(q) from the URDF',
         'joint_limit_margin': 'rad, band inside each limit (joints with less than a full turn)',

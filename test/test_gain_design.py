@@ -104,9 +104,13 @@ def test_the_sampled_loop_is_stable_with_the_delays_designed_for(designs, robot)
                 assert gd.time_constant_s(rho) < 1.0
     assert max(d.figures['spectral_radius'].values()) < 1.0
     # near-critical damping for the tanh law, as designed (less where the sampled loop caps
-    # the damping: the xArm6's joint 1, folded, has 0.026 kg m^2)
+    # the damping: the xArm6's joint 1, folded, has 0.026 kg m^2; more where the speed rule
+    # raised K_v to hold the push below the velocity limit: those joints cruise at the ceiling)
     zeta = d.figures['damping_ratio']['tanh']
-    assert np.all(zeta < 1.1 * gd.DAMPING_RATIO) and np.all(zeta > 0.5), zeta
+    assert np.all(zeta > 0.5), zeta
+    over = zeta >= 1.1 * gd.DAMPING_RATIO
+    np.testing.assert_allclose(d.figures['terminal_speed_rad_s'][over],
+                               d.figures['speed_ceiling_rad_s'][over], rtol=1e-2)
 
 
 def test_spectral_radius_of_a_sampled_mass_spring_damper():
