@@ -24,7 +24,7 @@ from quat_jt_controller import paper
 from quat_jt_controller.model import RobotModel
 from quat_jt_controller.reference_sim import ClosedLoop, run_sampled
 from quat_jt_runtime.resources import default_urdf_xml
-from wrist_sim.simulator import WristSimulator
+from wrist_sim.simulator import RobotSimulator
 
 
 def sampled_run(model: RobotModel, potential: str, coulomb_nm: Sequence[float],
@@ -33,7 +33,7 @@ def sampled_run(model: RobotModel, potential: str, coulomb_nm: Sequence[float],
     gains = cl.Gains.create(potential, paper.KP, paper.KV, paper.LAMBDA, cl.Task.ORIENTATION,
                             model.n)
     loop = ClosedLoop(model, gains, cl.Task.ORIENTATION, paper.Q_DESIRED)
-    with WristSimulator(default_urdf_xml(), model.joint_names, coulomb_nm=coulomb_nm) as sim:
+    with RobotSimulator(default_urdf_xml(), model.joint_names, coulomb_nm=coulomb_nm) as sim:
         return run_sampled(loop, sim, duration_s, delay_ticks=0).orientation_error
 
 

@@ -31,7 +31,7 @@ TIMES_S = (0.25, 0.5, 1.0, 2.0, 3.0, 4.0, 5.0, 6.0)
 def trace(label: str, gains: cl.Gains, shaping: sh.Shaping, duration_s: float,
           friction) -> tuple[str, SampledRun]:
     """Run the paper's experiment once; return a label and the run."""
-    from wrist_sim.simulator import WristSimulator
+    from wrist_sim.simulator import RobotSimulator
 
     model, _, _ = load_controller(ROBOTS['wrist'])
     loop = ClosedLoop(model, gains, cl.Task.ORIENTATION, paper.Q_DESIRED, shaping=shaping)
@@ -39,7 +39,7 @@ def trace(label: str, gains: cl.Gains, shaping: sh.Shaping, duration_s: float,
                                  cl.Task.ORIENTATION, shaping.joint_limit_margin_rad)
               if shaping.configuration_on else None)
     with quiet():
-        sim = WristSimulator(default_urdf_xml(), model.joint_names, coulomb_nm=friction)
+        sim = RobotSimulator(default_urdf_xml(), model.joint_names, coulomb_nm=friction)
     try:
         return label, run_sampled(loop, sim, duration_s, 1, q_star, Q_STAR_AFTER_S)
     finally:

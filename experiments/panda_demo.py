@@ -39,7 +39,7 @@ from quat_jt_controller.model import RobotModel
 from quat_jt_controller.regulator import Goal
 from quat_jt_runtime.resources import config_parameters
 from wrist_sim.quiet import c_output_silenced
-from wrist_sim.simulator import WristSimulator
+from wrist_sim.simulator import RobotSimulator
 
 PANDA_URDF = Path(pybullet_data.getDataPath()) / 'franka_panda' / 'panda.urdf'
 # The goals: the flange's pose at these joint angles (the first is launch/panda_demo.launch.py's)
@@ -84,7 +84,7 @@ def run(potential: str, hold_s: float) -> tuple[SequenceRun, RobotModel, str]:
     regulator = controller_from_package_config('panda_controller.yaml', urdf_xml, potential)
     model, shaping = regulator.model, regulator.shaping
     with c_output_silenced((1, 2)):
-        sim = WristSimulator(urdf_xml, model.joint_names, dt_s=1.0 / simp['rate_hz'],
+        sim = RobotSimulator(urdf_xml, model.joint_names, dt_s=1.0 / simp['rate_hz'],
                              viscous_nm_s_per_rad=simp['viscous_friction'],
                              coulomb_nm=simp['coulomb_friction'],
                              initial_positions_rad=simp['initial_positions'],

@@ -248,7 +248,7 @@ def run_case(robot: Robot, model: RobotModel, gains: cl.Gains, shaping: sh.Shapi
     ``no_velocities`` gives the controller estimated velocities (``PositionsOnly``), ``dt_s``
     the plant's step and the control period.
     """
-    from wrist_sim.simulator import WristSimulator
+    from wrist_sim.simulator import RobotSimulator
 
     p_d, R_d = model.forward_kinematics(qg.tolist())
     q_d = quat.from_rotation_matrix(R_d)
@@ -259,7 +259,7 @@ def run_case(robot: Robot, model: RobotModel, gains: cl.Gains, shaping: sh.Shapi
               if shaping.configuration_on else None)
     loop = ClosedLoop(model, gains, robot.task, q_d, p_d, shaping=shaping)
     with quiet():
-        sim = WristSimulator(robot_urdf(robot), model.joint_names, initial_positions_rad=q0,
+        sim = RobotSimulator(robot_urdf(robot), model.joint_names, initial_positions_rad=q0,
                              viscous_nm_s_per_rad=sim_params.get('viscous_friction'),
                              coulomb_nm=sim_params.get('coulomb_friction'),
                              enforce_velocity_limits=sim_params.get('enforce_velocity_limits',

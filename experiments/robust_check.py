@@ -28,7 +28,7 @@ from quat_jt_controller.gain_design import design
 from quat_jt_controller.model import RobotModel
 from quat_jt_controller.reference_sim import ClosedLoop, run_sampled
 from quat_jt_runtime.resources import default_urdf_xml
-from wrist_sim.simulator import WristSimulator
+from wrist_sim.simulator import RobotSimulator
 
 ERD = 'cmeel.prefix/share/example-robot-data/robots'
 
@@ -80,7 +80,7 @@ def run_arm(arm: str, condition: str, goals: int, duration_s: float, seed: int,
         p, R = plain.forward_kinematics(q_goal.tolist())
         loop = ClosedLoop(plain, gains, cl.Task(task), quat.from_rotation_matrix(R), tuple(p),
                           shaping=shaping)
-        with WristSimulator(urdf, plain.joint_names, initial_positions_rad=start.tolist(),
+        with RobotSimulator(urdf, plain.joint_names, initial_positions_rad=start.tolist(),
                             coulomb_nm=coulomb.tolist(), engine='mujoco',
                             armature=[true_armature] * n,
                             enforce_velocity_limits=False) as sim:

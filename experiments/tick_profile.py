@@ -75,7 +75,7 @@ def profile(calls: int) -> dict[str, dict[str, float]]:
     from rclpy.serialization import deserialize_message, serialize_message
     from sensor_msgs.msg import JointState
     from std_msgs.msg import Float64MultiArray
-    from wrist_sim.simulator import WristSimulator
+    from wrist_sim.simulator import RobotSimulator
 
     from experiments.probe import ProbeNode
 
@@ -83,7 +83,7 @@ def profile(calls: int) -> dict[str, dict[str, float]]:
     model = RobotModel(urdf, 'base_link', 'tool0')
     gains = cl.Gains.create('tanh', paper.KP, paper.KV, paper.LAMBDA, cl.Task.ORIENTATION, 3)
     regulator = Regulator(model, cl.Task.ORIENTATION, gains, goal=Goal(paper.Q_DESIRED))
-    sim = WristSimulator(urdf, model.joint_names)
+    sim = RobotSimulator(urdf, model.joint_names)
     probe = ProbeNode('tick_profile', random.randint(1, 100))  # a private domain
     try:
         node = probe.node

@@ -6,7 +6,7 @@ q = (0.2, -0.4, -1.1, 0.2, 1.4, 0.3) rad, 0.10 m and 0.25 rad from the start), t
 ``config/xarm6_controller.yaml`` and the start and friction of ``config/xarm6_sim.yaml``. What
 runs is NOT the nodes over DDS: it is the sampled loop in one process, the same law (Eq. 24 /
 32 with g(q), ``reference_sim.ClosedLoop.torque``) computed from each 1 kHz state of the same
-PyBullet simulator (``wrist_sim.simulator.WristSimulator``: friction, effort limits), applied
+PyBullet simulator (``wrist_sim.simulator.RobotSimulator``: friction, effort limits), applied
 in the next step, as the nodes do when every command arrives in time.
 
 For each potential it writes, to ``--out`` (default ``results/xarm6``): an MCAP with
@@ -36,7 +36,7 @@ from quat_jt_controller.inverse_kinematics import goal_configuration
 from quat_jt_controller.model import RobotModel
 from quat_jt_controller.reference_sim import ClosedLoop
 from quat_jt_runtime.resources import config_parameters
-from wrist_sim.simulator import WristSimulator
+from wrist_sim.simulator import RobotSimulator
 
 XARM6_URDF = Path(pybullet_data.getDataPath()) / 'xarm' / 'xarm6_robot.urdf'
 # The reachable goal of launch/xarm6_demo.launch.py: the arm's pose at these joint angles.
@@ -76,7 +76,7 @@ def run(potential: str, duration_s: float, urdf_xml: str) -> tuple[PoseRun, Robo
     t = np.empty(steps + 1)
     q, qdot, tau = (np.empty((steps + 1, model.n)) for _ in range(3))
     pos, ori = np.empty(steps + 1), np.empty(steps + 1)
-    with WristSimulator(urdf_xml, model.joint_names, dt_s=1.0 / simp['rate_hz'],
+    with RobotSimulator(urdf_xml, model.joint_names, dt_s=1.0 / simp['rate_hz'],
                         viscous_nm_s_per_rad=simp['viscous_friction'],
                         coulomb_nm=simp['coulomb_friction'],
                         initial_positions_rad=simp['initial_positions'],

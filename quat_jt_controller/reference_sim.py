@@ -159,7 +159,7 @@ def run_sampled(loop: ClosedLoop, sim, duration_s: float, delay_ticks: int = 1,
     """
     Run ``loop``'s regulator on a simulator as the nodes do: sampled, delayed, held, clamped.
 
-    ``sim`` is a simulator of the same URDF and joints (``wrist_sim.simulator.WristSimulator``
+    ``sim`` is a simulator of the same URDF and joints (``wrist_sim.simulator.RobotSimulator``
     or anything with ``q_rad``, ``qdot_rad_s``, ``dt_s`` and ``step(tau) -> applied``). Each
     step applies (zero-order hold) the torque of the node's tick (Regulator.update: Eq. (22) +
     g(q), clamped to the URDF effort limits) computed from the state measured ``delay_ticks``

@@ -13,14 +13,14 @@ from quat_jt_controller import paper
 from quat_jt_controller import quaternion as quat
 from quat_jt_controller.model import RobotModel
 from quat_jt_runtime.resources import default_urdf_xml
-from wrist_sim.simulator import WristSimulator
+from wrist_sim.simulator import RobotSimulator
 
 AXIS_LENGTH_M = 0.1
 
 
 def main() -> int:
     model = RobotModel(default_urdf_xml(), 'base_link', 'tool0')
-    with WristSimulator(default_urdf_xml(), use_gui=True) as sim:
+    with RobotSimulator(default_urdf_xml(), use_gui=True) as sim:
         q_goal = paper.Q_JOINT_DESIRED_RAD
         sim.reset(q_goal)
         p_goal, _ = model.forward_kinematics(q_goal)

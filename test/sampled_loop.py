@@ -5,7 +5,7 @@ The ideal loop of ``reference_sim`` evaluates Eq. (24) / (32) continuously. Over
 controller sees the joint state of one tick and its torque is applied, held constant (zero-order
 hold), during a later tick of the 1 kHz simulator, clamped to the URDF effort limits, with
 PyBullet's integrator and the simulator's friction. This module reproduces that loop in one
-process on the simulator core (``wrist_sim.simulator.WristSimulator``). The linearised
+process on the simulator core (``wrist_sim.simulator.RobotSimulator``). The linearised
 sampled-and-delayed loop around the goal (``linearized_spectral_radius``, re-exported here)
 lives in ``quat_jt_controller.gain_design``, which computed the gains of
 ``config/xarm6_controller.yaml``.
@@ -54,7 +54,7 @@ def goal_of(model: RobotModel, q_goal_rad: Sequence[float]):
 def _report() -> None:  # pragma: no cover - the figures behind config/xarm6_controller.yaml
     sys.path.insert(0, str(Path(__file__).resolve().parent))
     from robots import xarm6_model, XARM6_URDF
-    from wrist_sim.simulator import WristSimulator
+    from wrist_sim.simulator import RobotSimulator
 
     model = xarm6_model()
     sim_params = config_parameters('xarm6_sim.yaml')
@@ -84,7 +84,7 @@ def _report() -> None:  # pragma: no cover - the figures behind config/xarm6_con
                   f'{bool(np.diff(ideal.lyapunov).max() <= 1e-9 * ideal.lyapunov[0])}')
             for delay in (1, 3, 6):
                 for friction in (False, True):
-                    with WristSimulator(
+                    with RobotSimulator(
                             XARM6_URDF.read_text(), model.joint_names, initial_positions_rad=q0,
                             viscous_nm_s_per_rad=(sim_params['viscous_friction']
                                                   if friction else None),

@@ -29,7 +29,7 @@ from quat_jt_controller import shaping as sh
 from quat_jt_controller.reference_sim import ClosedLoop, run_sampled
 from quat_jt_runtime.resources import default_urdf_xml
 from robots import wrist_model
-from wrist_sim.simulator import WristSimulator
+from wrist_sim.simulator import RobotSimulator
 
 pytestmark = pytest.mark.unit
 
@@ -104,7 +104,7 @@ def rest_trace(potential, compensation, duration_s=6.0):
     gains = cl.Gains.create(potential, paper.KP, paper.KV, paper.LAMBDA, ORI, 3)
     shaping = sh.Shaping.create(3, friction_compensation=compensation)
     loop = ClosedLoop(model, gains, ORI, paper.Q_DESIRED, shaping=shaping)
-    with WristSimulator(default_urdf_xml(), model.joint_names, coulomb_nm=FRICTION) as sim:
+    with RobotSimulator(default_urdf_xml(), model.joint_names, coulomb_nm=FRICTION) as sim:
         return run_sampled(loop, sim, duration_s, delay_ticks=1)
 
 
@@ -237,7 +237,7 @@ def test_with_no_estimate_a_friction_plant_still_reaches_the_goal():
     for share in (0.0, 0.03):
         d = _unmeasured_friction_design(share)
         loop = ClosedLoop(model, d.gains('quadratic'), ORI, paper.Q_DESIRED, shaping=d.shaping)
-        with WristSimulator(default_urdf_xml(), model.joint_names, coulomb_nm=coulomb) as sim:
+        with RobotSimulator(default_urdf_xml(), model.joint_names, coulomb_nm=coulomb) as sim:
             run = run_sampled(loop, sim, 2.0, 1, list(paper.Q_JOINT_DESIRED_RAD), 0.05)
         final[share] = (run.final()[1], run.settled_at_s(orientation=0.01))
         learned = loop.clamped.learned_friction_nm
@@ -269,7 +269,7 @@ def test_on_a_plant_without_friction_the_learning_finds_nothing_to_learn(potenti
         np.maximum(most, regulator.learned_friction_nm, out=most)
         return out
     regulator.update = watched_tick
-    with WristSimulator(default_urdf_xml(), model.joint_names, coulomb_nm=[0.0] * 3,
+    with RobotSimulator(default_urdf_xml(), model.joint_names, coulomb_nm=[0.0] * 3,
                         viscous_nm_s_per_rad=[0.0] * 3) as sim:
         run = run_sampled(loop, sim, 2.0, 1, list(paper.Q_JOINT_DESIRED_RAD), 0.05)
     assert np.all(most <= 0.05 * np.array(d.shaping.friction_learning_limit_nm))

@@ -1,7 +1,7 @@
 """
 The simulator's MuJoCo engine against Pinocchio, and what both engines share.
 
-The same :class:`WristSimulator` interface with ``engine='mujoco'``: the one-step
+The same :class:`RobotSimulator` interface with ``engine='mujoco'``: the one-step
 acceleration is Pinocchio's ABA with ``model.armature`` set (the rotor inertia simulated),
 Coulomb friction holds and breaks away, viscous friction is MuJoCo's implicit damping, the
 speeds are held at the URDF velocity limits, the joints not driven are locked, and the bundled
@@ -12,7 +12,7 @@ import pytest
 from quat_jt_controller.model import RobotModel
 from quat_jt_runtime.resources import default_urdf_xml
 from robots import PANDA_JOINTS, PANDA_URDF, random_q, XARM6_URDF
-from wrist_sim.simulator import ENGINES, SimulatorError, WristSimulator
+from wrist_sim.simulator import ENGINES, RobotSimulator, SimulatorError
 
 pytestmark = pytest.mark.unit
 mujoco = pytest.importorskip('mujoco')
@@ -26,7 +26,7 @@ def urdf() -> str:
     return default_urdf_xml()
 
 
-def one_step_acceleration(sim: WristSimulator, q, qdot, tau) -> np.ndarray:
+def one_step_acceleration(sim: RobotSimulator, q, qdot, tau) -> np.ndarray:
     """Return (qdot_k+1 - qdot_k) / dt of one step from (q, qdot) under ``tau``."""
     sim.reset(q, qdot)
     sim.step(tau)
@@ -45,7 +45,7 @@ def test_the_acceleration_is_pinocchios_with_the_armature(urdf, robot):
     armature = np.linspace(0.05, 0.4, plain.n)
     model = RobotModel(xml, base, tip, joints, armature)
     rng = np.random.default_rng(7)
-    with WristSimulator(xml, model.joint_names, engine='mujoco', armature=armature,
+    with RobotSimulator(xml, model.joint_names, engine='mujoco', armature=armature,
                         enforce_velocity_limits=False) as sim:
         assert sim.engine == 'mujoco' and sim.supports_armature
         np.testing.assert_array_equal(sim.armature, armature)
@@ -65,7 +65,7 @@ def test_the_acceleration_is_pinocchios_with_the_armature(urdf, robot):
 def test_pybullet_keeps_the_armature_but_cannot_simulate_it(urdf):
     """Its dynamics stay the URDF's alone, and ``supports_armature`` says so."""
     plain = RobotModel(urdf, 'base_link', 'tool0')
-    with WristSimulator(urdf, armature=ARMATURE) as sim:
+    with RobotSimulator(urdf, armature=ARMATURE) as sim:
         assert sim.engine == 'pybullet' and not sim.supports_armature
         np.testing.assert_array_equal(sim.armature, ARMATURE)
         q, qdot, tau = [0.3, 0.5, -0.2], [0.5, 0.0, -0.5], [2.0, 1.0, -1.0]
@@ -78,7 +78,7 @@ def test_the_pendulum_falls_the_same_in_both_engines(urdf, engine):
     """Gravity alone from rest, 0.3 s, against Pinocchio integrated the same way."""
     model = RobotModel(urdf, 'base_link', 'tool0')
     q, qdot = np.array([0.3, 0.4, -0.2]), np.zeros(3)
-    with WristSimulator(urdf, engine=engine, initial_positions_rad=q) as sim:
+    with RobotSimulator(urdf, engine=engine, initial_positions_rad=q) as sim:
         for _ in range(300):
             qdot = qdot + DT_S * model.forward_dynamics(q, qdot, np.zeros(3))
             q = q + DT_S * qdot
@@ -98,7 +98,7 @@ def test_coulomb_friction_holds_below_its_level_and_breaks_away_above(urdf):
     coulomb = np.array([2.0, 3.0, 2.0])
     q0 = np.array([0.2, 0.5, -0.3])
     g = np.array(model.gravity(q0))
-    with WristSimulator(urdf, engine='mujoco', coulomb_nm=coulomb,
+    with RobotSimulator(urdf, engine='mujoco', coulomb_nm=coulomb,
                         initial_positions_rad=q0) as sim:
         held = g + 0.9 * coulomb * np.array([1.0, -1.0, 1.0])
         for _ in range(2000):
@@ -119,7 +119,7 @@ def test_viscous_friction_is_implicit_damping(urdf):
     model = RobotModel(urdf, 'base_link', 'tool0', armature=ARMATURE)
     b = np.array([0.5, 0.3, 0.2])
     q, qdot, tau = np.array([0.3, 0.5, -0.2]), np.array([2.0, -1.0, 0.5]), np.zeros(3)
-    with WristSimulator(urdf, engine='mujoco', viscous_nm_s_per_rad=b,
+    with RobotSimulator(urdf, engine='mujoco', viscous_nm_s_per_rad=b,
                         armature=ARMATURE) as sim:
         qddot = one_step_acceleration(sim, q, qdot, tau)
         M = model.mass_matrix(q)
@@ -131,7 +131,7 @@ def test_viscous_friction_is_implicit_damping(urdf):
 
 def test_speeds_are_held_at_the_velocity_limits_and_efforts_clamped(urdf):
     """Full torque for 1 s: no joint passes 6.28 rad/s, and q integrates the held speed."""
-    with WristSimulator(urdf, engine='mujoco') as sim:
+    with RobotSimulator(urdf, engine='mujoco') as sim:
         np.testing.assert_allclose(sim.velocity_limits_rad_s, 6.2832)
         applied = sim.step([100.0, -100.0, 5.0])
         np.testing.assert_allclose(applied, [50.0, -30.0, 5.0])
@@ -142,7 +142,7 @@ def test_speeds_are_held_at_the_velocity_limits_and_efforts_clamped(urdf):
             fastest = max(fastest, float(np.abs(sim.qdot_rad_s).max()))
             np.testing.assert_allclose(sim.q_rad, q_before + DT_S * sim.qdot_rad_s, atol=1e-12)
         assert 6.0 < fastest <= 6.2832 + 1e-12, fastest
-    with WristSimulator(urdf, engine='mujoco', enforce_velocity_limits=False) as sim:
+    with RobotSimulator(urdf, engine='mujoco', enforce_velocity_limits=False) as sim:
         fastest = 0.0
         for _ in range(1000):  # until the stops
             sim.step(sim.effort_limits_nm)
@@ -154,8 +154,8 @@ def test_the_robots_of_the_configs_compile(urdf):
     """The wrist, the xArm6 (its two impossible inertias balanced) and the Panda load."""
     for xml, joints in ((urdf, None), (XARM6_URDF.read_text(), None),
                         (PANDA_URDF.read_text(), PANDA_JOINTS)):
-        with WristSimulator(xml, joints, engine='mujoco') as sim:
-            with WristSimulator(xml, joints) as bullet:
+        with RobotSimulator(xml, joints, engine='mujoco') as sim:
+            with RobotSimulator(xml, joints) as bullet:
                 assert sim.joint_names == bullet.joint_names
                 np.testing.assert_array_equal(sim.effort_limits_nm, bullet.effort_limits_nm)
                 np.testing.assert_array_equal(sim.velocity_limits_rad_s,
@@ -172,7 +172,7 @@ def test_the_joints_not_driven_are_locked(urdf):
     """Two of the wrist's joints driven: the third held at zero, as RobotModel locks it."""
     names = ['joint3', 'joint2']
     model = RobotModel(urdf, 'base_link', 'tool0', names)
-    with WristSimulator(urdf, names, engine='mujoco') as sim:
+    with RobotSimulator(urdf, names, engine='mujoco') as sim:
         np.testing.assert_allclose(sim.effort_limits_nm, [20.0, 30.0])
         q, qdot, tau = np.array([0.2, 0.5]), np.array([1.0, -0.5]), np.array([1.0, 2.0])
         np.testing.assert_allclose(one_step_acceleration(sim, q, qdot, tau),
@@ -182,13 +182,13 @@ def test_the_joints_not_driven_are_locked(urdf):
 def test_bad_engines_and_values_are_refused_by_name(urdf, monkeypatch):
     with pytest.raises(SimulatorError, match=r"engine must be one of \['pybullet', 'mujoco'\], "
                                              "got 'ode'"):
-        WristSimulator(urdf, engine='ode')
+        RobotSimulator(urdf, engine='ode')
     with pytest.raises(SimulatorError, match=r'armature: values must be >= 0, got \[0.1, -1.0'):
-        WristSimulator(urdf, engine='mujoco', armature=[0.1, -1.0, 0.0])
+        RobotSimulator(urdf, engine='mujoco', armature=[0.1, -1.0, 0.0])
     with pytest.raises(SimulatorError, match='armature: expected 3 values'):
-        WristSimulator(urdf, armature=[0.1])
+        RobotSimulator(urdf, armature=[0.1])
     with pytest.raises(SimulatorError, match="use_gui: the window is PyBullet's"):
-        WristSimulator(urdf, engine='mujoco', use_gui=True)
+        RobotSimulator(urdf, engine='mujoco', use_gui=True)
     monkeypatch.setitem(__import__('sys').modules, 'mujoco', None)  # not installed
     with pytest.raises(SimulatorError, match='pip install mujoco'):
-        WristSimulator(urdf, engine='mujoco')
+        RobotSimulator(urdf, engine='mujoco')

@@ -24,7 +24,7 @@ from quat_jt_runtime.resources import config_parameters
 from robots import xarm6_model, XARM6_URDF
 from sampled_loop import goal_of, linearized_spectral_radius
 from sampled_loop import time_constant_s, xarm6_gains, xarm6_shaping
-from wrist_sim.simulator import WristSimulator
+from wrist_sim.simulator import RobotSimulator
 
 pytestmark = pytest.mark.unit
 
@@ -124,7 +124,7 @@ def test_linearised_sampled_loop_is_stable_with_up_to_six_steps_of_delay(model, 
 def test_sampled_delayed_saturated_loop_holds_goal_in_pybullet(model, sim_params, potential,
                                                                q_goal, delay_ticks):
     p_d, q_d = goal_of(model, q_goal)
-    with WristSimulator(XARM6_URDF.read_text(), model.joint_names,
+    with RobotSimulator(XARM6_URDF.read_text(), model.joint_names,
                         initial_positions_rad=sim_params['initial_positions'],
                         viscous_nm_s_per_rad=sim_params['viscous_friction'],
                         coulomb_nm=sim_params['coulomb_friction'],

@@ -13,7 +13,7 @@ import pytest
 from quat_jt_controller import quaternion as quat
 from quat_jt_controller.inverse_kinematics import goal_configuration
 from quat_jt_controller.reference_sim import ClosedLoop, run_sampled
-from wrist_sim.simulator import WristSimulator
+from wrist_sim.simulator import RobotSimulator
 
 pytestmark = pytest.mark.e2e
 
@@ -63,7 +63,7 @@ def test_xarm6_reaches_the_documented_goal_after_an_unreachable_one():
     near = ClosedLoop(model, gains, robot.task, q_d, p_d, shaping=shaping)
     lower, upper = np.array(model.position_lower), np.array(model.position_upper)
     with rx.quiet():
-        sim = WristSimulator(rx.robot_urdf(robot), model.joint_names,
+        sim = RobotSimulator(rx.robot_urdf(robot), model.joint_names,
                              initial_positions_rad=start,
                              viscous_nm_s_per_rad=sim_params['viscous_friction'],
                              coulomb_nm=sim_params['coulomb_friction'])

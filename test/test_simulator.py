@@ -7,7 +7,7 @@ import pytest
 from quat_jt_controller.model import RobotModel
 from quat_jt_runtime.resources import default_urdf_xml
 from wrist_sim.simulator import resolve_meshes, SimulatorError, take_zero_inertia_warnings
-from wrist_sim.simulator import WristSimulator, zero_inertia_note
+from wrist_sim.simulator import RobotSimulator, zero_inertia_note
 
 pytestmark = pytest.mark.unit
 
@@ -27,7 +27,7 @@ def model(urdf) -> RobotModel:
 
 @pytest.fixture
 def sim(urdf):
-    with WristSimulator(urdf) as s:
+    with RobotSimulator(urdf) as s:
         yield s
 
 
@@ -95,7 +95,7 @@ def test_joint_subset_and_order(urdf):
     """Any order and subset of joints: the others are locked at zero, as in RobotModel."""
     names = ['joint3', 'joint2']
     model = RobotModel(urdf, 'base_link', 'tool0', names)
-    with WristSimulator(urdf, names) as s:
+    with RobotSimulator(urdf, names) as s:
         np.testing.assert_allclose(s.effort_limits_nm, [20.0, 30.0])
         q, qdot, tau = np.array([0.2, 0.5]), np.array([1.0, -0.5]), np.array([1.0, 2.0])
         s.reset(q, qdot)
@@ -123,7 +123,7 @@ def test_bad_torques_raise_and_do_not_step(sim, bad):
     assert sim.step_count == 0
 
 
-def _run(sim: WristSimulator, tau, steps: int) -> np.ndarray:
+def _run(sim: RobotSimulator, tau, steps: int) -> np.ndarray:
     vel = np.empty((steps, sim.n))
     for k in range(steps):
         sim.step(tau)
@@ -140,7 +140,7 @@ def test_coulomb_below_the_level_holds_the_joint_still(urdf):
     """
     coulomb = np.array([2.0, 3.0, 2.0])
     q0 = np.array([0.2, 0.5, -0.3])  # gravity torque on joint 2 here ~0.6 N m < 3 N m
-    with WristSimulator(urdf, coulomb_nm=coulomb, initial_positions_rad=q0) as s:
+    with RobotSimulator(urdf, coulomb_nm=coulomb, initial_positions_rad=q0) as s:
         vel = _run(s, [1.8, 0.0, -1.8], 1000)
         np.testing.assert_allclose(s.q_rad, q0, atol=1e-9)
         assert np.abs(vel).max() < 1e-9
@@ -150,7 +150,7 @@ def test_coulomb_above_the_level_moves_the_joint(urdf, model):
     """Above the Coulomb level the joint accelerates with (tau - f_c) / I, the right way."""
     coulomb = np.array([2.0, 3.0, 2.0])
     q0 = np.array([0.0, 0.5, 0.0])
-    with WristSimulator(urdf, coulomb_nm=coulomb, initial_positions_rad=q0) as s:
+    with RobotSimulator(urdf, coulomb_nm=coulomb, initial_positions_rad=q0) as s:
         vel = _run(s, [3.0, 0.0, 0.0], 200)
         t = 0.2
         inertia = model.mass_matrix(q0)[0, 0]
@@ -172,7 +172,7 @@ def test_viscous_friction_is_minus_b_qdot(urdf, model):
     """
     b = np.array([0.2, 0.1, 0.05])
     q, qdot = np.zeros(3), np.array([2.0, 0.0, 0.0])
-    with WristSimulator(urdf, viscous_nm_s_per_rad=b) as s:
+    with RobotSimulator(urdf, viscous_nm_s_per_rad=b) as s:
         s.reset(q, qdot)
         _run(s, [0.0, 0.0, 0.0], 500)
         for _ in range(500):
@@ -197,7 +197,7 @@ def test_set_friction_validates_before_changing_anything(sim):
 
 def test_reset_returns_to_rest_and_time_goes_on(urdf):
     q0 = [0.1, -0.2, 0.3]
-    with WristSimulator(urdf, initial_positions_rad=q0) as s:
+    with RobotSimulator(urdf, initial_positions_rad=q0) as s:
         _run(s, [5.0, 5.0, 5.0], 100)
         assert not np.allclose(s.q_rad, q0)
         s.reset()
@@ -211,7 +211,7 @@ def test_reset_returns_to_rest_and_time_goes_on(urdf):
 
 
 def test_instances_are_independent(urdf):
-    with WristSimulator(urdf) as a, WristSimulator(urdf) as b:
+    with RobotSimulator(urdf) as a, RobotSimulator(urdf) as b:
         _run(a, [5.0, 0.0, 0.0], 50)
         assert a.q_rad[0] > 0.0
         np.testing.assert_array_equal(b.q_rad, 0.0)
@@ -219,11 +219,11 @@ def test_instances_are_independent(urdf):
 
 def test_unknown_or_repeated_joints_are_refused(urdf):
     with pytest.raises(SimulatorError, match='not movable'):
-        WristSimulator(urdf, ['joint1', 'tool_joint'])
+        RobotSimulator(urdf, ['joint1', 'tool_joint'])
     with pytest.raises(SimulatorError, match='repeat'):
-        WristSimulator(urdf, ['joint1', 'joint1'])
+        RobotSimulator(urdf, ['joint1', 'joint1'])
     with pytest.raises(SimulatorError):
-        WristSimulator(urdf, coulomb_nm=[1.0])
+        RobotSimulator(urdf, coulomb_nm=[1.0])
 
 
 def _link_with_meshes(*filenames: str) -> str:
@@ -266,7 +266,7 @@ def test_package_uris_resolve_through_the_ament_index(tmp_path, monkeypatch):
 def test_a_robot_whose_meshes_are_missing_loads_without_them():
     """The dynamics need only the inertias: the arm loads, moves and names what is missing."""
     xml = XARM.read_text().replace('package://xarm_description/', 'package://nowhere/')
-    with WristSimulator(xml) as s:
+    with RobotSimulator(xml) as s:
         assert s.n == 6
         assert s.missing_meshes and all('package://nowhere/' in m for m in s.missing_meshes)
         s.step(np.zeros(6))
@@ -277,7 +277,7 @@ def test_a_robot_whose_meshes_are_missing_loads_without_them():
 def test_loads_the_xarm6_with_package_meshes():
     xml = XARM.read_text()
     assert 'package://xarm_description/' in xml
-    with WristSimulator(xml) as s:
+    with RobotSimulator(xml) as s:
         assert s.n == 6
         s.step(np.zeros(6))
         assert np.all(np.isfinite(s.q_rad))
@@ -286,7 +286,7 @@ def test_loads_the_xarm6_with_package_meshes():
 @pytest.mark.skipif(not XARM.is_file(), reason='pybullet_data has no xArm6')
 def test_links_pybullet_gives_no_inertia_are_named_once_and_its_warnings_kept_out(capfd):
     """The xArm6's link2 and link3 tensors break the triangle inequality: PyBullet zeroes them."""
-    with WristSimulator(XARM.read_text()) as s:
+    with RobotSimulator(XARM.read_text()) as s:
         assert s.zero_inertia_links == ('link2', 'link3')
         c, body = s._engine._client, s._engine._body
         names = {c.getJointInfo(body, j)[12].decode(): j for j in range(c.getNumJoints(body))}
@@ -297,7 +297,7 @@ def test_links_pybullet_gives_no_inertia_are_named_once_and_its_warnings_kept_ou
     assert 'inertia' not in out + err, out + err
     note = zero_inertia_note(('link2', 'link3'))
     assert note.startswith('PyBullet simulates link2, link3 without rotational inertia')
-    with WristSimulator(default_urdf_xml()) as wrist:  # valid tensors: nothing to say
+    with RobotSimulator(default_urdf_xml()) as wrist:  # valid tensors: nothing to say
         assert wrist.zero_inertia_links == ()
 
 
@@ -312,7 +312,7 @@ def test_only_the_zero_inertia_warnings_are_taken_out_of_the_loaders_output():
 
 def test_hold_passes_time_with_the_joints_at_rest(urdf):
     q0 = [0.2, 0.6, -0.3]
-    with WristSimulator(urdf, initial_positions_rad=q0) as s:
+    with RobotSimulator(urdf, initial_positions_rad=q0) as s:
         for _ in range(100):
             s.hold()
         assert s.step_count == 100 and s.time_s == pytest.approx(0.1)
@@ -327,4 +327,4 @@ def test_gui_without_a_display_is_a_clear_error(urdf, monkeypatch):
     """Refuse use_gui without a display, saying why (PyBullet would end the process)."""
     monkeypatch.delenv('DISPLAY', raising=False)
     with pytest.raises(SimulatorError, match='DISPLAY is not set.*xvfb-run'):
-        WristSimulator(urdf, use_gui=True)
+        RobotSimulator(urdf, use_gui=True)

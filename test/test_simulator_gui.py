@@ -2,7 +2,7 @@
 The simulator's PyBullet window (``use_gui``), under a private Xvfb display.
 
 ROS-free. A screenshot of the window must show the robot and the goal frame drawn by
-``WristSimulator.show_frame`` where the GUI's own camera projects them. Skipped where Xvfb is
+``RobotSimulator.show_frame`` where the GUI's own camera projects them. Skipped where Xvfb is
 not installed.
 """
 import json
@@ -103,7 +103,7 @@ def test_gui_window_shows_the_robot_and_the_goal_frame(display, tmp_path):
 
 def test_without_gui_show_frame_draws_nothing():
     from quat_jt_runtime.resources import default_urdf_xml
-    from wrist_sim.simulator import WristSimulator
-    with WristSimulator(default_urdf_xml()) as sim:
+    from wrist_sim.simulator import RobotSimulator
+    with RobotSimulator(default_urdf_xml()) as sim:
         assert sim.show_frame('goal', (0.0, 0.0, 0.45), (0.0, 0.0, 0.0, 1.0)) is False
         assert sim.gui_camera() is None

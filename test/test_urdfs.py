@@ -9,7 +9,7 @@ from quat_jt_controller.inverse_kinematics import goal_configuration
 from quat_jt_controller.model import ModelError, RobotModel
 from robots import assert_jacobian_matches_finite_differences, example_robot_data_urdf
 from robots import small_arm_urdf
-from wrist_sim.simulator import WristSimulator
+from wrist_sim.simulator import RobotSimulator
 
 pytestmark = pytest.mark.unit
 
@@ -101,7 +101,7 @@ def test_a_name_clash_on_a_locked_joint_is_no_problem():
 def test_the_simulator_takes_continuous_joints():
     urdf = small_arm_urdf()
     model = RobotModel(urdf, 'base_link', 'tool')
-    with WristSimulator(urdf, dt_s=1e-3, enforce_velocity_limits=False) as sim:
+    with RobotSimulator(urdf, dt_s=1e-3, enforce_velocity_limits=False) as sim:
         assert sim.position_lower[0] == -np.inf and sim.position_upper[3] == np.inf
         np.testing.assert_allclose(sim.position_lower[1:3], [-2.0, -2.0])
         q, qdot = np.array([7.0, 0.3, -0.6, -4.0, 0.2]), np.array([0.5, -0.2, 0.1, 1.0, 0.0])
@@ -204,7 +204,7 @@ def test_an_arm_of_four_or_five_joints_reaches_a_pose_it_can_reach(name):
     q_star = goal_configuration(model, q0, q_d, p_d, cl.Task.POSE,
                                 d.shaping.joint_limit_margin_rad)
     assert q_star is not None
-    with WristSimulator(urdf, model.joint_names, initial_positions_rad=q0) as sim:
+    with RobotSimulator(urdf, model.joint_names, initial_positions_rad=q0) as sim:
         loop = ClosedLoop(model, d.gains('tanh'), cl.Task.POSE, q_d, p_d, shaping=d.shaping)
         # 5 s: the reach target's budget (the SO-100, held within its URDF's 1 rad/s with
         # links of 1e-4 kg m^2, settles in about 3.5 s)

@@ -1,7 +1,7 @@
 """
 What the simulator asks of a physics engine: one small interface, two engines (ROS-free).
 
-:class:`wrist_sim.simulator.WristSimulator` is the simulator the node and the experiments use,
+:class:`wrist_sim.simulator.RobotSimulator` is the simulator the node and the experiments use,
 whatever the engine: it validates what it is given, clamps the commanded torque to the URDF
 effort limits, counts steps and time, and holds the joints before the first command. What
 differs between engines is behind :class:`Engine`: loading the URDF, the friction and the

@@ -3,7 +3,7 @@
 
 A thin rclpy layer, with the interface of a ros2_control robot driven by a
 JointGroupEffortController, over the ROS-free parts: the physics
-(:class:`wrist_sim.simulator.WristSimulator`, in PyBullet or MuJoCo: ``engine``), the command path
+(:class:`wrist_sim.simulator.RobotSimulator`, in PyBullet or MuJoCo: ``engine``), the command path
 (:class:`wrist_sim.command_gate.CommandGate`: validation, watchdog, hold until the first
 command, the reset gate) and the stepping loops (``wrist_sim.pacing``: real-time deadlines, or
 lockstep with ``/clock``). It publishes ``joint_states`` after every step (effort = the motor
@@ -38,7 +38,7 @@ from wrist_sim.command_gate import CommandGate, RESUMED, TRIPPED
 from wrist_sim.config import SimConfig
 from wrist_sim.parameters import armature_note, change_log, declare_live, declare_structure
 from wrist_sim.simulator import at_limit, missing_meshes_note, NoDisplayError, SimulatorError
-from wrist_sim.simulator import WristSimulator, zero_inertia_note
+from wrist_sim.simulator import RobotSimulator, zero_inertia_note
 
 NODE_NAME = 'wrist_sim'
 THROTTLE_S = 1.0
@@ -69,7 +69,7 @@ class WristSimNode(Node):
         c = self.live.current
         self.dt_ns = p.dt_ns
         try:
-            self.sim = WristSimulator(
+            self.sim = RobotSimulator(
                 p.urdf_xml, p.joints, dt_s=self.dt_ns * 1e-9, use_gui=p.use_gui,
                 viscous_nm_s_per_rad=c.viscous_nm_s_per_rad, coulomb_nm=c.coulomb_nm,
                 initial_positions_rad=c.initial_positions_rad,

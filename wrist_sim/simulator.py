@@ -5,7 +5,7 @@ The physics engine is chosen by name (``ENGINES``): ``pybullet`` (the default) o
 
 Stands in for the paper's CICESE direct-drive wrist (by default the bundled
 ``urdf/spherical_wrist.urdf``) but loads any fixed-base serial URDF given as an XML string.
-:class:`WristSimulator` is the same for both engines; what differs is behind
+:class:`RobotSimulator` is the same for both engines; what differs is behind
 :class:`wrist_sim.engine.Engine` (:mod:`wrist_sim.pybullet_engine`,
 :mod:`wrist_sim.mujoco_engine`, whose docstrings say how each simulates the plant).
 
@@ -14,10 +14,10 @@ the friction per joint: viscous ``-b qdot`` (``b`` in N m s/rad) and Coulomb wit
 joint is held while the other torques on it stay below the level ``f_c``, N m, and resisted
 with ``f_c`` when they exceed it). The rotor inertia per joint (``armature``, kg m^2) is added
 to the diagonal of M(q) where the engine can (MuJoCo; PyBullet cannot, and
-:attr:`WristSimulator.supports_armature` says so).
+:attr:`RobotSimulator.supports_armature` says so).
 
 The commanded torque is clamped to the URDF effort limits; that clamped torque is the
-"applied" torque reported by :meth:`WristSimulator.step` and :meth:`WristSimulator.state`
+"applied" torque reported by :meth:`RobotSimulator.step` and :meth:`RobotSimulator.state`
 (friction is not included in it: it is the motor torque, as a drive would report it). The
 URDF velocity limits are enforced as a drive's speed limit would: each joint's speed is held
 at its limit, so a huge torque cannot spin a joint faster. This can be turned off
@@ -45,7 +45,7 @@ ENGINES = (PyBulletEngine.name, MuJoCoEngine.name)
 
 __all__ = ['at_limit', 'disconnect', 'ENGINES', 'missing_meshes_note', 'NoDisplayError',
            'per_joint', 'resolve_meshes', 'SimState', 'SimulatorError',
-           'take_zero_inertia_warnings', 'WristSimulator', 'zero_inertia_note']
+           'take_zero_inertia_warnings', 'RobotSimulator', 'zero_inertia_note']
 
 
 @dataclass(frozen=True)
@@ -88,7 +88,7 @@ def _as_vector(values: Optional[Sequence[float]], n: int, name: str,
     return np.zeros(n) if values is None else np.array(per_joint(name, values, n, nonnegative))
 
 
-class WristSimulator:
+class RobotSimulator:
     """
     A fixed-base serial robot from a URDF, in a physics engine, torque controlled.
 
@@ -314,7 +314,7 @@ class WristSimulator:
         if engine is not None:
             engine.close()
 
-    def __enter__(self) -> 'WristSimulator':
+    def __enter__(self) -> 'RobotSimulator':
         return self
 
     def __exit__(self, *exc) -> None:
