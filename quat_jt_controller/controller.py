@@ -216,7 +216,8 @@ class Controller:
             self.goal_anchor = held.p_desired_base
             logs += (LogLine(Severity.INFO, (
                 f'first joint state, {(steady_ns - self.started_ns) * 1e-9:.2f} s after '
-                f'start: holding the measured pose, {held.describe()}')),)
+                f'start: holding the measured pose, '
+                f'{held.describe(self.has_position, self.has_orientation)}')),)
         elif self._goal_velocity_until_ns and steady_ns > self._goal_velocity_until_ns:
             self._goal_velocity_until_ns = 0  # the stream stopped: a fixed goal again
             regulator.set_goal_joint_velocity(None)
@@ -334,7 +335,11 @@ class Controller:
         self.counters.accepted_goals += 1
         regulator = self.regulator
         previous = regulator.goal
-        regulator.set_goal(goal)
+        same = previous is not None and goal == previous
+        if same:  # a repeated goal (a latched or periodic publisher) keeps its q* and check
+            goal = previous
+        else:
+            regulator.set_goal(goal)
         self.goal_source = 'target_pose'
         nu_desired = self._motion.update(request.stamp_s, goal.q_desired_base,
                                          goal.p_desired_base)
@@ -343,7 +348,7 @@ class Controller:
             regulator.set_goal_joint_velocity(None)
         else:  # a stream: its joint velocity comes from the worker, until the stream stops
             self._goal_velocity_until_ns = steady_ns + int(self._motion.hold_s() * 1e9)
-        if goal == previous:
+        if same:
             return GoalReply(True, False, nu_desired)
         self.goal_anchor = None if self.last is None else self.last.p_tip_base
         self._check_goal(goal, nu_desired)
@@ -405,7 +410,7 @@ class Controller:
             if goal is regulator.goal and verdict != self.goal_warning:
                 self.goal_warning = verdict
                 if verdict:
-                    said = goal.describe(not self.has_orientation, self.has_orientation)
+                    said = goal.describe(self.has_position, self.has_orientation)
                     logs += (LogLine(Severity.WARN,
                                      f'goal {said} accepted with a warning: {verdict}'),)
         return logs

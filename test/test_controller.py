@@ -321,3 +321,20 @@ def test_the_goal_check_answers_the_goal_in_force_and_warns_once():
     assert ctl.regulator.goal_configuration == pytest.approx(q_star)
     checker.verdicts = [(new, 'near a singularity')]
     assert ctl.take_goal_checks() == ()  # the same warning again: said once
+
+
+def test_a_repeated_goal_keeps_its_goal_configuration_and_is_checked_once():
+    checker = FakeChecker()
+    ctl = controller(checker=checker)
+    tick(ctl, (0.0, 0.5, 0.0), MS)
+    reply = ctl.on_goal(request(turned(0.3)), 2 * MS)
+    assert reply.accepted and reply.new
+    [(goal, _, _)] = checker.submitted
+    checker.q_star = {id(goal): (0.1, 0.6, 0.2)}
+    checker.verdicts = [(goal, '')]  # the worker's answer: no warning, and q*
+    ctl.take_goal_checks()
+    assert ctl.regulator.goal_configuration == pytest.approx((0.1, 0.6, 0.2))
+    again = ctl.on_goal(request(turned(0.3)), 3 * MS)  # e.g. ros2 topic pub at 1 Hz
+    assert again.accepted and not again.new
+    assert ctl.goal is goal and len(checker.submitted) == 1
+    assert ctl.regulator.goal_configuration == pytest.approx((0.1, 0.6, 0.2))
