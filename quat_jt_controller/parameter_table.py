@@ -6,7 +6,7 @@ The table (``STRUCTURE``, ``GAINS``, ``SHAPING``, rows of
 default, range, size rule and description. From it come the node's declarations and descriptors
 (``parameters.py``), the validation of the :class:`~quat_jt_controller.shaping.Shaping` snapshot
 by the node and by ``controller_from_config`` alike (``Shaping.create`` checks every row), the
-snapshot's defaults, docs/parameters.md (``make docs``) and the parameter files ``gain_design``
+snapshot's defaults, docs/parameters.md (``make docs``) and the parameter files ``gain_output``
 writes. Read the groups through this module at the time of use (``parameter_table.SHAPING``),
 so that a row added here is seen everywhere.
 

@@ -7,7 +7,7 @@ hold), during a later tick of the 1 kHz simulator, clamped to the URDF effort li
 PyBullet's integrator and the simulator's friction. This module reproduces that loop in one
 process on the simulator core (``wrist_sim.simulator.RobotSimulator``). The linearised
 sampled-and-delayed loop around the goal (``linearized_spectral_radius``, re-exported here)
-lives in ``quat_jt_controller.gain_design``, which computed the gains of
+lives in ``quat_jt_controller.gain_analysis``, by which ``gain_design`` checked the gains of
 ``config/xarm6_controller.yaml``.
 
     .venv/bin/python test/sampled_loop.py     # the figures quoted in config/xarm6_controller.yaml
@@ -21,7 +21,7 @@ import numpy as np
 from quat_jt_controller import control_law as cl
 from quat_jt_controller import quaternion as quat
 from quat_jt_controller.controller_config import controller_from_package_config
-from quat_jt_controller.gain_design import linearized_spectral_radius, time_constant_s
+from quat_jt_controller.gain_analysis import linearized_spectral_radius, time_constant_s
 from quat_jt_controller.model import RobotModel
 from quat_jt_controller.reference_sim import ClosedLoop, run_sampled
 from quat_jt_controller.shaping import Shaping

@@ -15,7 +15,9 @@ import numpy as np
 import pybullet_data
 import pytest
 from quat_jt_controller import control_law as cl
+from quat_jt_controller import gain_analysis as ga
 from quat_jt_controller import gain_design as gd
+from quat_jt_controller import gain_output as go
 from quat_jt_controller import quaternion as quat
 from quat_jt_controller import shaping as sh
 from quat_jt_controller.model import RobotModel
@@ -98,10 +100,10 @@ def test_the_sampled_loop_is_stable_with_the_delays_designed_for(designs, robot)
         gains = d.gains(potential)
         for q, _, _ in data['configurations'][:6]:
             for delay in (1, 3):
-                rho = gd.linearized_spectral_radius(model, q, gains, delay, task=d.task,
+                rho = ga.linearized_spectral_radius(model, q, gains, delay, task=d.task,
                                                     shaping=d.shaping)
                 assert rho < 1.0
-                assert gd.time_constant_s(rho) < 1.0
+                assert ga.time_constant_s(rho) < 1.0
     assert max(d.figures['spectral_radius'].values()) < 1.0
     # near-critical damping for the tanh law, as designed (less where the sampled loop caps
     # the damping: the xArm6's joint 1, folded, has 0.026 kg m^2; more where the speed rule
@@ -116,10 +118,10 @@ def test_the_sampled_loop_is_stable_with_the_delays_designed_for(designs, robot)
 def test_spectral_radius_of_a_sampled_mass_spring_damper():
     """1 kg, 1 ms: stable with one tick of delay for modest gains, unstable when too stiff."""
     m, k, c = np.array([[1.0]]), np.array([[100.0]]), np.array([[2.0 * 10.0]])
-    rho = gd.spectral_radius(m, k, c, 1)
-    assert rho < 1.0 and gd.time_constant_s(rho) == pytest.approx(0.1, rel=0.2)
-    assert gd.spectral_radius(m, np.array([[4e6]]), np.array([[0.0]]), 1) > 1.0
-    assert gd._largest_stable_damping(1.0, (1,), 1e-3) == pytest.approx(1000.0, rel=1e-3)
+    rho = ga.spectral_radius(m, k, c, 1)
+    assert rho < 1.0 and ga.time_constant_s(rho) == pytest.approx(0.1, rel=0.2)
+    assert ga.spectral_radius(m, np.array([[4e6]]), np.array([[0.0]]), 1) > 1.0
+    assert ga.largest_stable_damping(1.0, (1,), 1e-3) == pytest.approx(1000.0, rel=1e-3)
 
 
 @pytest.mark.parametrize('name, args', [('wrist_controller.yaml', WRIST_ARGS),
@@ -207,9 +209,9 @@ def test_the_simulator_config_is_what_the_tool_writes(tmp_path):
     assert tuple(shipped['joints']) == PANDA_JOINTS  # the fingers are held, not driven
     assert shipped['enforce_velocity_limits'] is True
     with pytest.raises(ValueError, match='outside the limits'):  # joint 4 lies in [-3.14, 0]
-        gd.sim_yaml(panda_model(), 1000.0, [0.0, 0.0, 0.0, 0.5, 0.0, 1.0, 0.0], None, None)
+        go.sim_yaml(panda_model(), 1000.0, [0.0, 0.0, 0.0, 0.5, 0.0, 1.0, 0.0], None, None)
     with pytest.raises(ValueError, match='--sim-coulomb: expected 7'):
-        gd.sim_yaml(panda_model(), 1000.0, None, [0.1] * 6, None)
+        go.sim_yaml(panda_model(), 1000.0, None, [0.1] * 6, None)
 
 
 def test_a_strong_joint_is_not_held_to_the_pace_of_the_weakest(designs):
@@ -305,10 +307,10 @@ def test_a_design_at_100_hz_is_stable_where_the_1_khz_one_is_not():
     configs = gd.survey(model, task)['configurations']
 
     def worst(d):
-        return max(gd.linearized_spectral_radius(model, q, d.gains('tanh'), 1, 0.01, M, task,
+        return max(ga.linearized_spectral_radius(model, q, d.gains('tanh'), 1, 0.01, M, task,
                                                  d.shaping) for q, _, M in configs)
     slow = gd.design(model, task, rate_hz=100.0)
-    assert slow.rate_hz == 100.0 and 'state_rate: 100.0' in gd.to_yaml(slow)
+    assert slow.rate_hz == 100.0 and 'state_rate: 100.0' in go.to_yaml(slow)
     assert worst(slow) < 1.0 < worst(gd.design(model, task, rate_hz=1000.0))
 
 
@@ -334,8 +336,8 @@ def test_rotor_inertia_enters_the_design_through_the_inertia():
     assert all(b > a for a, b in zip(plain.kv, rotor.kv))  # more inertia, more damping
     assert rotor.armature == armature and plain.armature == (0.0, 0.0, 0.0)
     assert max(rotor.figures['spectral_radius'].values()) < 1.0
-    assert params_of(gd.to_yaml(rotor))['armature'] == list(armature)
-    assert params_of(gd.to_yaml(plain))['armature'] == [0.0, 0.0, 0.0]
+    assert params_of(go.to_yaml(rotor))['armature'] == list(armature)
+    assert params_of(go.to_yaml(plain))['armature'] == [0.0, 0.0, 0.0]
 
 
 def test_the_command_takes_one_armature_for_all_joints_or_one_per_joint(tmp_path):
@@ -364,7 +366,7 @@ def test_the_command_takes_one_armature_for_all_joints_or_one_per_joint(tmp_path
 
 def test_the_simulator_engines_are_the_ones_the_tool_writes():
     from wrist_sim.simulator import ENGINES
-    assert gd.ENGINES == ENGINES
+    assert go.ENGINES == ENGINES
 
 
 def test_with_no_friction_estimate_a_share_of_the_effort_may_be_learned():
@@ -406,4 +408,4 @@ def test_a_light_wrist_does_not_collapse_the_task_gains():
         assert 0.0 < d.figures['time_to_goal_s'] < 10.0
     assert any('--armature' in w for w in light.figures['warnings'])
     assert not any('--armature' in w for w in geared.figures['warnings'])
-    assert 'Expected time to a goal' in gd.to_yaml(light)
+    assert 'Expected time to a goal' in go.to_yaml(light)

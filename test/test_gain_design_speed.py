@@ -9,7 +9,9 @@ limits"). A URDF without a velocity limit leaves the rule out on that joint.
 import numpy as np
 import pytest
 from quat_jt_controller import control_law as cl
+from quat_jt_controller import gain_analysis as ga
 from quat_jt_controller import gain_design as gd
+from quat_jt_controller import gain_output as go
 from quat_jt_controller import shaping as sh
 from quat_jt_controller.model import RobotModel
 from robots import small_arm_urdf, wrist_model
@@ -49,8 +51,8 @@ def test_the_damping_holds_the_largest_push_below_the_speed_ceiling(arm, which):
     # the linear damping is raised to at most SPEED_DAMPING_SHARE of what the sampled loop
     # takes (b_max, the per-joint check) unless the design's own K_v was already above that
     for j, inertia in enumerate(f['inertia_min']):
-        b_max = gd.DAMPER_SAFETY * gd._largest_stable_damping(
-            inertia, gd._checked_delays(f['delays']), 1.0 / d.rate_hz)
+        b_max = gd.DAMPER_SAFETY * ga.largest_stable_damping(
+            inertia, ga.checked_delays(f['delays']), 1.0 / d.rate_hz)
         assert d.kv[j] <= b_max * (1.0 + 1e-3)
         if f['damping_ratio']['tanh'][j] > 1.1 * gd.DAMPING_RATIO:  # raised by the rule
             assert d.kv[j] <= gd.SPEED_DAMPING_SHARE * b_max * (1.0 + 1e-3)
@@ -63,7 +65,7 @@ def test_the_cruising_speed_is_where_the_law_meets_the_push():
     kv = np.array([1.0, 1.0, 1.0, 1.0])
     v_c = np.array([0.0, 1.0, 1.0, 1.0])
     cap = np.array([10.0, 10.0, 0.5, 1.0])
-    v = gd.cruising_speed(push, kv, v_c, cap)
+    v = ga.cruising_speed(push, kv, v_c, cap)
     np.testing.assert_allclose(v[0], 2.0, rtol=1e-9)  # linear only
     np.testing.assert_allclose(v[1] * (1.0 + v[1] ** 2), 2.0, rtol=1e-9)  # cubic: v = 1
     np.testing.assert_allclose(v[2] * 1.25, 2.0, rtol=1e-9)  # linear past the cap, slope 1.25
@@ -103,4 +105,4 @@ def test_an_arm_without_velocity_limits_is_designed_without_the_rule():
     assert np.all(np.isfinite(f['terminal_speed_rad_s']))
     assert max(f['spectral_radius'].values()) < 1.0
     assert np.all(np.array(d.kp) > 0.0)
-    assert 'Expected time to a goal' in gd.to_yaml(d)
+    assert 'Expected time to a goal' in go.to_yaml(d)

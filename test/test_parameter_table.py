@@ -13,6 +13,7 @@ from parameter_cases import inside, live_rows, outside, wrist_context
 import pytest
 from quat_jt_controller import control_law as cl
 from quat_jt_controller import gain_design as gd
+from quat_jt_controller import gain_output as go
 from quat_jt_controller import parameter_table as table
 from quat_jt_controller import shaping as sh
 from quat_jt_controller.controller_config import controller_from_package_config
@@ -77,7 +78,7 @@ def test_an_added_row_is_checked_and_written(added_row):
         controller_from_package_config(CONFIG, overrides={'test_added_gain': -1.0})
     sh.Shaping.create(3, test_added_gain=1.5)
     design = gd.design(wrist_model(), cl.Task.ORIENTATION, delays=(1,))
-    text = gd.to_yaml(design)
+    text = go.to_yaml(design)
     assert yaml.safe_load(text)['/**']['ros__parameters']['test_added_gain'] == 0.25
     assert 'posture_weight, test_added_gain; docs/lyapunov.md' in ' '.join(
         line.lstrip('# ') for line in text.splitlines() if line.startswith('#'))
@@ -85,7 +86,7 @@ def test_an_added_row_is_checked_and_written(added_row):
 
 def test_the_parameter_file_is_in_the_table_order_with_its_types():
     design = gd.design(wrist_model(), cl.Task.ORIENTATION, delays=(1,))
-    written = yaml.safe_load(gd.to_yaml(design))['/**']['ros__parameters']
+    written = yaml.safe_load(go.to_yaml(design))['/**']['ros__parameters']
     order = ['task', *names(table.GAINS), *names(table.SHAPING)]
     assert list(written)[:len(order)] == order
     rows = {spec.name: spec for spec in table.STRUCTURE + table.GAINS + table.SHAPING}

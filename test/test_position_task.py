@@ -16,6 +16,7 @@ import numpy as np
 import pytest
 from quat_jt_controller import control_law as cl
 from quat_jt_controller import gain_design as gd
+from quat_jt_controller import gain_output as go
 from quat_jt_controller import shaping as sh
 from quat_jt_controller.goal_check import check_goal
 from quat_jt_controller.goal_frames import GoalFrames
@@ -93,7 +94,7 @@ def test_the_design_finishes_with_three_rows_and_every_joint_damped():
     assert d.task is POS and len(d.kp) == 3 and len(d.lam) == 3 and len(d.kv) == 4
     assert min(d.kv) > 0.0 and min(d.shaping.configuration_gain) > 0.0
     assert max(d.figures['spectral_radius'].values()) < 1.0
-    text = gd.to_yaml(d)
+    text = go.to_yaml(d)
     assert 'task: position' in text and 'K_p, x, y, z (N/m)' in text
 
 

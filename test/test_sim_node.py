@@ -78,9 +78,9 @@ def test_the_node_declares_exactly_its_table(context):
 
 @pytest.mark.node
 def test_the_file_design_gains_writes_holds_rows_of_the_simulators_table():
-    """gain_design.sim_yaml (which may not import the simulator) writes the table's names."""
+    """gain_output.sim_yaml (which may not import the simulator) writes the table's names."""
     import yaml
-    from quat_jt_controller import gain_design as gd
+    from quat_jt_controller import gain_output as go
     from quat_jt_runtime.params import REALTIME
     from robots import panda_model
     from wrist_sim import parameters as table
@@ -88,7 +88,7 @@ def test_the_file_design_gains_writes_holds_rows_of_the_simulators_table():
     from wrist_sim.simulator import ENGINES
     model = panda_model()
     for engine in ENGINES:
-        text = gd.sim_yaml(model, 1000.0, None, [0.1] * model.n, None, engine=engine)
+        text = go.sim_yaml(model, 1000.0, None, [0.1] * model.n, None, engine=engine)
         written = yaml.safe_load(text)['/**']['ros__parameters']
         rows = {spec.name: spec for spec in table.STRUCTURE + table.LIVE + REALTIME}
         assert set(written) <= set(rows), set(written) - set(rows)

@@ -4,7 +4,9 @@ import pinocchio as pin
 import pytest
 
 from quat_jt_controller import control_law as cl
+from quat_jt_controller import gain_analysis as ga
 from quat_jt_controller import gain_design as gd
+from quat_jt_controller import gain_output as go
 from quat_jt_controller.inverse_kinematics import goal_configuration
 from quat_jt_controller.model import ModelError, RobotModel
 from robots import assert_jacobian_matches_finite_differences, example_robot_data_urdf
@@ -133,14 +135,14 @@ def test_design_on_a_five_joint_arm_finishes(task):
     model = RobotModel(path.read_text(), 'base', 'gripper', SO100_ARM)
     data = gd.survey(model, task)
     assert len(data['configurations']) == gd.SAMPLES
-    sigmas = [gd._sigma_min(rows) for _, rows, _ in data['configurations']]
+    sigmas = [ga.sigma_min(rows) for _, rows, _ in data['configurations']]
     assert min(sigmas) >= data['regular_sigma_min'] > 0.0
     if task is cl.Task.POSE:
         assert data['regular_sigma_min'] < gd.REGULAR_SIGMA_MIN
     d = _pose_design(model) if task is cl.Task.POSE else gd.design(model, task)
     assert all(k > 0 for k in d.kp + d.kv)
     assert max(d.figures['spectral_radius'].values()) < 1.0
-    text = ' '.join(gd.to_yaml(d).replace('#', ' ').split())
+    text = ' '.join(go.to_yaml(d).replace('#', ' ').split())
     assert (f'none of {gd.REGULAR_TRIES} random ones reached' in text) == (task is cl.Task.POSE)
 
 
