@@ -26,8 +26,8 @@ from experiments import arms
 import numpy as np
 from quat_jt_controller import quaternion as quat
 from quat_jt_controller.control_law import Task
-from quat_jt_controller.inverse_kinematics import goal_configuration, SINGULAR_SIGMA_MIN
-from quat_jt_controller.model import RobotModel
+from quat_jt_controller.inverse_kinematics import goal_configuration, sampling_box, sigma_min
+from quat_jt_controller.model import RobotModel, SINGULAR_SIGMA_MIN
 
 DEFAULT_ARMS = ('ur3', 'ur5', 'ur10', 'panda', 'so100:gripper', 'z1', 'xarm7', 'talos_left_arm',
                 'wrist')
@@ -45,13 +45,6 @@ def arm_model(spec: str) -> tuple[RobotModel, Task]:
         task = Task.POSE
     base, tip_link, joints = arms.arm_links(urdf, None, tip or None)
     return RobotModel(urdf, base, tip_link, joints), task
-
-
-def sampling_box(model: RobotModel) -> tuple[np.ndarray, np.ndarray]:
-    """Return the limits to draw from: a joint without stops in [-pi, pi]."""
-    lower = np.array(model.position_lower, dtype=float)
-    upper = np.array(model.position_upper, dtype=float)
-    return np.where(np.isfinite(lower), lower, -np.pi), np.where(np.isfinite(upper), upper, np.pi)
 
 
 def check_arm(model: RobotModel, task: Task, cases: int, seed: int, margin_rad: float) -> dict:
@@ -72,14 +65,13 @@ def check_arm(model: RobotModel, task: Task, cases: int, seed: int, margin_rad: 
         if q_star is None:
             continue
         solved += 1
-        p, R, J = model.kinematics(q_star.tolist())
+        p, R = model.forward_kinematics(q_star.tolist())
         _, e = quat.orientation_error(quat.from_rotation_matrix(R), q_d)
-        error = float(np.linalg.norm(e))
-        if task is Task.POSE:
+        error = float(np.linalg.norm(e)) if task.has_orientation else 0.0
+        if task.has_position:
             error = max(error, float(np.linalg.norm(np.subtract(p, p_d))))
         residual = max(residual, error)
-        rows = np.array(J) if task is Task.POSE else np.array(J)[3:]
-        regular += bool(np.linalg.svd(rows, compute_uv=False)[-1] >= SINGULAR_SIGMA_MIN)
+        regular += bool(sigma_min(model, q_star, task) >= SINGULAR_SIGMA_MIN)
         within += bool(np.all(q_star >= lower) and np.all(q_star <= upper))
     return {'cases': cases, 'solved': solved, 'regular': regular, 'within': within,
             'residual': residual, 'median_s': float(np.median(times)),

@@ -105,7 +105,7 @@ def loop_status(figures: dict, waiting: bool, stopped: bool, counters: Counters,
 
 
 def goal_status(source: str, goal: Optional[Goal], warning: str, last: Optional[TickOutput],
-                qdot: Optional[Sequence[float]], pose_task: bool, counters: Counters,
+                qdot: Optional[Sequence[float]], with_position: bool, counters: Counters,
                 goal_check_unavailable: str = '', goal_check_ready: bool = True,
                 configuration: Optional['ConfigurationState'] = None) -> Status:
     """
@@ -139,7 +139,7 @@ def goal_status(source: str, goal: Optional[Goal], warning: str, last: Optional[
          'available' if goal_check_ready else 'starting'),
         ('goal_xyzw', str([round(c, 6) for c in goal.xyzw()]) if goal else ''),
     ]
-    if pose_task:
+    if with_position:
         values += [
             ('position_error_m', f'{last.position_error_norm_m:.6g}' if last else 'nan'),
             ('goal_position_m',

@@ -45,7 +45,7 @@ from quat_jt_controller.gain_analysis import (
     joint_stiffness, largest_stable_damping, median_damping_ratio, QO, seen_inertia, sigma_min,
     time_to_goal_s, worst_rho)
 from quat_jt_controller.model import RobotModel
-from quat_jt_controller.shaping import FULL_TURN_RAD, Shaping
+from quat_jt_controller.shaping import DEFAULT_SPEED_CAP_RAD_S, FULL_TURN_RAD, Shaping
 from quat_jt_runtime.joints import check_state_rate
 from quat_jt_runtime.param_table import row
 
@@ -66,13 +66,13 @@ SPEED_MARGIN = 0.8
 SPEED_DAMPING_SHARE = 0.75
 NEGLIGIBLE_CUBIC = 100.0  # a v_c this many times the velocity limit: no cubic term
 CRUISE_STEP = 1.1  # the goal-configuration gain of a joint slower than that grows by this
-DEFAULT_VELOCITY = 2.0 * pi  # rad/s, for a joint whose URDF gives no velocity limit
+DEFAULT_VELOCITY = DEFAULT_SPEED_CAP_RAD_S  # rad/s, for a joint whose URDF gives no velocity limit
 DAMPER_SAFETY = 0.5  # of the largest damping the sampled loop tolerates on a joint
 LIMIT_MARGIN_MAX_RAD = 0.25
 LIMIT_MARGIN_FRACTION = 0.1  # of the smallest half range of a limited joint
 GUIDE_RADIUS_RAD = 0.0  # > 0: a dead zone around q* where only the paper's term acts
 GUIDE_RAMP_RAD = 0.25
-FRICTION_VELOCITY_RAD_S = 0.075  # the xArm6 wrist creeps at ~2 v_eps while it learns
+FRICTION_VELOCITY_RAD_S = 0.075  # v_eps of the compensation (docs/reach.md says why 0.075)
 FRICTION_ERROR_BAND = 0.004  # ||e||; a little below the 0.005 the wrist is asked to reach
 FRICTION_POSITION_BAND_M = 0.0005
 # At rest the regulator may learn this much more than the estimate (x the estimate), in
@@ -80,8 +80,7 @@ FRICTION_POSITION_BAND_M = 0.0005
 FRICTION_LEARNING = 2.0
 # ... and with no estimate (0), when asked (--friction-effort-share), a share of the joint's
 # effort limit: a friction nobody measured up to this much is still broken (docs/lyapunov.md,
-# section 4). This is the share measured; the default is none: on the Panda's ideal plant the
-# learning left torque sign changes at the end of most cases (docs/gain_design.md).
+# section 4). This is the share measured; the default is none (docs/gain_design.md says why).
 FRICTION_EFFORT_SHARE = 0.03
 DEFAULT_FRICTION_EFFORT_SHARE = 0.0
 FRICTION_LEARNING_TIME_S = 1.0

@@ -12,9 +12,8 @@ The goal is a unit quaternion ``quat_desired`` (w, x, y, z) and, for the pose an
 position ``p_desired`` (m), both in the base frame (the position task reads the position alone: its
 residual is p_d - p, its self-motion larger); joint configurations are ``q`` (rad). The work is
 bounded by a number of starts and of iterations, never by wall time, so the same start and goal
-give the same answer on any host. It costs milliseconds to a few tenths of a second: the controller
-runs it in the goal-check worker (:mod:`quat_jt_controller.goal_check`), never on the control
-thread.
+give the same answer on any host. The controller runs it in the goal-check worker
+(:mod:`quat_jt_controller.goal_check`), never on the control thread.
 """
 from math import pi
 from typing import Iterator, NamedTuple, Optional, Sequence
@@ -47,6 +46,7 @@ def _pose_residual(model: RobotModel, q: np.ndarray, quat_desired: Sequence[floa
                    p_desired: Sequence[float], task: Task) -> tuple[np.ndarray, np.ndarray]:
     """Residual (rotation vector of quat_d * conj(quat) and/or p_d - p, per task) and its J."""
     p, R, rows = model.kinematics(q.tolist())
+    task = Task(task)
     if task is Task.POSITION:
         return np.subtract(p_desired, p), np.array(rows)[:3]
     rot = np.array(quat.rotation_vector(*quat.orientation_error(quat.from_rotation_matrix(R),

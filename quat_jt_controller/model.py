@@ -33,8 +33,8 @@ except ModuleNotFoundError as exc:  # e.g. a colcon workspace whose rosdep skipp
 from quat_jt_runtime.errors import checked_vector, QuatJtError
 from quat_jt_runtime.joints import fixed_joints, movable_joints, select_joints
 
-# sigma_min of the task Jacobian (J_o or J_G) below this: near-singular (the paper's assumption
-# A2 fails there), for the goal check's verdict and the stall report alike
+# sigma_min of the task Jacobian (J_o, J_G or J_p) below this: near-singular (the paper's
+# assumption A2 fails there), for the goal check's verdict and the stall report alike
 SINGULAR_SIGMA_MIN = 0.05
 
 

@@ -163,7 +163,8 @@ SHAPING = (
          '||e|| below which the friction compensation fades out (it is off below half of '
          'it). Live.', bounds=(1e-5, 1.0)),
     Spec('friction_position_band', Kind.DOUBLE, 0.0005,
-         '||p_d - p|| (m) below which the friction compensation fades out (pose task). Live.',
+         '||p_d - p|| (m) below which the friction compensation fades out (pose and position '
+         'tasks). Live.',
          bounds=(1e-6, 1.0), field='friction_position_band_m'),
     Spec('configuration_gain', Kind.DOUBLE_ARRAY, joint_zeros,
          'Most torque (N m) the goal-configuration term asks of each joint ({n}); it pulls '

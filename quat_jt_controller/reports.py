@@ -1,8 +1,8 @@
 """
 What the controller reports: the feedback topics and ``/diagnostics`` (ROS marshalling).
 
-:class:`Feedback` publishes ``~/current_pose``, ``~/orientation_error`` and, for the pose task,
-``~/position_error``; :class:`GoalPose` the goal in force on ``~/goal_pose``;
+:class:`Feedback` publishes ``~/current_pose``, ``~/orientation_error`` and, for the pose and
+position tasks, ``~/position_error``; :class:`GoalPose` the goal in force on ``~/goal_pose``;
 :class:`Diagnostics` turns the figures of the ROS-free builders
 (``controller.py``, ``diagnostics.py``) into ``/diagnostics`` and warns of a second commander on
 the robot.

@@ -55,7 +55,7 @@ FULL_TURN_RAD = 2.0 * pi - 1e-6
 # potential torque is 0.1% of f, and changes sign smoothly (C-infinity) through tau_p = 0.
 TORQUE_BAND_FRACTION = 0.001
 # The learning goes on while a joint held by a friction slides slower than this x v_eps (a
-# wider gate, 4, lets an oscillation's slow turning points in on a weak potential: the SO-100)
+# wider gate lets an oscillation's slow turning points in on a weak potential; docs/lyapunov.md)
 LEARNING_SPEED_FACTOR = 1.0
 # The learning low-passes how stuck a joint is with this fraction of the learning time, and
 # learns only once the filtered value is above 1/2 (learn_friction).
@@ -81,7 +81,7 @@ class Shaping:
     ``large_error_gain`` N m (``k_L``; 0 = off), ``friction_compensation_nm`` N m per joint
     (Coulomb estimates; 0 = off), ``friction_velocity_rad_s`` rad/s (``v_eps``),
     ``friction_error_band`` (``||e||`` below which the breakaway fades out) and
-    ``friction_position_band_m`` m (the same for ``||p_d - p||``, pose task).
+    ``friction_position_band_m`` m (the same for ``||p_d - p||``, pose and position tasks).
     ``configuration_gain`` N m per joint (``T_j``, the most the goal-configuration term asks
     of joint j; 0 = off) and ``configuration_radius_rad`` rad (its dead zone, also the width of
     its ramp). Empty per-joint tuples mean zeros. The rules and the defaults are the rows of
