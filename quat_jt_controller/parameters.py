@@ -22,12 +22,12 @@ from quat_jt_runtime.description import robot_description
 from quat_jt_runtime.joints import check_state_rate
 from quat_jt_runtime.param_table import names, row
 from quat_jt_runtime.params import ChangeLog, declare, LiveParameters
-from quat_jt_runtime.urdf_source import Description
+from quat_jt_runtime.urdf_source import Description, WithDescription
 from rclpy.node import Node
 
 
 @dataclass(frozen=True)
-class StructuralConfig:
+class StructuralConfig(WithDescription):
     """The read-only parameters, read once at start-up."""
 
     task: Task
@@ -41,16 +41,6 @@ class StructuralConfig:
     state_rate_hz: float
     publish_rate_divider: int
     prewarm_lead_s: float  # 0: no throwaway tick before each state
-
-    @property
-    def urdf_xml(self) -> str:
-        """Return the URDF in use (the bundled wrist's if none was given)."""
-        return self.description.xml
-
-    @property
-    def given_urdf(self) -> str:
-        """Return the URDF as given to the node ('' = none: the bundled wrist)."""
-        return self.description.given
 
     @classmethod
     def create(cls, values: Mapping[str, Any],

@@ -86,6 +86,27 @@ class Description:
         return f'{kind} {self.origin} ({self.source.value})'
 
 
+class WithDescription:
+    """
+    The URDF names a node's structural config gives, from its ``description`` field.
+
+    Mixed into both nodes' frozen configs, so ``urdf_xml`` and ``given_urdf`` mean the same
+    thing in each.
+    """
+
+    description: Description  # declared by the dataclass that mixes this in
+
+    @property
+    def urdf_xml(self) -> str:
+        """Return the URDF in use (the bundled wrist's if none was given)."""
+        return self.description.xml
+
+    @property
+    def given_urdf(self) -> str:
+        """Return the URDF as given to the node ('' = none: the bundled wrist)."""
+        return self.description.given
+
+
 def choose(text: str, path: str, topic: str) -> Choice:
     """
     Return the one source the parameters name (none: the bundled wrist).

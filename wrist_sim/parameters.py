@@ -18,6 +18,7 @@ from quat_jt_runtime.param_table import joint_zeros, JOINT_ZEROS_TEXT, Kind, nam
 from quat_jt_runtime.params import ChangeLog, declare, LiveParameters, REALTIME, Realtime
 from quat_jt_runtime.params import realtime_from
 from quat_jt_runtime.urdf_source import Description, DescriptionError, Source, SOURCES
+from quat_jt_runtime.urdf_source import WithDescription
 from rclpy.node import Node
 from wrist_sim.config import SimConfig
 from wrist_sim.simulator import ENGINES, per_joint, SimulatorError
@@ -108,7 +109,7 @@ def armature_note(structure: 'SimStructure', simulated: bool) -> str:
 
 
 @dataclass(frozen=True)
-class SimStructure:
+class SimStructure(WithDescription):
     """The read-only parameters, read once at start-up."""
 
     description: Description  # the URDF in use and where it came from
@@ -125,16 +126,6 @@ class SimStructure:
     stats_file: str
     stats_window_steps: int
     realtime: Realtime  # cpu_affinity, thread_priority (off in lockstep and with the window)
-
-    @property
-    def urdf_xml(self) -> str:
-        """Return the URDF in use (the bundled wrist's if none was given)."""
-        return self.description.xml
-
-    @property
-    def given_urdf(self) -> str:
-        """Return the URDF as given ('' = none: the bundled wrist)."""
-        return self.description.given
 
     @property
     def dt_ns(self) -> int:
