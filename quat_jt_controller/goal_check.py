@@ -4,8 +4,9 @@ Check a goal against the paper's assumptions A1 (reachable) and A2 (no self-moti
 :func:`check_goal` runs the inverse kinematics of :mod:`quat_jt_controller.inverse_kinematics` from
 a fixed number of starts: a goal no start reaches may break A1; a goal reached only where the
 smallest singular value of J_o (orientation task), J_G (pose task) or J_p (position task) is small
-breaks A2. The verdict is advice for the user. :class:`GoalCheckWorker` runs it, and on request the
-goal configuration q* (:func:`~quat_jt_controller.inverse_kinematics.goal_configuration`), in a
+breaks A2 (its position rows in units of the arm's length: ``RobotModel.task_sigma_min``). The
+verdict is advice for the user. :class:`GoalCheckWorker` runs it, and on request the goal
+configuration q* (:func:`~quat_jt_controller.inverse_kinematics.goal_configuration`), in a
 separate process (:func:`_serve`, JSON lines over its stdin and stdout), never on the control
 thread.
 """
@@ -20,8 +21,6 @@ import threading
 import time
 from typing import Callable, NamedTuple, Optional, Sequence
 
-import numpy as np
-
 from quat_jt_controller.control_law import Task
 from quat_jt_controller.inverse_kinematics import configuration_velocity, MAX_STARTS
 from quat_jt_controller.inverse_kinematics import RESIDUAL_TOLERANCE, search_goal_configuration
@@ -34,8 +33,9 @@ def singular_warning(q: Sequence[float], sigma_min: float) -> str:
     """Return the warning for a goal reached only at the near-singular ``q`` (A2)."""
     q_text = [round(float(x), 4) for x in q]
     return (f'it is reached only near a singular configuration q = {q_text} (sigma_min(J) = '
-            f'{sigma_min:.3g} < {SINGULAR_SIGMA_MIN}): assumption A2 of the paper does not '
-            'hold; the regulator may drift along the self-motion')
+            f'{sigma_min:.3g} < {SINGULAR_SIGMA_MIN}; its position rows, if any, per unit of '
+            "the arm's length): assumption A2 of the paper does not hold; the regulator may "
+            'drift along the self-motion')
 
 
 def unreached_warning(best_q: Sequence[float], best_residual: float, starts: int) -> str:
@@ -65,7 +65,7 @@ def check_goal(model: RobotModel, q_measured: Optional[Sequence[float]],
         if best is None or residual < best[1]:
             best = (q, residual)
         if residual < RESIDUAL_TOLERANCE:
-            sigma = float(np.linalg.svd(J, compute_uv=False)[-1])
+            sigma = model.task_sigma_min(J, Task(task).has_position)
             if sigma >= SINGULAR_SIGMA_MIN:
                 return ''
             if singular is None or sigma > singular[1]:

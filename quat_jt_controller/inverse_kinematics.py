@@ -58,10 +58,15 @@ def _pose_residual(model: RobotModel, q: np.ndarray, quat_desired: Sequence[floa
 
 
 def sigma_min(model: RobotModel, q: Sequence[float], task: Task) -> float:
-    """Return the smallest singular value of the task Jacobian (J_G, J_o or J_p) at ``q``."""
+    """
+    Return the smallest singular value of the task Jacobian (J_G, J_o or J_p) at ``q``.
+
+    Its position rows are in units of the arm's length (``RobotModel.task_sigma_min``), so
+    it compares with SINGULAR_SIGMA_MIN on an arm of any size.
+    """
     _, _, rows = model.kinematics(list(q))
-    J = Task(task).rows(np.array(rows))
-    return float(np.linalg.svd(J, compute_uv=False)[-1])
+    task = Task(task)
+    return model.task_sigma_min(task.rows(np.array(rows)), task.has_position)
 
 
 def _limits(model: RobotModel) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
@@ -302,7 +307,7 @@ class Search(NamedTuple):
     """What :func:`search_goal_configuration` found, and how hard it looked."""
 
     q_star: Optional[np.ndarray]  # None: no start reached the goal within the limits
-    sigma_min: float  # of the task Jacobian at q_star (nan without one)
+    sigma_min: float  # of the task Jacobian at q_star, as sigma_min() (nan without one)
     starts: int  # IK starts tried (the warm start included)
     best_q: np.ndarray  # the configuration of the smallest residual found
     best_residual: float  # its residual (m and rad)
@@ -337,7 +342,7 @@ def search_goal_configuration(model: RobotModel, q_measured: Optional[Sequence[f
     Each solution is polished, its full-turn joints moved by whole turns to the angle nearest
     the measured one, but ``margin_rad`` from their stops when a whole turn allows (the joint
     box is convex: the way there stays within the limits). Among them it prefers the regular
-    ones (``sigma_min(J) >= SINGULAR_SIGMA_MIN``), then those outside the joint-limit bands
+    ones (:func:`sigma_min` ``>= SINGULAR_SIGMA_MIN``), then those outside the joint-limit bands
     (``margin_rad``), then the nearest to ``q_measured``. A goal reached only near a
     singularity still gets the least singular q* found: A2 does not hold there, which the goal
     check reports, but the goal is reached. Deterministic.

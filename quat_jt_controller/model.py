@@ -33,8 +33,10 @@ except ModuleNotFoundError as exc:  # e.g. a colcon workspace whose rosdep skipp
 from quat_jt_runtime.errors import checked_vector, QuatJtError
 from quat_jt_runtime.joints import fixed_joints, movable_joints, select_joints
 
-# sigma_min of the task Jacobian (J_o, J_G or J_p) below this: near-singular (the paper's
-# assumption A2 fails there), for the goal check's verdict and the stall report alike
+# sigma_min of the task Jacobian (J_o, J_G or J_p), its position rows divided by the arm's
+# length (RobotModel.task_sigma_min: dimensionless), below this: near-singular (the paper's
+# assumption A2 fails there), for the choice of q*, the goal check's verdict and the stall
+# report alike
 SINGULAR_SIGMA_MIN = 0.05
 
 
@@ -133,6 +135,51 @@ class RobotModel:
         self.effort_limits = self._per_joint(model.effortLimit)
         # the URDF's <dynamics friction>, N m (0: not given); the simulator does not use it
         self.friction_nm = self._per_joint(model.friction)
+        self.length_m = self._chain_length(joint_ids)
+
+    def _chain_length(self, joint_ids: Sequence[int]) -> float:
+        """
+        Return the arm's length, m: from its first controlled joint to the tip, stretched.
+
+        The sum of the distances between consecutive joint origins along the chain, from the
+        first controlled joint (the nearest the root) to the tip link's origin: the joint
+        placements of the URDF, so it does not depend on q, and it bounds the reach from
+        above. 0 when the chain has no length (e.g. a wrist whose axes meet at the tip).
+        """
+        model = self.model
+        tip = model.frames[self._tip_id]
+        chain = []
+        jid = tip.parentJoint
+        while jid > 0:
+            chain.append(jid)
+            jid = model.parents[jid]
+        controlled = [jid for jid in chain if jid in joint_ids]
+        if not controlled:
+            return 0.0
+        first = min(controlled)  # Pinocchio numbers a parent before its children
+        return float(np.linalg.norm(tip.placement.translation) + sum(
+            np.linalg.norm(model.jointPlacements[jid].translation)
+            for jid in chain if jid > first))
+
+    def task_sigma_min(self, rows: np.ndarray, has_position: bool) -> float:
+        """
+        Return sigma_min of the task rows of J, its position rows in units of the arm's length.
+
+        The near-singular test of assumption A2 compares this with SINGULAR_SIGMA_MIN. The
+        position rows J_p (the first three rows of ``rows`` when ``has_position``) are in m/rad:
+        the tip's speed per joint speed grows with the arm's size, so an arm twice as large,
+        in the same configuration, has twice the sigma_min(J_p). Divided by ``length_m``
+        (:meth:`_chain_length`) they are dimensionless, like the orientation rows J_o
+        (rad/rad), which are left as they are: the test is then the same for an arm of any
+        size, and an arm 1 m long keeps SINGULAR_SIGMA_MIN in m/rad. For the position task
+        this is sigma_min(J_p) / L; for the pose task, sigma_min of [J_p / L; J_o]; for the
+        orientation task, sigma_min(J_o). An arm of no length keeps its rows as given.
+        """
+        J = np.asarray(rows, dtype=float)
+        if has_position and self.length_m > 0.0:
+            J = J.copy()
+            J[:3] /= self.length_m
+        return float(np.linalg.svd(J, compute_uv=False)[-1])
 
     def link_names(self) -> tuple[str, ...]:
         """Return the names of the URDF's links (Pinocchio's body frames), in its order."""

@@ -103,10 +103,12 @@ class StallDetector:
                               + ', '.join(weak) + ')')
         _, _, J = model.kinematics(list(q))
         rows = reg.task.rows(np.array(J))
-        self.sigma_min = float(np.linalg.svd(rows, compute_uv=False)[-1])
+        self.sigma_min = model.task_sigma_min(rows, reg.task.has_position)
         if self.sigma_min < SINGULAR_SIGMA_MIN:
             causes.append(f'near-singular: sigma_min(J) = {self.sigma_min:.3g} < '
-                          f'{SINGULAR_SIGMA_MIN}')
+                          f'{SINGULAR_SIGMA_MIN}'
+                          + (f' (position rows per {model.length_m:.3g} m of arm)'
+                             if reg.task.has_position else ''))
         if abs(out.eta_e) < NEAR_180_ETA_E:
             causes.append(f'orientation error near 180 degrees (eta_e = {out.eta_e:.3f})')
         if not causes:

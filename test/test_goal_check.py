@@ -1,16 +1,19 @@
-"""The A1 / A2 goal check (quat_jt_controller.goal_check) on the wrist and the xArm6."""
+"""The A1 / A2 goal check (quat_jt_controller.goal_check) on the wrist, the xArm6, a small arm."""
 import math
+import re
 
+import numpy as np
 import pytest
 from quat_jt_controller import quaternion as quat
 from quat_jt_controller.control_law import Task
 from quat_jt_controller.goal_check import check_goal
-from quat_jt_controller.inverse_kinematics import solve_ik
-from robots import Q_DESIRED, wrist_model, xarm6_model
+from quat_jt_controller.inverse_kinematics import sigma_min, solve_ik
+from quat_jt_controller.model import RobotModel, SINGULAR_SIGMA_MIN
+from robots import Q_DESIRED, small_arm_urdf, wrist_model, xarm6_model
 
 pytestmark = pytest.mark.unit
 
-ORI, POSE = Task.ORIENTATION, Task.POSE
+ORI, POSE, POSITION = Task.ORIENTATION, Task.POSE, Task.POSITION
 
 
 def goal_at(model, q):
@@ -51,3 +54,56 @@ def test_xarm_goal_outside_the_workspace_breaks_a1():
     q_d, _ = goal_at(model, [0.0, -0.5, -1.0, 0.0, 1.5, 0.0])
     warning = check_goal(model, [0.0, -0.5, -1.0, 0.0, 1.5, 0.0], q_d, (1.2, 0.0, 0.5), POSE)
     assert 'A1' in warning, warning
+
+
+def scaled_small_arm(scale):
+    """Return the small arm of the tests, each joint origin ``scale`` x as far from its parent."""
+    def origin(match):
+        return 'origin xyz="' + ' '.join(str(scale * float(v)) for v in match.group(1).split())
+    return RobotModel(re.sub(r'origin xyz="([^"]*)', origin, small_arm_urdf()),
+                      'base_link', 'tool')
+
+
+def test_the_arms_length_is_its_chain_from_the_first_joint_to_the_tip():
+    """The small arm: four links of 0.2 m from joint 1 to the tip (0.1 m below it excluded)."""
+    for scale in (0.1, 1.0, 10.0):
+        assert scaled_small_arm(scale).length_m == pytest.approx(4 * 0.2 * scale)
+
+
+@pytest.mark.parametrize('task', [POSITION, POSE])
+def test_the_near_singular_test_is_the_same_for_an_arm_of_any_size(task):
+    """
+    sigma_min(J_p) in m/rad grows with the arm; per unit of its length it does not.
+
+    The same configuration of the same arm drawn 0.1x, 1x and 10x as large: the raw
+    sigma_min of its position rows scales with it, the one compared with SINGULAR_SIGMA_MIN
+    does not, and the goal check's verdict on the goal there is the same. A bend of 0.1 rad
+    near full stretch is near-singular at every size (a fixed threshold in m/rad would have
+    passed it on the large arm); a bend of 1.2 rad is regular at every size.
+    """
+    arms = {scale: scaled_small_arm(scale) for scale in (0.1, 1.0, 10.0)}
+    for bend, singular in ((0.1, True), (1.2, False)):
+        q = [0.3, -0.4, bend, 0.2, 0.1]
+        raw, scaled, verdicts = {}, {}, set()
+        for scale, model in arms.items():
+            _, _, J = model.kinematics(q)
+            raw[scale] = np.linalg.svd(np.array(J)[:3], compute_uv=False)[-1]
+            scaled[scale] = sigma_min(model, q, task)
+            p, R = model.forward_kinematics(q)
+            verdicts.add(check_goal(model, [0.0, 0.5, 0.5, 0.0, 0.0],
+                                    quat.from_rotation_matrix(R), p, task) != '')
+        assert raw[10.0] == pytest.approx(100.0 * raw[0.1])
+        assert scaled[10.0] == pytest.approx(scaled[0.1]) == pytest.approx(scaled[1.0])
+        assert (scaled[1.0] < SINGULAR_SIGMA_MIN) == singular
+        assert verdicts == {singular}, (bend, verdicts)
+        if singular:  # a fixed threshold in m/rad would call the large arm regular here
+            assert raw[10.0] > SINGULAR_SIGMA_MIN
+
+
+def test_the_orientation_task_keeps_its_dimensionless_rows():
+    """J_o is in rad/rad: the wrist's near-singular test reads sigma_min(J_o) as it is."""
+    model = wrist_model()
+    q = [0.3, 0.02, -0.5]
+    _, _, J = model.kinematics(q)
+    assert sigma_min(model, q, ORI) == pytest.approx(
+        np.linalg.svd(np.array(J)[3:], compute_uv=False)[-1], rel=1e-12)
