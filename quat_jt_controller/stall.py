@@ -4,7 +4,10 @@ Stall detection for /diagnostics: at rest, away from the goal, and why.
 The regulator's Lyapunov function only decreases (docs/lyapunov.md), so the robot can come to
 rest before the goal: against a joint limit, where the potential's torque is below the
 friction (estimated, or with no estimate below a plausible level), near a singular
-configuration, or near a 180-degree orientation error (where the paper's torque fades).
+configuration, or near a 180-degree orientation error (where the paper's torque fades). It can
+also crawl towards the goal slower than the rest speed, where the potential's torque is weak
+against the damping: a slow approach, told apart from a joint held by a friction by what the
+joint does under its push (:meth:`StallDetector.diagnose`).
 :class:`StallDetector` is fed every tick with the tick's output (``TickOutput``) and q/qdot,
 but evaluates only every ``period_s`` (10 Hz: no SVD per tick). If the joints are at rest and
 the error is above tolerance for more than ``hold_s`` it reports a WARN naming the likely
@@ -28,6 +31,14 @@ NEAR_LIMIT_RAD = 0.05  # a joint this close to a URDF limit (or inside the band)
 # With no friction estimate, a potential torque below this share of a joint's effort limit
 # (or below what the joint may learn, if more) is within a geared drive's plausible friction
 PLAUSIBLE_FRICTION_SHARE = 0.05
+# A weak joint whose potential torque is at least this share of the largest weak one is pushed
+# (the smaller ones may be moved or held by the others through the inertia's coupling)
+PUSHED_SHARE = 0.1
+# A pushed joint moving along its push with its damping taking at least this share of the
+# push, K_v |qdot| >= share |tau_p|, moves freely (a slow approach); else it is held
+MOVING_DAMPING_SHARE = 0.5
+# A joint that has learned this share of its a_max has learned all it may
+LEARNED_FULL_SHARE = 0.999
 
 
 class StallDetector:
@@ -70,15 +81,21 @@ class StallDetector:
         if self._since_s is None:
             self._since_s = t_s
         self.stalled_for_s = t_s - self._since_s
-        self.causes = self.diagnose(q, out) if self.stalled else []
+        self.causes = self.diagnose(q, out, qdot) if self.stalled else []
 
     @property
     def stalled(self) -> bool:
         """Return True while at rest off the goal for longer than ``hold_s``."""
         return self._since_s is not None and self.stalled_for_s > self.hold_s
 
-    def diagnose(self, q: Sequence[float], out: TickOutput) -> list[str]:
-        """Return the likely causes of a stall at ``q`` (one SVD; called at most at 10 Hz)."""
+    def diagnose(self, q: Sequence[float], out: TickOutput,
+                 qdot: Optional[Sequence[float]] = None) -> list[str]:
+        """
+        Return the likely causes of a stall at ``q`` (one SVD; called at most at 10 Hz).
+
+        ``qdot`` (rad/s; None: at rest) tells a joint held by a friction from one still
+        moving along its weak push (:meth:`_weak_push`).
+        """
         reg = self.regulator
         model, shaping = reg.model, reg.shaping
         causes = []
@@ -89,18 +106,9 @@ class StallDetector:
                 if isfinite(limit) and gap < near:
                     causes.append(f'{name} at {q[j]:.3f} rad is {max(gap, 0.0):.3f} rad from '
                                   f'its {side} limit {limit:g} rad')
-        friction = shaping.friction_compensation_nm
-        tau_p = out.tau_potential_nm
-        if tau_p and not any(f > 0.0 for f in friction):
-            causes += self._unmeasured_friction(tau_p)
-        elif friction and tau_p:
-            learned = reg.learned_friction_nm  # the estimate so far: f + what was learned
-            weak = [f'{name} |tau| {abs(t):.3g} N m <= {f + a:.3g} N m'
-                    for name, t, f, a in zip(model.joint_names, tau_p, friction, learned)
-                    if f > 0.0 and abs(t) <= f + a]
-            if weak:
-                causes.append('potential torque below the friction estimate ('
-                              + ', '.join(weak) + ')')
+        if out.tau_potential_nm:
+            causes += self._weak_push(out.tau_potential_nm,
+                                      (0.0,) * model.n if qdot is None else qdot)
         _, _, J = model.kinematics(list(q))
         rows = reg.task.rows(np.array(J))
         self.sigma_min = model.task_sigma_min(rows, reg.task.has_position)
@@ -115,30 +123,81 @@ class StallDetector:
             causes.append('no known cause (a local minimum of the potential)')
         return causes
 
-    def _unmeasured_friction(self, tau_p: Sequence[float]) -> list[str]:
+    def _weak_push(self, tau_p: Sequence[float], qdot: Sequence[float]) -> list[str]:
         """
-        Name friction as the likely cause when no estimate is set and the push is weak.
+        Name a friction where it holds a joint, or a slow approach where the push is only weak.
 
-        A joint whose potential torque is below a plausible friction level,
-        PLAUSIBLE_FRICTION_SHARE x its effort limit or what it may learn at rest if more, can
-        be held by a friction nobody measured (docs/lyapunov.md, section 4).
+        A joint's push is weak below its friction estimate ``f + a`` (the estimate plus what
+        was learned), or, with no estimate, below a plausible friction level:
+        PLAUSIBLE_FRICTION_SHARE x its effort limit, or what it may learn at rest (``a_max``)
+        if more (docs/lyapunov.md, section 4). Of the weak joints, those pushed (at least
+        PUSHED_SHARE x the largest weak torque) are told apart by their motion. With the
+        potential's torque ``tau_p`` balanced by the damping alone, ``K_v qdot = tau_p`` (a
+        frictionless joint crawling, its inertia's share small at such speeds), so a joint
+        moving along its push with ``K_v |qdot| >= MOVING_DAMPING_SHARE |tau_p|`` is moving
+        freely: a slow approach, not a friction. A joint at rest, moving against its push, or
+        moving along it with less than that share taken by its damping is held: something
+        else takes the push, a friction (or a joint-limit or contact force, named apart).
         """
         reg = self.regulator
         model, shaping = reg.model, reg.shaping
-        limits = shaping.friction_learning_limit_nm or (0.0,) * model.n
+        n = model.n
+        friction = shaping.friction_compensation_nm or (0.0,) * n
+        limits = shaping.friction_learning_limit_nm or (0.0,) * n
+        learned = reg.learned_friction_nm
         weak = []
-        for name, t, effort, a, a_max in zip(model.joint_names, tau_p, model.effort_limits,
-                                             reg.learned_friction_nm, limits):
-            level = max(PLAUSIBLE_FRICTION_SHARE * effort, a_max)
-            if isfinite(level) and abs(t) <= level:
-                learned = f', learned {a:.3g} of {a_max:.3g} N m' if a_max > 0.0 else ''
-                weak.append(f'{name} |tau| {abs(t):.3g} N m <= {level:.3g} N m{learned}')
-        if not weak:
-            return []
-        return ['likely friction: no friction estimate is set (friction_compensation 0) and '
-                'the potential torque is below a plausible friction level ('
-                + ', '.join(weak) + '); measure the breakaway torque per joint and set '
-                'friction_compensation, or raise friction_learning_limit']
+        for j in range(n):
+            t = abs(tau_p[j])
+            if friction[j] > 0.0:
+                level = friction[j] + learned[j]
+            else:
+                level = max(PLAUSIBLE_FRICTION_SHARE * model.effort_limits[j], limits[j])
+            if isfinite(level) and t <= level:
+                weak.append((j, level))
+        largest = max((abs(tau_p[j]) for j, _ in weak), default=0.0)
+        estimated, unmeasured, moving = [], [], []
+        speed = 0.0  # the fastest of the joints moving along their push, rad/s
+        kv = reg.gains.kv
+        for j, level in weak:
+            t = tau_p[j]
+            if abs(t) <= 0.0 or abs(t) < PUSHED_SHARE * largest:
+                continue
+            name = model.joint_names[j]
+            if qdot[j] * t > 0.0 and kv[j] * abs(qdot[j]) >= MOVING_DAMPING_SHARE * abs(t):
+                moving.append(f'{name} |tau| {abs(t):.3g} N m, qdot {qdot[j]:.3g} rad/s')
+                speed = max(speed, abs(qdot[j]))
+                continue
+            what = (f'{name} |tau| {abs(t):.3g} N m <= {level:.3g} N m'
+                    + (f', qdot {qdot[j]:.3g} rad/s' if qdot[j] != 0.0 else '')
+                    + self._learned_text(learned[j], limits[j]))
+            (estimated if friction[j] > 0.0 else unmeasured).append(what)
+        causes = []
+        if estimated:
+            causes.append('potential torque below the friction estimate, the joint held ('
+                          + ', '.join(estimated) + ')')
+        if unmeasured:
+            causes.append('likely friction: no friction estimate is set (friction_compensation '
+                          '0) and the potential torque is below a plausible friction level '
+                          'while the joint is held (' + ', '.join(unmeasured) + '); measure '
+                          'the breakaway torque per joint and set friction_compensation, or '
+                          'raise friction_learning_limit')
+        if moving:
+            causes.append("a slow approach: the potential's torque is weak here ("
+                          + ', '.join(moving) + '); the arm is still moving towards the goal at '
+                          f'{speed:.3g} rad/s, slower than the rest speed {REST_SPEED_RAD_S:g} '
+                          'rad/s; raise kp, allow more time, or give design_gains --armature '
+                          'if its design warned of light links')
+        return causes
+
+    @staticmethod
+    def _learned_text(a: float, a_max: float) -> str:
+        """Say what a held joint has learned of its friction: some, or all it may."""
+        if a_max <= 0.0:
+            return ''
+        if a >= LEARNED_FULL_SHARE * a_max:
+            return (f', learned its full {a_max:.3g} N m: the friction exceeds what it may '
+                    'learn')
+        return f', learned {a:.3g} of {a_max:.3g} N m so far'
 
     def status(self) -> Status:
         """Return ``(level, message, values)`` for /diagnostics."""

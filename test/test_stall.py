@@ -2,8 +2,9 @@
 Stall detection (quat_jt_controller.stall), ROS-free: fed from the tick, at 10 Hz.
 
 At rest off the goal for more than 0.5 s it warns and names the cause: a joint at a limit,
-the potential's torque below the friction estimate, a near-singular configuration, a
-near-180-degree error. Moving, or at the goal, it stays OK. The SVD runs at most at 10 Hz.
+the potential's torque below the friction estimate (a joint held), a slow approach (a joint still
+moving along its weak push), a near-singular configuration, a near-180-degree error. Moving, or
+at the goal, it stays OK. The SVD runs at most at 10 Hz.
 """
 import math
 
@@ -20,12 +21,15 @@ from robots import wrist_model
 pytestmark = pytest.mark.unit
 
 REST = [0.0, 0.0, 0.0]
+WEAK_KP = tuple(0.02 * k for k in paper.KP)  # a weak potential: the wrist crawls near the goal
 
 
-def regulator(friction=(0.0, 0.0, 0.0), potential='tanh', kp=paper.KP) -> Regulator:
+def regulator(friction=(0.0, 0.0, 0.0), potential='tanh', kp=paper.KP,
+              learning=(0.0, 0.0, 0.0)) -> Regulator:
     gains = cl.Gains.create(potential, kp, paper.KV, paper.LAMBDA, cl.Task.ORIENTATION, 3)
     return Regulator(wrist_model(), cl.Task.ORIENTATION, gains, goal=Goal(paper.Q_DESIRED),
-                     shaping=sh.Shaping.create(3, friction_compensation=friction))
+                     shaping=sh.Shaping.create(3, friction_compensation=friction,
+                                               friction_learning_limit=learning))
 
 
 def feed_for(detector, reg, q, qdot, seconds, t0=0.0, dt=1e-3):
@@ -108,3 +112,63 @@ def test_with_no_friction_estimate_a_weak_push_names_friction():
     message = det.status()[1]
     assert det.stalled and 'likely friction' in message
     assert 'local minimum' not in message
+
+
+def test_a_joint_held_against_its_weak_push_names_friction_and_what_it_learned():
+    """Held at rest, pushed, while it learns all it may: the friction exceeds a_max."""
+    a_max = (0.002, 0.002, 0.002)
+    reg = regulator(potential='quadratic', learning=a_max)
+    det = stall.StallDetector(reg)
+    near = [v + 0.02 for v in paper.Q_JOINT_DESIRED_RAD]
+    tau_p = reg.update(near, REST).tau_potential_nm
+    assert min(abs(t) for t in tau_p) > max(a_max)  # the push is above what it may learn
+    t, dt = 0.0, 1e-3
+    while t < 5.0 * reg.shaping.friction_learning_time_s:  # held: it learns all it may
+        det.feed(t, near, REST, reg.update(near, REST, dt))
+        t += dt
+    assert reg.learned_friction_nm == pytest.approx(a_max, rel=1e-3)
+    message = det.status()[1]
+    assert det.stalled and 'likely friction' in message, message
+    assert 'exceeds what it may learn' in message and 'slow approach' not in message
+
+
+@pytest.mark.parametrize('direction', [0.0, -1.0])
+def test_a_joint_at_rest_or_moving_against_its_push_is_held(direction):
+    """Not moving along its push (at rest, or pushed back): held, so friction is named."""
+    reg = regulator(potential='quadratic', kp=WEAK_KP)
+    det = stall.StallDetector(reg)
+    near = [v + 0.1 for v in paper.Q_JOINT_DESIRED_RAD]
+    tau_p = reg.update(near, REST).tau_potential_nm
+    qdot = [direction * t / kv for t, kv in zip(tau_p, reg.gains.kv)]  # K_v qdot = -tau_p
+    assert max(abs(v) for v in qdot) < stall.REST_SPEED_RAD_S
+    feed_for(det, reg, near, qdot, 0.7)
+    message = det.status()[1]
+    assert det.stalled and 'likely friction' in message and 'slow approach' not in message
+
+
+def test_on_a_frictionless_plant_a_slow_crawl_is_a_slow_approach_not_friction():
+    """
+    A weak potential on the ideal plant: the arm crawls below the rest speed, not held.
+
+    Simulated (M(q) qddot = tau - C qdot - g, no friction) from 0.1 rad off the goal with
+    2% of the paper's k_p: the damping takes the push, K_v qdot = tau_p, and the wrist moves
+    towards the goal at about 0.01 rad/s, so the detector sees a stall. Its potential torque
+    is below a plausible friction, but every joint still moves along it.
+    """
+    reg = regulator(potential='quadratic', kp=WEAK_KP)
+    det = stall.StallDetector(reg)
+    model = reg.model
+    q = [v + 0.1 for v in paper.Q_JOINT_DESIRED_RAD]
+    qdot = list(REST)
+    dt = 1e-3
+    for k in range(1500):
+        out = reg.update(q, qdot, dt)
+        det.feed(k * dt, q, qdot, out)
+        qddot = model.forward_dynamics(q, qdot, out.tau_nm)
+        qdot = [v + dt * a for v, a in zip(qdot, qddot)]
+        q = [x + dt * v for x, v in zip(q, qdot)]
+    assert det.stalled and out.orientation_error_norm > stall.ORIENTATION_TOLERANCE
+    assert all(t * v > 0.0 for t, v in zip(out.tau_potential_nm, qdot))  # along the push
+    message = det.status()[1]
+    assert 'slow approach' in message and 'still moving towards the goal' in message, message
+    assert 'likely friction' not in message and 'local minimum' not in message
