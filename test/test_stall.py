@@ -172,3 +172,21 @@ def test_on_a_frictionless_plant_a_slow_crawl_is_a_slow_approach_not_friction():
     message = det.status()[1]
     assert 'slow approach' in message and 'still moving towards the goal' in message, message
     assert 'likely friction' not in message and 'local minimum' not in message
+
+
+def test_near_singular_is_judged_per_unit_of_the_arms_length():
+    """A 10x large arm near full stretch: sigma_min(J_p) is 10x larger, still near-singular."""
+    from quat_jt_controller.model import SINGULAR_SIGMA_MIN
+    from test_goal_check import scaled_small_arm
+    model = scaled_small_arm(10.0)
+    q = [0.3, -0.4, 0.1, 0.2, 0.1]  # nearly stretched: the elbow bent by 0.1 rad
+    p_goal, _ = model.forward_kinematics([0.3, -0.4, 1.0, 0.2, 0.1])
+    gains = cl.Gains.create('tanh', (1.0, 1.0, 1.0), (1.0,) * 5, (1.0, 1.0, 1.0),
+                            cl.Task.POSITION, 5)
+    reg = Regulator(model, cl.Task.POSITION, gains, goal=Goal.at_position(p_goal))
+    det = stall.StallDetector(reg)
+    feed_for(det, reg, q, [0.0] * 5, 0.7)
+    _, _, J = model.kinematics(q)
+    assert np.linalg.svd(np.array(J)[:3], compute_uv=False)[-1] > SINGULAR_SIGMA_MIN
+    assert det.stalled and 'near-singular' in det.status()[1]
+    assert det.sigma_min < SINGULAR_SIGMA_MIN
