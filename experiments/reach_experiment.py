@@ -581,7 +581,8 @@ def run_dds(robot: Robot, count: int, seed: int, progress=print) -> str:
     return '\n'.join(lines)
 
 
-CONDITIONS = ('ideal', 'armature', 'armature-wrong', 'friction', 'no-velocities')
+CONDITIONS = ('ideal', 'armature', 'armature-wrong', 'friction', 'armature-friction',
+              'no-velocities')
 
 
 @dataclass(frozen=True)
@@ -602,6 +603,9 @@ class Condition:
             'armature-wrong': f'rotor inertia {self.plant_armature:g} kg m^2, given as '
                               f'{self.told_armature:g}',
             'friction': f'untold Coulomb friction {self.coulomb_effort_fraction:g} x effort',
+            'armature-friction': f'rotor inertia {self.plant_armature:g} kg m^2, given, and '
+                                 f'untold Coulomb friction {self.coulomb_effort_fraction:g} x '
+                                 'effort',
             'no-velocities': 'states without velocities (estimated)',
         }[self.name]
 
@@ -614,6 +618,8 @@ def condition(name: str, armature: float = 0.1, told_scale: float = 0.5,
         'armature': Condition('armature', armature, armature),
         'armature-wrong': Condition('armature-wrong', armature, told_scale * armature),
         'friction': Condition('friction', coulomb_effort_fraction=friction_fraction),
+        'armature-friction': Condition('armature-friction', armature, armature,
+                                       friction_fraction),
         'no-velocities': Condition('no-velocities', no_velocities=True),
     }[name]
 

@@ -45,7 +45,8 @@ from quat_jt_controller.gain_analysis import (
     joint_stiffness, largest_stable_damping, median_damping_ratio, QO, seen_inertia, sigma_min,
     time_to_goal_s, worst_rho)
 from quat_jt_controller.model import RobotModel
-from quat_jt_controller.shaping import DEFAULT_SPEED_CAP_RAD_S, FULL_TURN_RAD, Shaping
+from quat_jt_controller.shaping import (
+    DEFAULT_SPEED_CAP_RAD_S, FADE_TOP_FRACTION, FULL_TURN_RAD, Shaping)
 from quat_jt_runtime.joints import check_state_rate
 from quat_jt_runtime.param_table import row
 
@@ -82,8 +83,11 @@ FRICTION_LEARNING = 2.0
 # effort limit: a friction nobody measured up to this much is still broken (docs/lyapunov.md,
 # section 4). This is the share measured; the default is none (docs/gain_design.md says why).
 FRICTION_EFFORT_SHARE = 0.03
-DEFAULT_FRICTION_EFFORT_SHARE = 0.0
+DEFAULT_FRICTION_EFFORT_SHARE = FRICTION_EFFORT_SHARE
 FRICTION_LEARNING_TIME_S = 1.0
+# ... and on a joint without one, at most what changes its speed by this share of its limit in
+# one tick: with the learned push fading out above FADE_TOP_FRACTION of it, the limit holds
+TICK_SPEED_SHARE = 1.0 - FADE_TOP_FRACTION
 # A joint that accelerates faster than this on its effort limit and the inertia it sees, with
 # no armature given, is taken for a URDF without its drive's rotor inertia (a warning)
 PLAUSIBLE_ACCELERATION_RAD_S2 = 5000.0
@@ -478,16 +482,16 @@ def design(model: RobotModel, task: cl.Task, rate_hz: float = 1000.0,
         if v_c < NEGLIGIBLE_CUBIC * velocity[j]:  # else it brakes < 1e-4 of k_v v: none
             damping_speed[j] = v_c
     terminal = cruising_speed(push, kv, damping_speed, velocity)
-    # The effort share of what may be learned is held to the damping torque (linear and cubic)
-    # at the joint's velocity limit: a fully learned over-compensation alone, with no friction
-    # left to take it, drives the joint no faster than that limit.
-    at_limit = kv * velocity * (1.0 + np.divide(velocity ** 2, damping_speed ** 2,
-                                                out=np.zeros(n), where=damping_speed > 0.0))
-    learning_limit = np.where(friction > 0.0, learning, np.minimum(learning, at_limit))
+    # A joint without an estimate learns at most what changes its speed by TICK_SPEED_SHARE x
+    # its velocity limit in one tick on the least inertia it sees: the learned push fades out
+    # above FADE_TOP_FRACTION x the limit, so with no friction to take it, it cannot pass the
+    # limit within the tick it takes to see that (docs/lyapunov.md, section 4).
+    per_tick = TICK_SPEED_SHARE * velocity * inertia / dt_s
+    learning = np.where(friction > 0.0, learning, np.minimum(learning, per_tick))
     shaping = Shaping.create(
         n, joint_limit_margin=margin, joint_limit_gain=limit_gain.round(3).tolist(),
         friction_compensation=friction.tolist(), friction_velocity=FRICTION_VELOCITY_RAD_S,
-        friction_learning_limit=learning_limit.tolist(),
+        friction_learning_limit=learning.tolist(),
         friction_learning_time=FRICTION_LEARNING_TIME_S,
         friction_error_band=FRICTION_ERROR_BAND,
         friction_position_band=FRICTION_POSITION_BAND_M,
@@ -517,7 +521,7 @@ def design(model: RobotModel, task: cl.Task, rate_hz: float = 1000.0,
         'velocity_limits_rad_s': velocity, 'friction_learning': friction_learning,
         'cruise_fraction': cruise_fraction,
         'regular_sigma_min': data['regular_sigma_min'],
-        'warnings': (friction_warnings(model, friction, learning_limit)
+        'warnings': (friction_warnings(model, friction, learning)
                      + inertia_warnings(model, effort, inertia)),
         'speed_ceiling_rad_s': np.where(limited_speed, ceiling, np.inf),
         'time_to_goal_s': time_to_goal_s(np.array(terminal), configs, np.array(kp_r),

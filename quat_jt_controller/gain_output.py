@@ -16,7 +16,7 @@ from quat_jt_controller import parameter_table as table
 from quat_jt_controller.gain_analysis import DELAY_MARGIN, GAIN_MARGIN, sigma_min
 from quat_jt_controller.gain_design import (
     DAMPING_RATIO, Design, FRICTION_LEARNING_TIME_S, GUIDE_OVER_TASK, LIMIT_OVER_TASK,
-    REGULAR_SIGMA_MIN, REGULAR_TRIES, SAMPLES, SPEED_MARGIN, TORQUE_SHARE)
+    REGULAR_SIGMA_MIN, REGULAR_TRIES, SAMPLES, SPEED_MARGIN, TICK_SPEED_SHARE, TORQUE_SHARE)
 from quat_jt_controller.model import RobotModel
 from quat_jt_runtime.param_table import Kind, names, row, yaml_lines, yaml_value
 
@@ -105,7 +105,8 @@ def to_yaml(d: Design, potential: str = 'tanh', command: str = '',
         f'{_fmt(d.armature or [0.0] * len(d.joints))} kg m^2;',
         f'  at rest the regulator may learn {f["friction_learning"]:g} x the estimates more, '
         f'and without an estimate {f.get("friction_effort_share", 0.0):g} x the effort limit (a '
-        'friction nobody measured; at most the damping at the velocity limit), in '
+        'friction nobody measured; at most what changes the speed of the joint by '
+        f'{TICK_SPEED_SHARE:g} x its limit in one tick), in '
         f'{FRICTION_LEARNING_TIME_S:g} s;',
         f'  budget {TORQUE_SHARE:g} x (effort - gravity - friction - learnable friction) = '
         f'{_fmt(f["budget_nm"])}, of which the task potential may ask at most (a-priori '

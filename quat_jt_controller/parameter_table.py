@@ -146,10 +146,10 @@ SHAPING = (
          default_text=JOINT_ZEROS_TEXT, field='friction_compensation_nm', **PER_JOINT),
     Spec('friction_learning_limit', Kind.DOUBLE_ARRAY, joint_zeros,
          'The most (N m) the friction compensation may learn on top of the estimate, one per '
-         'joint ({n}): it grows while a joint stays stuck away from the goal with the push not '
-         'taken by its damping, stops once the joint moves, holds while a friction takes the '
-         'push, and leaks away where the damping takes it and near the goal. Zeros = off. '
-         'Live.',
+         'joint ({n}): it grows while a joint stays stuck, or creeps slower than its creep '
+         'speed, away from the goal with the push not taken by its damping, holds while a '
+         'friction takes the push, and leaks away where the damping takes it and near the '
+         'goal; along a motion faster than the creep it fades out. Zeros = off. Live.',
          default_text=JOINT_ZEROS_TEXT, field='friction_learning_limit_nm', **PER_JOINT),
     Spec('friction_learning_time', Kind.DOUBLE, 1.0,
          'Time (s) to learn friction_learning_limit while stuck; the learned part leaks with '

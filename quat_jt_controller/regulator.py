@@ -194,6 +194,9 @@ class Regulator:
         self._stuck = [0.0] * self.n
         self._unmet = [0.0] * self.n
         self._damping = [0.0] * self.n
+        self._creep = [0.0] * self.n  # the creep speed per joint (rad/s), for the learning
+        self._fade = [0.0] * self.n
+        self._resting = [0.0] * self.n
         self._held = [0.0] * self.n  # how stuck each joint has stayed (learn_friction's h)
         # the limit band ending at q* (LimitBand.ending_at), cached for (band, q*): derived
         self._band_at_goal: tuple = (None, None, None)
@@ -389,9 +392,23 @@ class Regulator:
                 if learning:  # the damping terms so far: tau = tau_p + damping
                     for j in range(n):
                         damping[j] = tau[j] - tau_p[j]
+                creep = fade = None  # the creep and fade speeds: from q* if known
+                if learning and q_star is not None:
+                    creep, fade = self._creep, self._fade
+                    v_eps = shaping.friction_velocity_rad_s
+                    v0 = sh.CREEP_SPEED_FACTOR * v_eps
+                    extra = (sh.FADE_SPEED_FACTOR - sh.CREEP_SPEED_FACTOR) * v_eps
+                    for j in range(n):
+                        v = abs(q[j] - q_star[j]) * sh.CREEP_GAIN
+                        top = sh.CREEP_TOP_FRACTION * self._speed_cap[j]
+                        c = v0 if v < v0 else (v if v < top else (top if top > v0 else v0))
+                        creep[j] = c
+                        f = c + extra
+                        cap = sh.FADE_TOP_FRACTION * self._speed_cap[j]
+                        fade[j] = f if f < cap else (cap if cap > c else c + 1e-6)
                 fc = sh.friction_compensation(
                     tau_p, qdot, phi, shaping, self._learned_friction_nm if learning else None,
-                    self._stuck, damping, self._unmet)
+                    self._stuck, damping, self._unmet, creep, fade)
                 for j in range(n):
                     tau[j] += fc[j]
         if gains.gravity_compensation:

@@ -27,15 +27,16 @@ The law of Eq. (22) becomes
   ``phi(y_tilde) (f_j + a_j) t_p [max(0, t_v t_p) + 1 - |t_v|]``, ``t_p = tanh(tau_p,j /
   (0.001 (f_j + a_max,j)))`` the direction of the potential torque ``tau_p``, ``t_v =
   tanh(qdot_j / v_eps)``: at rest and while the joint moves the way the potential pushes it,
-  ``f_j + a_j`` that way; a joint moving against it (an overshoot) is left to its friction.
+  ``f_j + a_j`` that way (the learned ``a_j`` fading out above a creep speed); a joint moving
+  against it (an overshoot) is left to its friction.
   All of it fades to zero inside a small error band (``phi``), so an estimate above the true
   friction cannot feed a limit cycle at the goal. Its size never
   exceeds ``f_j + a_j``, which is what keeps dV/dt <= -qdot^T K_v qdot against a Coulomb
   friction of at least that. ``a_j`` in ``[0, a_max,j]`` is the learned part of the estimate
-  (:func:`learn_friction`): it grows while the joint stays stuck outside the error band with
-  the push not taken by its damping (held by a friction, not slowed by its damping), which
-  happens only while ``f_j + a_j`` is below the friction that holds it; it leaks away where
-  the damping takes the push and inside the band.
+  (:func:`learn_friction`): it grows while the joint stays held, or creeps slower than its
+  creep speed, outside the error band with the push not taken by its damping (held by a
+  friction, not slowed by its damping), which happens only while ``f_j + a_j`` is below the
+  friction that holds it; it leaks away where the damping takes the push and inside the band.
 
 All are off by default (:class:`Shaping` ()), which gives the paper's law exactly. Plain
 floats: the functions here run in the 1 kHz tick.
@@ -54,9 +55,18 @@ FULL_TURN_RAD = 2.0 * pi - 1e-6
 # t_p = tanh(tau_p / (TORQUE_BAND_FRACTION f)): the breakaway reaches 76% of f when the
 # potential torque is 0.1% of f, and changes sign smoothly (C-infinity) through tau_p = 0.
 TORQUE_BAND_FRACTION = 0.001
-# The learning goes on while a joint held by a friction slides slower than this x v_eps (a
-# wider gate lets an oscillation's slow turning points in on a weak potential; docs/lyapunov.md)
-LEARNING_SPEED_FACTOR = 1.0
+# The learning goes on while a joint held by a friction slides slower than this x v_eps, the
+# creep speed, weakening linearly up to it (docs/lyapunov.md, section 4)
+CREEP_SPEED_FACTOR = 2.0
+# The learned push along the motion fades out linearly from the creep speed to this x v_eps
+FADE_SPEED_FACTOR = 8.0
+# With a goal configuration q* (the regulator), a joint's creep speed is |q - q*| x this (1/s),
+# at least the above and at most this share of its velocity limit, and its fade speed that
+# plus the width above, at most FADE_TOP_FRACTION of the limit: a joint far from q* creeps to
+# it in about 1 / CREEP_GAIN s a radian instead of at a fixed crawl
+CREEP_GAIN = 4.0
+CREEP_TOP_FRACTION = 0.4
+FADE_TOP_FRACTION = 0.6
 # The learning low-passes how stuck a joint is with this fraction of the learning time, and
 # learns only once the filtered value is above 1/2 (learn_friction).
 HOLD_TIME_FRACTION = 0.2
@@ -287,7 +297,10 @@ def friction_compensation(tau_potential: Sequence[float], qdot: Sequence[float],
                           shaping: Shaping, learned_nm: Optional[Sequence[float]] = None,
                           stuck_out: Optional[list[float]] = None,
                           damping_nm: Optional[Sequence[float]] = None,
-                          unmet_out: Optional[list[float]] = None) -> list[float]:
+                          unmet_out: Optional[list[float]] = None,
+                          creep_rad_s: Optional[Sequence[float]] = None,
+                          fade_rad_s: Optional[Sequence[float]] = None,
+                          resting_out: Optional[list[float]] = None) -> list[float]:
     """
     tau_fc per joint: phi (f + a) t_p [max(0, t_v t_p) + 1 - |t_v|], never above f + a in size.
 
@@ -300,30 +313,58 @@ def friction_compensation(tau_potential: Sequence[float], qdot: Sequence[float],
     does. ``phi`` (:func:`fade`) turns all of it off near the goal. ``learned_nm`` is ``a``,
     the part of the estimate learned at rest (:func:`learn_friction`; None = zeros).
 
+    The learned ``a`` along the motion is scaled by a ramp of the speed along the push: 1 up
+    to the creep speed, 0 from the fade speed on (``creep_rad_s``, ``fade_rad_s`` per joint;
+    None: ``CREEP_SPEED_FACTOR v_eps`` and ``FADE_SPEED_FACTOR v_eps``). So a learned push
+    that no friction takes drives the joint no faster than the fade speed, however large it
+    is; the estimate ``f``, which the user measured, is not faded.
+
     For the learning, ``unmet_out``, if given, receives per joint the share of the push
     ``u = tau_p + tau_fc`` that the damping torque ``damping_nm`` (the joint damping terms of
     the law, ``-K_v qdot`` and the rest) does not take: ``w = max(0, 1 - |d| / |u|)``. In a
     joint that the push moves freely against its damping (a slow approach) ``w`` is near 0;
     in one held by stiction it is 1 (no damping at rest); one moving against the push gets
-    ``(1 - |t_v|) w`` (it is not held); with ``damping_nm`` None, ``w`` is 1.
-    ``stuck_out``, if given, receives ``(1 - |t_v|) |t_p| w`` (how stuck, pushed and unmoved
-    by the push each joint is). Both are left alone when ``phi`` is 0.
+    ``slow w`` (it is not held); with ``damping_nm`` None, ``w`` is 1. ``stuck_out``, if
+    given, receives ``slow |t_p| w`` (how stuck, pushed and unmoved by the push each joint
+    is), ``slow = max(0, 1 - |qdot| / creep)``: a joint creeping slower than its creep speed
+    still counts, the less the nearer it is to it. Both are left alone when ``phi`` is 0.
     """
     out = [0.0] * len(qdot)
     if phi <= 0.0:
         return out
     v_eps = shaping.friction_velocity_rad_s
+    v_rest = v_creep = CREEP_SPEED_FACTOR * v_eps
+    v_fade = FADE_SPEED_FACTOR * v_eps
     for j, (f, _, scale) in enumerate(shaping.friction_table):
         if scale <= 0.0:  # no estimate and nothing to learn
             continue
-        tv = tanh(qdot[j] / v_eps)
+        v = qdot[j]
+        tv = tanh(v / v_eps)
         tp = tanh(tau_potential[j] / scale)
         rest = 1.0 - abs(tv)
-        size = f if learned_nm is None else f + learned_nm[j]
         along = tv * tp
-        out[j] = phi * size * tp * ((along if along > 0.0 else 0.0) + rest)
+        if along < 0.0:
+            along = 0.0
+        size = f * (along + rest)
+        if creep_rad_s is not None:
+            v_creep = creep_rad_s[j]
+            v_fade = fade_rad_s[j]
+        if learned_nm is not None and learned_nm[j] > 0.0:
+            speed = v if tp > 0.0 else -v  # along the push
+            if speed <= v_creep:
+                size += learned_nm[j] * (along + rest)
+            elif speed < v_fade:
+                size += learned_nm[j] * (along * (v_fade - speed) / (v_fade - v_creep) + rest)
+            else:
+                size += learned_nm[j] * rest
+        out[j] = phi * size * tp
         if stuck_out is not None or unmet_out is not None:
-            slow = 1.0 - abs(tanh(qdot[j] / (LEARNING_SPEED_FACTOR * v_eps)))
+            slow = 1.0 - abs(v) / v_creep
+            if slow < 0.0:
+                slow = 0.0
+            resting = 1.0 - abs(v) / v_rest
+            if resting < 0.0:
+                resting = 0.0
             w = 1.0
             if damping_nm is not None:
                 signed = tau_potential[j] + out[j]
@@ -334,6 +375,8 @@ def friction_compensation(tau_potential: Sequence[float], qdot: Sequence[float],
                     w *= slow
             if stuck_out is not None:
                 stuck_out[j] = slow * abs(tp) * w
+            if resting_out is not None:
+                resting_out[j] = resting * abs(tp) * w
             if unmet_out is not None:
                 unmet_out[j] = w
     return out
@@ -342,21 +385,24 @@ def friction_compensation(tau_potential: Sequence[float], qdot: Sequence[float],
 def learn_friction(learned_nm: list[float], stuck: Sequence[float], phi: float,
                    shaping: Shaping, dt_s: float,
                    unmet: Optional[Sequence[float]] = None,
-                   held: Optional[list[float]] = None) -> None:
+                   held: Optional[list[float]] = None,
+                   resting: Optional[Sequence[float]] = None) -> None:
     """
     Advance ``a``, the learned part of the friction estimate, by one tick of ``dt_s``, in place.
 
     ``da/dt = (a_max / T) phi s - [(1 - phi) + phi (1 - w) / c] a / T`` (``T`` the learning
     time, ``c = HOLD_TIME_FRACTION``), clipped to ``[0, a_max]``. ``stuck`` (``(1 - |t_v|)
     |t_p| w``) and ``unmet`` (``w``) are per joint as :func:`friction_compensation` gave them
-    this tick (unread when ``phi`` is 0; ``unmet`` None: ``w`` = 1). ``held``, if given, is
+    this tick (unread when ``phi`` is 0; ``unmet`` None: ``w`` = 1; ``slow`` there replaces
+    ``1 - |t_v|``). ``held``, if given, is
     ``h`` per joint, advanced here in place: ``stuck`` low-passed with the time constant
     ``c T``; ``s`` is ``stuck`` times a ramp of ``h`` from 0 at ``h = 1/2`` to 1 at ``3/4``,
     so a joint must stay stuck for a while (about ``0.7 c T``) before anything is learned,
-    which the turning point of a swing does not, and stops learning at once when it moves.
+    which the turning point of a swing does not, and learns less as it nears its creep speed.
     Without ``held``, ``s`` is ``stuck``.
 
-    So ``a`` grows only while a joint stays at rest, pushed and not moved by the push, outside
+    So ``a`` grows only while a joint stays at rest or creeps, pushed and not moved by the push
+    against its damping, outside
     the error band (``phi`` > 0): while the compensation is still below the friction that holds
     it. It holds while a friction takes the push of a moving joint (``w`` ~ 1), leaks in
     ``c T`` while the damping takes it (``w`` ~ 0: nothing to compensate), and in ``T``
@@ -373,7 +419,9 @@ def learn_friction(learned_nm: list[float], stuck: Sequence[float], phi: float,
         if phi > 0.0:
             s = stuck[j]
             if held is not None:
-                h = held[j] + hold_rate * (s - held[j])
+                evidence = s if resting is None else resting[j]
+                h = held[j]
+                h += (hold_rate if resting is None or evidence > h else rate) * (evidence - h)
                 held[j] = h
                 if h < 0.75:  # not stuck for long enough: s = 0 below h = 1/2
                     s = s * (4.0 * h - 2.0) if h > 0.5 else 0.0

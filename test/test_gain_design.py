@@ -371,19 +371,34 @@ def test_the_simulator_engines_are_the_ones_the_tool_writes():
 
 def test_with_no_friction_estimate_a_share_of_the_effort_may_be_learned():
     model = wrist_model()
-    unmeasured = gd.design(model, cl.Task.ORIENTATION,
-                           friction_effort_share=gd.FRICTION_EFFORT_SHARE)
+    unmeasured = gd.design(model, cl.Task.ORIENTATION)  # the default: a share is learnable
     effort = np.array(model.effort_limits)
-    # the wrist's damping at its velocity limits holds far more than the share
+    # the wrist is heavy enough that one tick of the share moves it far less than its limit
     np.testing.assert_allclose(unmeasured.shaping.friction_learning_limit_nm,
                                gd.FRICTION_EFFORT_SHARE * effort)
     assert unmeasured.shaping.friction_compensation_nm == (0.0, 0.0, 0.0)
-    none = gd.design(model, cl.Task.ORIENTATION)  # the default: nothing learned without one
+    none = gd.design(model, cl.Task.ORIENTATION, friction_effort_share=0.0)
     assert none.shaping.friction_learning_limit_nm == (0.0, 0.0, 0.0)
     np.testing.assert_allclose(none.figures['budget_nm'] - unmeasured.figures['budget_nm'],
                                gd.TORQUE_SHARE * gd.FRICTION_EFFORT_SHARE * effort)
     with pytest.raises(ValueError, match='friction_effort_share'):
         gd.design(model, cl.Task.ORIENTATION, friction_effort_share=0.6)
+
+
+def test_on_a_light_joint_the_learnable_push_moves_it_less_than_its_limit_in_a_tick():
+    """One tick of the whole learnable push changes a joint's speed by at most the share."""
+    model = _xarm7()  # no rotor inertia: a wrist of ~1e-4 kg m^2 on a 20 N m drive
+    rate_hz = 1000.0
+    d = gd.design(model, cl.Task.POSE, rate_hz)
+    limit = np.array(d.shaping.friction_learning_limit_nm)
+    effort = np.array(model.effort_limits)
+    velocity = np.array(model.velocity_limits)
+    inertia = d.figures['inertia_min']
+    speed_change = limit / inertia / rate_hz
+    assert np.all(speed_change <= gd.TICK_SPEED_SHARE * velocity * (1.0 + 1e-9))
+    assert np.all(limit <= gd.FRICTION_EFFORT_SHARE * effort * (1.0 + 1e-9))
+    assert np.any(limit < gd.FRICTION_EFFORT_SHARE * effort)  # the bound binds somewhere
+    assert np.all(limit > 0.0)
 
 
 def _xarm7(armature=None):

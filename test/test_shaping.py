@@ -398,3 +398,53 @@ def test_shaping_swaps_whole_and_q_star_only_for_the_goal_in_force():
     assert reg.shaping is new
     held = reg.hold([0.1, 0.2, 0.3])
     assert reg.goal is held and reg.goal_configuration == (0.1, 0.2, 0.3)
+
+
+def test_the_learned_push_fades_out_along_the_motion_above_the_creep_speed():
+    """A learned push drives a joint no faster than the fade speed, whatever its size."""
+    shaping = sh.Shaping.create(1, friction_learning_limit=(2.0,), friction_velocity=0.05)
+    v_eps = shaping.friction_velocity_rad_s
+    creep, fade = sh.CREEP_SPEED_FACTOR * v_eps, sh.FADE_SPEED_FACTOR * v_eps
+    learned = [2.0]
+
+    def push(v):
+        return sh.friction_compensation([0.3], [v], 1.0, shaping, learned)[0]
+    assert push(0.0) == pytest.approx(2.0, rel=1e-3)  # at rest: the whole of it
+    assert push(creep) == pytest.approx(2.0 * math.tanh(creep / v_eps) + 2.0 * (
+        1.0 - math.tanh(creep / v_eps)), rel=1e-6)
+    middle = 0.5 * (creep + fade)
+    assert 0.0 < push(middle) < push(creep)
+    assert push(fade) == pytest.approx(2.0 * (1.0 - math.tanh(fade / v_eps)), abs=1e-9)
+    assert abs(push(2.0 * fade)) < 1e-9  # none along a fast motion
+    assert push(-fade) >= 0.0  # against the motion (an overshoot): never along it
+    # the estimate f is not faded: a measured friction is compensated at any speed
+    measured = sh.Shaping.create(1, friction_compensation=(1.0,), friction_velocity=0.05)
+    assert sh.friction_compensation([0.3], [2.0 * fade], 1.0, measured)[0] == pytest.approx(
+        1.0, rel=1e-6)
+
+
+def test_a_joint_creeping_below_the_creep_speed_with_a_friction_keeps_learning():
+    """
+    Sliding slower than the creep speed with a friction taking the push, ``a`` keeps growing.
+
+    The rule before stopped near ``v_eps``, which left joints creeping for seconds; a joint
+    given a faster creep speed (far from its goal configuration) learns up to that.
+    """
+    shaping = sh.Shaping.create(1, friction_learning_limit=(1.0,), friction_velocity=0.05)
+    v_eps = shaping.friction_velocity_rad_s
+    learned, held = [0.2], [1.0]
+    qdot = [1.2 * v_eps]  # above v_eps, below the creep speed: still learning
+    for _ in range(200):
+        _learning_tick(shaping, learned, held, [0.1], qdot, [-0.01 * qdot[0]])
+    assert learned[0] > 0.25
+    fast = [3.0 * v_eps]  # above the creep speed: it learns no more ...
+    before = learned[0]
+    for _ in range(200):
+        _learning_tick(shaping, learned, held, [0.1], fast, [-0.01 * fast[0]])
+    assert learned[0] <= before
+    # ... unless the joint is given a faster creep speed (far from its goal configuration)
+    stuck, unmet = [0.0], [0.0]
+    creep, fade = [10.0 * v_eps], [16.0 * v_eps]
+    sh.friction_compensation([0.1], fast, 1.0, shaping, learned, stuck, [-0.01 * fast[0]],
+                             unmet, creep, fade)
+    assert stuck[0] > 0.5
