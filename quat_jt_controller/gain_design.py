@@ -79,9 +79,10 @@ FRICTION_POSITION_BAND_M = 0.0005
 # At rest the regulator may learn this much more than the estimate (x the estimate), in
 # FRICTION_LEARNING_TIME_S: a friction up to (1 + this) x the estimate is still broken
 FRICTION_LEARNING = 2.0
-# ... and with no estimate (0), when asked (--friction-effort-share), a share of the joint's
+# ... and with no estimate (0), a share (--friction-effort-share) of the joint's
 # effort limit: a friction nobody measured up to this much is still broken (docs/lyapunov.md,
-# section 4). This is the share measured; the default is none (docs/gain_design.md says why).
+# section 4). On by default: without it no arm but the wrist reaches with a friction of 1% of
+# its effort limits that nobody measured (docs/gain_design.md, "The learning on by default").
 FRICTION_EFFORT_SHARE = 0.03
 DEFAULT_FRICTION_EFFORT_SHARE = FRICTION_EFFORT_SHARE
 FRICTION_LEARNING_TIME_S = 1.0

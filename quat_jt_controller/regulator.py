@@ -195,8 +195,7 @@ class Regulator:
         self._unmet = [0.0] * self.n
         self._damping = [0.0] * self.n
         self._creep = [0.0] * self.n  # the creep speed per joint (rad/s), for the learning
-        self._fade = [0.0] * self.n
-        self._resting = [0.0] * self.n
+        self._fade = [0.0] * self.n  # ... and the fade speed of the learned push (rad/s)
         self._held = [0.0] * self.n  # how stuck each joint has stayed (learn_friction's h)
         # the limit band ending at q* (LimitBand.ending_at), cached for (band, q*): derived
         self._band_at_goal: tuple = (None, None, None)
@@ -392,14 +391,14 @@ class Regulator:
                 if learning:  # the damping terms so far: tau = tau_p + damping
                     for j in range(n):
                         damping[j] = tau[j] - tau_p[j]
-                creep = fade = None  # the creep and fade speeds: from q* if known
-                if learning and q_star is not None:
+                creep = fade = None
+                if learning:  # the creep and fade speeds, the creep from q* if known
                     creep, fade = self._creep, self._fade
                     v_eps = shaping.friction_velocity_rad_s
                     v0 = sh.CREEP_SPEED_FACTOR * v_eps
                     extra = (sh.FADE_SPEED_FACTOR - sh.CREEP_SPEED_FACTOR) * v_eps
                     for j in range(n):
-                        v = abs(q[j] - q_star[j]) * sh.CREEP_GAIN
+                        v = 0.0 if q_star is None else abs(q[j] - q_star[j]) * sh.CREEP_GAIN
                         top = sh.CREEP_TOP_FRACTION * self._speed_cap[j]
                         c = v0 if v < v0 else (v if v < top else (top if top > v0 else v0))
                         creep[j] = c

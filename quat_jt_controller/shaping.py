@@ -299,8 +299,7 @@ def friction_compensation(tau_potential: Sequence[float], qdot: Sequence[float],
                           damping_nm: Optional[Sequence[float]] = None,
                           unmet_out: Optional[list[float]] = None,
                           creep_rad_s: Optional[Sequence[float]] = None,
-                          fade_rad_s: Optional[Sequence[float]] = None,
-                          resting_out: Optional[list[float]] = None) -> list[float]:
+                          fade_rad_s: Optional[Sequence[float]] = None) -> list[float]:
     """
     tau_fc per joint: phi (f + a) t_p [max(0, t_v t_p) + 1 - |t_v|], never above f + a in size.
 
@@ -333,7 +332,7 @@ def friction_compensation(tau_potential: Sequence[float], qdot: Sequence[float],
     if phi <= 0.0:
         return out
     v_eps = shaping.friction_velocity_rad_s
-    v_rest = v_creep = CREEP_SPEED_FACTOR * v_eps
+    v_creep = CREEP_SPEED_FACTOR * v_eps
     v_fade = FADE_SPEED_FACTOR * v_eps
     for j, (f, _, scale) in enumerate(shaping.friction_table):
         if scale <= 0.0:  # no estimate and nothing to learn
@@ -362,9 +361,6 @@ def friction_compensation(tau_potential: Sequence[float], qdot: Sequence[float],
             slow = 1.0 - abs(v) / v_creep
             if slow < 0.0:
                 slow = 0.0
-            resting = 1.0 - abs(v) / v_rest
-            if resting < 0.0:
-                resting = 0.0
             w = 1.0
             if damping_nm is not None:
                 signed = tau_potential[j] + out[j]
@@ -375,8 +371,6 @@ def friction_compensation(tau_potential: Sequence[float], qdot: Sequence[float],
                     w *= slow
             if stuck_out is not None:
                 stuck_out[j] = slow * abs(tp) * w
-            if resting_out is not None:
-                resting_out[j] = resting * abs(tp) * w
             if unmet_out is not None:
                 unmet_out[j] = w
     return out
@@ -385,8 +379,7 @@ def friction_compensation(tau_potential: Sequence[float], qdot: Sequence[float],
 def learn_friction(learned_nm: list[float], stuck: Sequence[float], phi: float,
                    shaping: Shaping, dt_s: float,
                    unmet: Optional[Sequence[float]] = None,
-                   held: Optional[list[float]] = None,
-                   resting: Optional[Sequence[float]] = None) -> None:
+                   held: Optional[list[float]] = None) -> None:
     """
     Advance ``a``, the learned part of the friction estimate, by one tick of ``dt_s``, in place.
 
@@ -419,9 +412,7 @@ def learn_friction(learned_nm: list[float], stuck: Sequence[float], phi: float,
         if phi > 0.0:
             s = stuck[j]
             if held is not None:
-                evidence = s if resting is None else resting[j]
-                h = held[j]
-                h += (hold_rate if resting is None or evidence > h else rate) * (evidence - h)
+                h = held[j] + hold_rate * (s - held[j])
                 held[j] = h
                 if h < 0.75:  # not stuck for long enough: s = 0 below h = 1/2
                     s = s * (4.0 * h - 2.0) if h > 0.5 else 0.0
