@@ -360,10 +360,18 @@ def design(model: RobotModel, task: cl.Task, rate_hz: float = 1000.0,
                         friction_effort_share * effort)
     budget = TORQUE_SHARE * (effort - data['gravity_max'] - friction - learning)
     if np.any(budget <= 0.0):
+        short = np.flatnonzero(budget <= 0.0)
+        held = short[data['gravity_max'][short] >= effort[short]]
+        hint = (f'; the arm cannot hold itself up everywhere within its limits '
+                f'({[model.joint_names[j] for j in held]}): check the URDF\'s effort limits, '
+                f'and that gravity is along -z of the base link {model.base_link!r} (give '
+                '--base-link a level link)' if held.size else '')
         raise ValueError(f'no torque left for the potential on joints '
-                         f'{[model.joint_names[j] for j in np.flatnonzero(budget <= 0.0)]}: '
+                         f'{[model.joint_names[j] for j in short]}: '
                          f'effort {effort.tolist()}, gravity up to '
-                         f'{np.round(data["gravity_max"], 3).tolist()}')
+                         f'{np.round(data["gravity_max"], 3).tolist()} (the largest over '
+                         f'{SURVEY} configurations within the limits), friction and its '
+                         f'learnable share {np.round(friction + learning, 3).tolist()}{hint}')
     # Speed rule: never ask a joint for more than its damping can hold at SPEED_MARGIN x its
     # velocity limit (holding_limit; b_max: the largest damping the sampled loop tolerates on
     # its smallest inertia, halved); K_v is raised below (holding_damping) where the cubic
