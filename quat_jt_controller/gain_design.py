@@ -363,7 +363,7 @@ def design(model: RobotModel, task: cl.Task, rate_hz: float = 1000.0,
         short = np.flatnonzero(budget <= 0.0)
         held = short[data['gravity_max'][short] >= effort[short]]
         hint = (f'; the arm cannot hold itself up everywhere within its limits '
-                f'({[model.joint_names[j] for j in held]}): check the URDF\'s effort limits, '
+                f'({[model.joint_names[j] for j in held]}): check the effort limits of the URDF, '
                 f'and that gravity is along -z of the base link {model.base_link!r} (give '
                 '--base-link a level link)' if held.size else '')
         raise ValueError(f'no torque left for the potential on joints '

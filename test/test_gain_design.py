@@ -281,9 +281,9 @@ def run_main(argv, capsys) -> tuple[int, list[str]]:
     (['--task', 'position'], 1, 'the position task Jacobian is singular'),
     (['--effort-limits', '0.1', '0.1', '0.1'], 1, 'no design: no torque left for the '
      "potential on joints ['joint2']"),
-    (['--effort-limits', '0.1', '0.1', '0.1'], 1, "the arm cannot hold itself up everywhere "
-     "within its limits (['joint2']): check the URDF's effort limits, and that gravity is along "
-     "-z of the base link"),
+    (['--effort-limits', '0.1', '0.1', '0.1'], 1, 'the arm cannot hold itself up everywhere '
+     "within its limits (['joint2']): check the effort limits of the URDF, and that gravity is "
+     'along -z of the base link'),
     (['--out', 'no/such/folder/x.yaml'], 1, 'cannot write no/such/folder/x.yaml: No such file'),
 ])
 def test_a_bad_input_is_one_line_naming_it(argv, status, words, capsys, monkeypatch):
