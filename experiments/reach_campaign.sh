@@ -2,7 +2,7 @@
 # The any-arm campaign of docs/reach.md: every arm, every condition, the same seed.
 # Usage: bash experiments/reach_campaign.sh OUT_DIR [extra reach_experiment arguments]
 # (e.g. --cases 100 --workers 8, or --ray-address auto). One log per arm in OUT_DIR; the
-# table rows are the lines that start with '|'.
+# table rows are the lines that start with '|'. ARMS='ur3 wrist' runs only those arms.
 set -euo pipefail
 out=${1:?usage: reach_campaign.sh OUT_DIR [reach_experiment arguments]}
 shift
@@ -23,6 +23,9 @@ arms=(
 )
 for entry in "${arms[@]}"; do
   name=${entry%%|*}
+  if [[ -n "${ARMS:-}" && " $ARMS " != *" $name "* ]]; then
+    continue
+  fi
   # shellcheck disable=SC2086
   $python -m experiments.reach_experiment ${entry#*|} --potential tanh "$@" \
     > "$out/$name.log" 2>&1 || echo "$name: exit $?" >> "$out/failures.txt"
