@@ -331,8 +331,10 @@ def classify(model: RobotModel, loop: ClosedLoop, shaping: sh.Shaping, q_star,
         causes.append(f'still moving at the end (up to {speed:.3f} rad/s): too slow')
     else:
         reg = Regulator(model, loop.task, loop.gains, None, loop.goal, shaping)
-        # the mean velocity of the last 100 samples: a crawl tells a slow approach from a hold
-        qdot = ((run.q_rad[-1] - run.q_rad[-100]) / (run.t_s[-1] - run.t_s[-100])).tolist()
+        # the mean velocity of the last samples: a crawl tells a slow approach from a hold (the
+        # learned friction is not the run's: this regulator has learned none)
+        k = min(100, len(run.t_s) - 1)
+        qdot = ((run.q_rad[-1] - run.q_rad[-1 - k]) / (run.t_s[-1] - run.t_s[-1 - k])).tolist()
         out = reg.update(run.q_rad[-1].tolist(), qdot)
         found = StallDetector(reg).diagnose(run.q_rad[-1].tolist(), out, qdot)
         causes += ['stalled: ' + c for c in found]

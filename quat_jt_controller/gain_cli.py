@@ -14,8 +14,7 @@ from xml.etree import ElementTree
 
 from quat_jt_controller import control_law as cl
 from quat_jt_controller.gain_design import (
-    CRUISE_FRACTION, DEFAULT_FRICTION_EFFORT_SHARE, design, FRICTION_EFFORT_SHARE,
-    FRICTION_LEARNING)
+    CRUISE_FRACTION, DEFAULT_FRICTION_EFFORT_SHARE, design, FRICTION_LEARNING)
 from quat_jt_controller.gain_output import ENGINES, sim_yaml, to_yaml
 from quat_jt_controller.model import ModelError, RobotModel
 from quat_jt_runtime.joints import check_state_rate, STATE_RATE_RANGE_HZ
@@ -141,10 +140,10 @@ def main(argv: Optional[list] = None) -> int:
                         f'rest, x the estimates (default {FRICTION_LEARNING:g}; 0 = none)')
     parser.add_argument('--friction-effort-share', type=_number(0.0, 0.5, low_open=False),
                         default=DEFAULT_FRICTION_EFFORT_SHARE,
-                        help='what the regulator may learn at rest on a joint without a '
-                        'friction estimate, as a share of its effort limit: a friction nobody '
-                        f'measured ({FRICTION_EFFORT_SHARE:g} measured; default '
-                        f'{DEFAULT_FRICTION_EFFORT_SHARE:g}, none)')
+                        help='what the regulator may learn at rest or creeping on a joint '
+                        'without a friction estimate, as a share of its effort limit: a '
+                        'friction nobody measured (default '
+                        f'{DEFAULT_FRICTION_EFFORT_SHARE:g}; 0 turns it off)')
     parser.add_argument('--delays', type=_number(0.0, low_open=False, integer=True), nargs='+',
                         default=[1], help='ticks of delay the sampled loop must be stable with')
     parser.add_argument('--cruise-fraction', type=_number(0.0, 1.0), default=CRUISE_FRACTION,

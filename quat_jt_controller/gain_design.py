@@ -355,9 +355,16 @@ def design(model: RobotModel, task: cl.Task, rate_hz: float = 1000.0,
     if not np.isfinite(friction_effort_share) or not 0.0 <= friction_effort_share < 0.5:
         raise ValueError('friction_effort_share must be in [0, 0.5), got '
                          f'{friction_effort_share}')
-    # a joint with an estimate learns relative to it; one without, a share of its effort
+    inertia = data['inertia_min']
+    velocity = np.array(model.velocity_limits, dtype=float)
+    velocity = np.where(np.isfinite(velocity) & (velocity > 0), velocity, DEFAULT_VELOCITY)
+    # a joint with an estimate learns relative to it; one without, a share of its effort, at
+    # most what changes its speed by TICK_SPEED_SHARE x its velocity limit in one tick on the
+    # least inertia it sees: the learned push fades out above FADE_TOP_FRACTION x the limit
+    # (docs/lyapunov.md, section 4, says what this bounds and what it does not)
+    per_tick = TICK_SPEED_SHARE * velocity * inertia / dt_s
     learning = np.where(friction > 0.0, friction_learning * friction,
-                        friction_effort_share * effort)
+                        np.minimum(friction_effort_share * effort, per_tick))
     budget = TORQUE_SHARE * (effort - data['gravity_max'] - friction - learning)
     if np.any(budget <= 0.0):
         short = np.flatnonzero(budget <= 0.0)
@@ -376,9 +383,6 @@ def design(model: RobotModel, task: cl.Task, rate_hz: float = 1000.0,
     # velocity limit (holding_limit; b_max: the largest damping the sampled loop tolerates on
     # its smallest inertia, halved); K_v is raised below (holding_damping) where the cubic
     # part alone cannot. A joint without a URDF velocity limit: b_max x DEFAULT_VELOCITY.
-    inertia = data['inertia_min']
-    velocity = np.array(model.velocity_limits, dtype=float)
-    velocity = np.where(np.isfinite(velocity) & (velocity > 0), velocity, DEFAULT_VELOCITY)
     b_max = np.array([DAMPER_SAFETY * largest_stable_damping(inertia[j],
                                                              checked_delays(delays), dt_s)
                       for j in range(n)])
@@ -491,12 +495,6 @@ def design(model: RobotModel, task: cl.Task, rate_hz: float = 1000.0,
         if v_c < NEGLIGIBLE_CUBIC * velocity[j]:  # else it brakes < 1e-4 of k_v v: none
             damping_speed[j] = v_c
     terminal = cruising_speed(push, kv, damping_speed, velocity)
-    # A joint without an estimate learns at most what changes its speed by TICK_SPEED_SHARE x
-    # its velocity limit in one tick on the least inertia it sees: the learned push fades out
-    # above FADE_TOP_FRACTION x the limit, so with no friction to take it, it cannot pass the
-    # limit within the tick it takes to see that (docs/lyapunov.md, section 4).
-    per_tick = TICK_SPEED_SHARE * velocity * inertia / dt_s
-    learning = np.where(friction > 0.0, learning, np.minimum(learning, per_tick))
     shaping = Shaping.create(
         n, joint_limit_margin=margin, joint_limit_gain=limit_gain.round(3).tolist(),
         friction_compensation=friction.tolist(), friction_velocity=FRICTION_VELOCITY_RAD_S,

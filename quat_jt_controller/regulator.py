@@ -189,7 +189,7 @@ class Regulator:
         # a, the part of the friction estimate learned at rest (N m per joint): the one state
         # the tick keeps, advanced only by ticks given a time step (shaping.learn_friction)
         self._learned_friction_nm = [0.0] * self.n
-        # this tick's (1 - |t_v|) |t_p| w and w (the share of the push the damping does not
+        # this tick's slow |t_p| w and w (the share of the push the damping does not
         # take), and the damping torque they are computed from: for the learning, filled in place
         self._stuck = [0.0] * self.n
         self._unmet = [0.0] * self.n
@@ -254,6 +254,7 @@ class Regulator:
         limits = shaping.friction_learning_limit_nm or (0.0,) * self.n
         self._learned_friction_nm = [min(a, a_max) for a, a_max in
                                      zip(self._learned_friction_nm, limits)]
+        self._held = [h if a_max > 0.0 else 0.0 for h, a_max in zip(self._held, limits)]
         self._law = self._law._replace(shaping=shaping, band=band)
 
     @property
@@ -399,12 +400,13 @@ class Regulator:
                     extra = (sh.FADE_SPEED_FACTOR - sh.CREEP_SPEED_FACTOR) * v_eps
                     for j in range(n):
                         v = 0.0 if q_star is None else abs(q[j] - q_star[j]) * sh.CREEP_GAIN
-                        top = sh.CREEP_TOP_FRACTION * self._speed_cap[j]
-                        c = v0 if v < v0 else (v if v < top else (top if top > v0 else v0))
+                        cap = self._speed_cap[j]
+                        top = sh.CREEP_TOP_FRACTION * cap
+                        c = v0 if v < v0 else v
+                        c = c if c < top else top  # < the fade's top, by 0.2 of the limit
                         creep[j] = c
-                        f = c + extra
-                        cap = sh.FADE_TOP_FRACTION * self._speed_cap[j]
-                        fade[j] = f if f < cap else (cap if cap > c else c + 1e-6)
+                        top = sh.FADE_TOP_FRACTION * cap
+                        fade[j] = c + extra if c + extra < top else top
                 fc = sh.friction_compensation(
                     tau_p, qdot, phi, shaping, self._learned_friction_nm if learning else None,
                     self._stuck, damping, self._unmet, creep, fade)

@@ -24,7 +24,8 @@ The law of Eq. (22) becomes
   configuration (from the goal-check worker: the stream's task velocity mapped through
   J(q*), never an inverse in the tick), ``g_v`` in [0, 1]. Zero for a fixed goal.
 * ``tau_fc``, Coulomb friction compensation (section 4): per joint
-  ``phi(y_tilde) (f_j + a_j) t_p [max(0, t_v t_p) + 1 - |t_v|]``, ``t_p = tanh(tau_p,j /
+  ``phi(y_tilde) t_p [(f_j + r_j a_j) max(0, t_v t_p) + (f_j + a_j) (1 - |t_v|)]`` (``r_j``
+  the fade of the learned part along a motion faster than a creep speed), ``t_p = tanh(tau_p,j /
   (0.001 (f_j + a_max,j)))`` the direction of the potential torque ``tau_p``, ``t_v =
   tanh(qdot_j / v_eps)``: at rest and while the joint moves the way the potential pushes it,
   ``f_j + a_j`` that way (the learned ``a_j`` fading out above a creep speed); a joint moving
@@ -63,7 +64,7 @@ FADE_SPEED_FACTOR = 8.0
 # With a goal configuration q* (the regulator), a joint's creep speed is |q - q*| x this (1/s),
 # at least the above and at most this share of its velocity limit, and its fade speed that
 # plus the width above, at most FADE_TOP_FRACTION of the limit: a joint far from q* creeps to
-# it in about 1 / CREEP_GAIN s a radian instead of at a fixed crawl
+# it with the time constant 1 / CREEP_GAIN instead of at a fixed crawl
 CREEP_GAIN = 4.0
 CREEP_TOP_FRACTION = 0.4
 FADE_TOP_FRACTION = 0.6
@@ -301,7 +302,7 @@ def friction_compensation(tau_potential: Sequence[float], qdot: Sequence[float],
                           creep_rad_s: Optional[Sequence[float]] = None,
                           fade_rad_s: Optional[Sequence[float]] = None) -> list[float]:
     """
-    tau_fc per joint: phi (f + a) t_p [max(0, t_v t_p) + 1 - |t_v|], never above f + a in size.
+    tau_fc per joint: phi t_p [(f + r a) max(0, t_v t_p) + (f + a) (1 - |t_v|)], |.| <= f + a.
 
     ``t_p = tanh(tau_p / (0.001 (f + a_max)))`` is the direction of the potential torque
     ``tau_potential``, ``t_v = tanh(qdot / v_eps)``. At rest it pushes with ``f + a`` in the
@@ -384,20 +385,20 @@ def learn_friction(learned_nm: list[float], stuck: Sequence[float], phi: float,
     Advance ``a``, the learned part of the friction estimate, by one tick of ``dt_s``, in place.
 
     ``da/dt = (a_max / T) phi s - [(1 - phi) + phi (1 - w) / c] a / T`` (``T`` the learning
-    time, ``c = HOLD_TIME_FRACTION``), clipped to ``[0, a_max]``. ``stuck`` (``(1 - |t_v|)
-    |t_p| w``) and ``unmet`` (``w``) are per joint as :func:`friction_compensation` gave them
-    this tick (unread when ``phi`` is 0; ``unmet`` None: ``w`` = 1; ``slow`` there replaces
-    ``1 - |t_v|``). ``held``, if given, is
-    ``h`` per joint, advanced here in place: ``stuck`` low-passed with the time constant
-    ``c T``; ``s`` is ``stuck`` times a ramp of ``h`` from 0 at ``h = 1/2`` to 1 at ``3/4``,
-    so a joint must stay stuck for a while (about ``0.7 c T``) before anything is learned,
-    which the turning point of a swing does not, and learns less as it nears its creep speed.
+    time, ``c = HOLD_TIME_FRACTION``), clipped to ``[0, a_max]``. ``stuck`` (``slow |t_p| w``,
+    ``slow = max(0, 1 - |qdot| / v_cr)``) and ``unmet`` (``w``) are per joint as
+    :func:`friction_compensation` gave them this tick (unread when ``phi`` is 0; ``unmet``
+    None: ``w`` = 1). ``held``, if given, is ``h`` per joint, advanced here in place:
+    ``stuck`` low-passed with the time constant ``c T``; ``s`` is ``stuck`` times a ramp of
+    ``h`` from 0 at ``h = 1/2`` to 1 at ``3/4``, so a joint must stay stuck for a while
+    (about ``0.7 c T``) before anything is learned, which the turning point of a swing does
+    not, and learns less as it nears its creep speed.
     Without ``held``, ``s`` is ``stuck``.
 
     So ``a`` grows only while a joint stays at rest or creeps, pushed and not moved by the push
-    against its damping, outside
-    the error band (``phi`` > 0): while the compensation is still below the friction that holds
-    it. It holds while a friction takes the push of a moving joint (``w`` ~ 1), leaks in
+    against its damping, outside the error band (``phi`` > 0): while the compensation does not
+    yet move it at its creep speed against the friction that holds it. It holds while a
+    friction takes the push of a moving joint (``w`` ~ 1), leaks in
     ``c T`` while the damping takes it (``w`` ~ 0: nothing to compensate), and in ``T``
     within the band (docs/lyapunov.md, section 4).
     """
@@ -512,5 +513,5 @@ def describe(shaping: Shaping) -> str:
                      f'{shaping.posture_weight:g} (a redundant arm)')
     if shaping.learning_on:
         parts.append(f'learning up to {list(shaping.friction_learning_limit_nm)} N m more at '
-                     f'rest in {shaping.friction_learning_time_s:g} s')
+                     f'rest or creeping in {shaping.friction_learning_time_s:g} s')
     return '; '.join(parts) if parts else "off (the paper's law)"

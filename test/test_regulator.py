@@ -140,3 +140,34 @@ def test_the_goal_velocity_term_adds_k_v_g_v_qdot_star_and_nothing_else(seed):
         reg.set_goal_joint_velocity([1.0, 2.0])
     with pytest.raises(sh.ShapingError, match=r'goal_velocity_gain must be in \[0, 1\]'):
         sh.Shaping.create(3, goal_velocity_gain=1.5)
+
+
+@pytest.mark.parametrize('with_q_star', [True, False])
+def test_the_learned_push_is_gone_along_a_motion_at_six_tenths_of_the_velocity_limit(
+        with_q_star):
+    """Learned at rest, the push is whole at rest and nothing along a motion at 0.6 v_lim."""
+    model = wrist_model()
+    goal = Goal(paper.Q_DESIRED)
+    q = [1.0, 1.0, 1.0]
+
+    def regulator(limit):
+        shaping = sh.Shaping.create(3, friction_learning_limit=(limit,) * 3,
+                                    friction_learning_time=0.1)
+        reg = Regulator(model, ORI, paper_gains(), goal=goal, shaping=shaping)
+        if with_q_star:  # far from q*: the creep speed at its top, 0.4 v_lim
+            assert reg.set_goal_configuration(goal, [-1.0, -1.0, -1.0])
+        return reg
+    learning, plain = regulator(2.0), regulator(0.0)
+    for _ in range(1000):  # held at rest: it learns
+        learning.update(q, [0.0] * 3, 1e-3)
+    learned = learning.learned_friction_nm
+    assert all(a > 1.0 for a in learned), learned
+    rest = np.subtract(learning.update(q, [0.0] * 3).tau_nm, plain.update(q, [0.0] * 3).tau_nm)
+    push = np.sign(plain.update(q, [0.0] * 3).tau_potential_nm)
+    np.testing.assert_allclose(np.abs(rest), learned, rtol=1e-2)
+    assert np.all(np.sign(rest) == push)
+    v_lim = np.array(model.velocity_limits)
+    for share in (0.6, 1.0, 3.0):  # along the push, at and above the fade's top
+        qdot = (share * v_lim * push).tolist()
+        extra = np.subtract(learning.update(q, qdot).tau_nm, plain.update(q, qdot).tau_nm)
+        assert np.all(np.abs(extra) < 1e-6 * np.array(learned)), (share, extra)
