@@ -10,7 +10,7 @@ sampled-and-delayed loop around the goal (``linearized_spectral_radius``, re-exp
 lives in ``quat_jt_controller.gain_analysis``, by which ``gain_design`` checked the gains of
 ``config/xarm6_controller.yaml``.
 
-    .venv/bin/python test/sampled_loop.py     # the figures quoted in config/xarm6_controller.yaml
+    .venv/bin/python test/sampled_loop.py     # the figures quoted in docs/xarm6.md
 """
 import dataclasses
 from pathlib import Path
