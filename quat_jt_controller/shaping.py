@@ -36,8 +36,9 @@ The law of Eq. (22) becomes
   friction of at least that. ``a_j`` in ``[0, a_max,j]`` is the learned part of the estimate
   (:func:`learn_friction`): it grows while the joint stays held, or creeps slower than its
   creep speed, outside the error band with the push not taken by its damping (held by a
-  friction, not slowed by its damping), which happens only while ``f_j + a_j`` is below the
-  friction that holds it; it leaks away where the damping takes the push and inside the band.
+  friction, not slowed by its damping), until the compensation moves the joint at that speed
+  (past the breakaway, on purpose); it leaks away where the damping takes the push and inside
+  the band.
 
 All are off by default (:class:`Shaping` ()), which gives the paper's law exactly. Plain
 floats: the functions here run in the 1 kHz tick.
