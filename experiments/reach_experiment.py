@@ -42,7 +42,7 @@ Any arm from its URDF plus what a user knows, instead of ``--robot`` (docs/reach
 
     python -m experiments.reach_experiment (--urdf FILE | --example-robot NAME)
         [--base-link L] [--tip-link L] [--task pose|orientation|position] [--rate HZ]
-        [--condition ideal armature armature-wrong friction no-velocities]
+        [--condition ideal armature armature-wrong friction armature-friction no-velocities]
         [--engine mujoco|pybullet] [--armature A] [--armature-told-scale S]
         [--friction-fraction F] [--cases N] [--potential tanh]
 
