@@ -196,6 +196,8 @@ class Regulator:
         self._damping = [0.0] * self.n
         self._creep = [0.0] * self.n  # the creep speed per joint (rad/s), for the learning
         self._fade = [0.0] * self.n  # ... and the fade speed of the learned push (rad/s)
+        self._creep_top = [sh.CREEP_TOP_FRACTION * v for v in self._speed_cap]  # their tops
+        self._fade_top = [sh.FADE_TOP_FRACTION * v for v in self._speed_cap]
         self._held = [0.0] * self.n  # how stuck each joint has stayed (learn_friction's h)
         # the limit band ending at q* (LimitBand.ending_at), cached for (band, q*): derived
         self._band_at_goal: tuple = (None, None, None)
@@ -395,18 +397,8 @@ class Regulator:
                 creep = fade = None
                 if learning:  # the creep and fade speeds, the creep from q* if known
                     creep, fade = self._creep, self._fade
-                    v_eps = shaping.friction_velocity_rad_s
-                    v0 = sh.CREEP_SPEED_FACTOR * v_eps
-                    extra = (sh.FADE_SPEED_FACTOR - sh.CREEP_SPEED_FACTOR) * v_eps
-                    for j in range(n):
-                        v = 0.0 if q_star is None else abs(q[j] - q_star[j]) * sh.CREEP_GAIN
-                        cap = self._speed_cap[j]
-                        top = sh.CREEP_TOP_FRACTION * cap
-                        c = v0 if v < v0 else v
-                        c = c if c < top else top  # < the fade's top, by 0.2 of the limit
-                        creep[j] = c
-                        top = sh.FADE_TOP_FRACTION * cap
-                        fade[j] = c + extra if c + extra < top else top
+                    sh.creep_speeds(q, q_star, shaping, self._creep_top, self._fade_top,
+                                    creep, fade)
                 fc = sh.friction_compensation(
                     tau_p, qdot, phi, shaping, self._learned_friction_nm if learning else None,
                     self._stuck, damping, self._unmet, creep, fade)

@@ -378,6 +378,30 @@ def friction_compensation(tau_potential: Sequence[float], qdot: Sequence[float],
     return out
 
 
+def creep_speeds(q: Sequence[float], q_star: Optional[Sequence[float]], shaping: Shaping,
+                 creep_top: Sequence[float], fade_top: Sequence[float],
+                 creep_out: list[float], fade_out: list[float]) -> None:
+    """
+    Fill each joint's creep and fade speeds (rad/s) for :func:`friction_compensation`.
+
+    The creep speed is ``CREEP_GAIN |q - q*|`` (0 with no ``q*``), at least
+    ``CREEP_SPEED_FACTOR v_eps`` and at most ``creep_top`` (``CREEP_TOP_FRACTION`` of the
+    velocity limit); the fade speed is ``(FADE_SPEED_FACTOR - CREEP_SPEED_FACTOR) v_eps``
+    above it, at most ``fade_top`` (``FADE_TOP_FRACTION`` of the limit, above the creep's top).
+    """
+    v_eps = shaping.friction_velocity_rad_s
+    v0 = CREEP_SPEED_FACTOR * v_eps
+    extra = (FADE_SPEED_FACTOR - CREEP_SPEED_FACTOR) * v_eps
+    for j in range(len(creep_out)):
+        v = 0.0 if q_star is None else abs(q[j] - q_star[j]) * CREEP_GAIN
+        c = v0 if v < v0 else v
+        top = creep_top[j]
+        c = c if c < top else top
+        creep_out[j] = c
+        top = fade_top[j]
+        fade_out[j] = c + extra if c + extra < top else top
+
+
 def learn_friction(learned_nm: list[float], stuck: Sequence[float], phi: float,
                    shaping: Shaping, dt_s: float,
                    unmet: Optional[Sequence[float]] = None,
