@@ -85,8 +85,9 @@ def linearized_spectral_radius(model: RobotModel, q_goal_rad: Sequence[float], g
     At y_tilde = 0 (eta_e = 1) Eq. (24) / (32) minus g(q) is tau = -K_q dq - K_v qdot with
     K_q of :func:`joint_stiffness`, slopes k_p (quadratic) or k_p lambda (log-cosh). Of the
     extensions (``shaping``) only the goal-configuration term without a dead zone adds
-    stiffness there (:func:`configuration_stiffness`; q* = the goal); the others are zero
-    near the goal. See :func:`spectral_radius`.
+    stiffness there (:func:`configuration_stiffness`; q* = the goal), and the inertial damping
+    raises the damping (:func:`damping_at`); the others are zero near the goal. See
+    :func:`spectral_radius`.
     """
     _, _, J = model.kinematics(list(q_goal_rad))
     task = cl.Task(task)
@@ -98,7 +99,9 @@ def linearized_spectral_radius(model: RobotModel, q_goal_rad: Sequence[float], g
     K = joint_stiffness(rows, slope, task)
     if shaping is not None and shaping.configuration_on:
         K = K + np.diag(configuration_stiffness(shaping))
-    return spectral_radius(M, K, np.diag(gains.kv), delay_ticks, dt_s)
+    D = (damping_at(gains.kv, shaping.inertial_damping, shaping.inertial_damping_rate_per_s, M)
+         if shaping is not None else np.asarray(gains.kv))
+    return spectral_radius(M, K, np.diag(D), delay_ticks, dt_s)
 
 
 def time_constant_s(rho: float, dt_s: float = 1e-3) -> float:
@@ -123,20 +126,41 @@ def sigma_min(rows: np.ndarray) -> float:
     return float(np.linalg.svd(rows, compute_uv=False)[-1])
 
 
+def damping_at(kv: np.ndarray, inertial: Optional[np.ndarray], rate_per_s: float,
+               M: np.ndarray) -> np.ndarray:
+    """
+    Return the linear damping per joint at a configuration of mass matrix ``M`` (N m s/rad).
+
+    ``max(k_v,j, min(c_j sqrt(M_jj), beta I_j))``, ``I_j`` the inertia the joint sees there
+    (:func:`seen_inertia`), as the regulator's tick damps (``inertial_damping``: ``c``,
+    ``inertial_damping_rate``: ``beta``; None or zeros: ``k_v`` alone).
+    """
+    kv = np.asarray(kv, dtype=float)
+    if inertial is None or rate_per_s <= 0.0 or not np.any(np.asarray(inertial) > 0.0):
+        return kv
+    own = np.asarray(inertial, dtype=float) * np.sqrt(np.diag(M))
+    return np.maximum(kv, np.minimum(own, rate_per_s * seen_inertia(M)))
+
+
 def median_damping_ratio(configs, slope: np.ndarray, kv: np.ndarray,
-                         extra: np.ndarray, task: cl.Task = cl.Task.POSE) -> np.ndarray:
-    """Median over the configurations of k_v / (2 sqrt(M_jj k_jj)), per joint."""
-    zeta = [kv / (2.0 * np.sqrt(np.diag(M) * (np.diag(joint_stiffness(rows, slope, task))
-                                              + extra)))
+                         extra: np.ndarray, task: cl.Task = cl.Task.POSE,
+                         inertial: Optional[np.ndarray] = None,
+                         rate_per_s: float = 0.0) -> np.ndarray:
+    """Median over the configurations of b_j / (2 sqrt(M_jj k_jj)), b of :func:`damping_at`."""
+    zeta = [damping_at(kv, inertial, rate_per_s, M)
+            / (2.0 * np.sqrt(np.diag(M) * (np.diag(joint_stiffness(rows, slope, task))
+                                           + extra)))
             for _, rows, M in configs]
     return np.median(zeta, axis=0)
 
 
-def worst_rho(configs, kp, kv, lam, extra, delays, dt_s, task=cl.Task.POSE) -> dict:
+def worst_rho(configs, kp, kv, lam, extra, delays, dt_s, task=cl.Task.POSE,
+              inertial: Optional[np.ndarray] = None, rate_per_s: float = 0.0) -> dict:
     """
     Worst spectral radius per potential over the configurations, with the margins.
 
-    DELAY_MARGIN more ticks of delay than asked for, and GAIN_MARGIN x the gains.
+    DELAY_MARGIN more ticks of delay than asked for, and GAIN_MARGIN x the gains; the damping
+    at each configuration is :func:`damping_at`'s.
     """
     cases = margin_cases(delays)
     worst = {}
@@ -144,8 +168,9 @@ def worst_rho(configs, kp, kv, lam, extra, delays, dt_s, task=cl.Task.POSE) -> d
         rho = 0.0
         for _, rows, M in configs:
             K = joint_stiffness(rows, slope, task) + np.diag(extra)
+            D = np.diag(damping_at(kv, inertial, rate_per_s, M))
             for scale, d in cases:
-                rho = max(rho, spectral_radius(M, scale * K, scale * np.diag(kv), d, dt_s))
+                rho = max(rho, spectral_radius(M, scale * K, scale * D, d, dt_s))
         worst[potential] = rho
     return worst
 
@@ -214,16 +239,18 @@ def cruising_speed(push_nm: np.ndarray, kv: np.ndarray, damping_speed_rad_s: np.
 
 def time_to_goal_s(cruise_rad_s: np.ndarray, configs, kp: np.ndarray, kv: np.ndarray,
                    lam: np.ndarray, extra: np.ndarray, dt_s: float,
-                   move_rad: float = 1.0, task: cl.Task = cl.Task.POSE) -> float:
+                   move_rad: float = 1.0, task: cl.Task = cl.Task.POSE,
+                   inertial: Optional[np.ndarray] = None, rate_per_s: float = 0.0) -> float:
     """
     Return the expected time to a goal ``move_rad`` away in every joint (s), roughly.
 
     The slowest joint's cruise, ``move_rad / v_j`` at its cruising speed, plus the linearised
     tanh loop's settling, ln(1000) time constants of its slowest mode (an error 1000 x
     smaller: a 0.5 rad error down to ~0.5 mrad), at the median of the representative
-    configurations, nominal gains and one tick of delay.
+    configurations, nominal gains (the damping of :func:`damping_at`) and one tick of delay.
     """
     rhos = sorted(spectral_radius(M, joint_stiffness(rows, kp * lam, task) + np.diag(extra),
-                                  np.diag(kv), 1, dt_s) for _, rows, M in configs)
+                                  np.diag(damping_at(kv, inertial, rate_per_s, M)), 1, dt_s)
+                  for _, rows, M in configs)
     settle = np.log(1000.0) * time_constant_s(rhos[len(rhos) // 2], dt_s)
     return float(move_rad / np.min(cruise_rad_s) + settle)

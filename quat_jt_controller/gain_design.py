@@ -58,6 +58,9 @@ POSITION_SATURATION_M = 0.1  # tanh(lambda_p 0.1 m) = 0.96
 DAMPING_RATIO = sqrt(0.5)  # of the tanh law's linearised loop (the quadratic's: x sqrt(lambda))
 # Where the sampled loop caps K_v, the stiffness is lowered until the tanh law keeps this much
 DAMPING_RATIO_MIN = 0.5
+# The ratio the inertial damping holds where the arm is heavy: the least the design accepts.
+# More slows the creep of a joint that the friction learning moves (docs/gain_design.md).
+INERTIAL_DAMPING_RATIO = DAMPING_RATIO_MIN
 CRUISE_FRACTION = 0.6  # of the URDF velocity limit: the speed far from the goal (default)
 # ... and the most that steady speed may be, whatever the cruise aimed at: the push far from
 # the goal meets the damping (linear and cubic) at or below this share of the limit
@@ -251,6 +254,32 @@ def _damping(configs, kp: np.ndarray, lam: np.ndarray, extra: np.ndarray,
     return np.median(values, axis=0)
 
 
+def _inertial_damping(configs, slope: np.ndarray, extra: np.ndarray,
+                      task: cl.Task = cl.Task.POSE) -> np.ndarray:
+    """
+    Return ``c`` per joint: the damping ``c_j sqrt(M_jj(q))`` of INERTIAL_DAMPING_RATIO.
+
+    ``c_j = 2 zeta sqrt(k_j)``, ``k_j`` the joint's median stiffness at the goal (the task's
+    slope ``slope`` and the goal-configuration term's ``extra``): where the arm is heavier
+    than the K_v that the lightest configuration allows can damp, the damping keeps the ratio
+    zeta (the tick caps it at ``beta I_j(q)``, :func:`inertial_damping_rate`).
+    """
+    k = np.median([np.diag(joint_stiffness(rows, slope, task)) for _, rows, _ in configs],
+                  axis=0) + extra
+    return 2.0 * INERTIAL_DAMPING_RATIO * np.sqrt(k)
+
+
+def inertial_damping_rate(delays: Sequence[int], dt_s: float) -> float:
+    """
+    Return ``beta`` (1/s): DAMPER_SAFETY x the damping per kg m^2 the sampled loop tolerates.
+
+    The largest damping ``D`` with ``v_k+1 = v_k - dt D / I v_k-d`` stable is proportional to
+    ``I`` (:func:`largest_stable_damping`), so its ratio to ``I`` is one number for the rate
+    and the delays (with the margin of one tick more); ``b_max,j`` is this times ``I_min,j``.
+    """
+    return DAMPER_SAFETY * largest_stable_damping(1.0, checked_delays(delays), dt_s)
+
+
 def _cruising_guide(configs, kp: np.ndarray, lam: np.ndarray, bound: np.ndarray,
                     push_max: np.ndarray, cruise: np.ndarray, b_max: np.ndarray,
                     task: cl.Task = cl.Task.POSE) -> np.ndarray:
@@ -386,6 +415,7 @@ def design(model: RobotModel, task: cl.Task, rate_hz: float = 1000.0,
     b_max = np.array([DAMPER_SAFETY * largest_stable_damping(inertia[j],
                                                              checked_delays(delays), dt_s)
                       for j in range(n)])
+    beta = inertial_damping_rate(delays, dt_s)  # b_max per kg m^2, for the inertial damping
     limited_speed = np.array([isfinite(v) and v > 0.0 for v in model.velocity_limits])
     ceiling = np.where(limited_speed, SPEED_MARGIN * velocity, velocity)
     push_max = np.minimum(budget, np.where(limited_speed,
@@ -444,8 +474,9 @@ def design(model: RobotModel, task: cl.Task, rate_hz: float = 1000.0,
         kv = np.minimum(_damping(configs, kp, lam, extra, task), b_max)
         kv = np.where(limited_speed, holding_damping(bound + guide, kv, b_max, ceiling,
                                                      velocity), kv)
-        rho = worst_rho(configs, kp, kv, lam, extra, delays, dt_s, task)
-        zeta = median_damping_ratio(configs, kp * lam, kv, extra, task)
+        inertial = _inertial_damping(configs, kp * lam, extra, task)
+        rho = worst_rho(configs, kp, kv, lam, extra, delays, dt_s, task, inertial, beta)
+        zeta = median_damping_ratio(configs, kp * lam, kv, extra, task, inertial, beta)
         if max(rho.values()) < 1.0 and zeta.min() >= DAMPING_RATIO_MIN:
             break
         # A joint whose damping the loop caps, under-damped because of its own
@@ -504,6 +535,8 @@ def design(model: RobotModel, task: cl.Task, rate_hz: float = 1000.0,
         friction_position_band=FRICTION_POSITION_BAND_M,
         configuration_gain=guide.round(3).tolist(), configuration_radius=GUIDE_RADIUS_RAD,
         configuration_ramp=GUIDE_RAMP_RAD, damping_speed=damping_speed.round(3).tolist(),
+        inertial_damping=[float(f'{v:.4g}') for v in inertial],
+        inertial_damping_rate=float(f'{beta:.4g}'),
         goal_velocity_gain=GOAL_VELOCITY_GAIN,
         preferred_configuration=(model.middle_of_ranges() if preferred_configuration_rad is None
                                  else preferred_configuration_rad),
@@ -512,12 +545,14 @@ def design(model: RobotModel, task: cl.Task, rate_hz: float = 1000.0,
     kv_r = tuple(float(f'{v:.4g}') for v in kv)
     lam_r = tuple(float(f'{v:.4g}') for v in lam)
     extra = configuration_stiffness(shaping)
+    inertial = np.array(shaping.inertial_damping)
+    beta = shaping.inertial_damping_rate_per_s
     final = worst_rho(configs, np.array(kp_r), np.array(kv_r), np.array(lam_r), extra,
-                      delays, dt_s, task)
+                      delays, dt_s, task, inertial, beta)
     ratios = {'quadratic': median_damping_ratio(configs, np.array(kp_r), np.array(kv_r), extra,
-                                                task),
+                                                task, inertial, beta),
               'tanh': median_damping_ratio(configs, np.array(kp_r) * np.array(lam_r),
-                                           np.array(kv_r), extra, task)}
+                                           np.array(kv_r), extra, task, inertial, beta)}
     figures = {
         'effort_limits_nm': effort, 'gravity_max_nm': data['gravity_max'],
         'friction_nm': friction, 'budget_nm': budget, 'task_bound_nm': bound,
@@ -533,7 +568,7 @@ def design(model: RobotModel, task: cl.Task, rate_hz: float = 1000.0,
         'speed_ceiling_rad_s': np.where(limited_speed, ceiling, np.inf),
         'time_to_goal_s': time_to_goal_s(np.array(terminal), configs, np.array(kp_r),
                                          np.array(kv_r), np.array(lam_r), extra, dt_s,
-                                         task=task),
+                                         task=task, inertial=inertial, rate_per_s=beta),
         'friction_effort_share': friction_effort_share,
     }
     return Design(task, model.joint_names, model.base_link, model.tip_link, rate_hz, kp_r,

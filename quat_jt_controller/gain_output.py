@@ -157,6 +157,10 @@ def to_yaml(d: Design, potential: str = 'tanh', command: str = '',
         'configuration_radius': 'rad, dead zone around q*',
         'configuration_ramp': 'rad, the torque rises over this',
         'damping_speed': 'rad/s, v_c of the cubic damping (0 = none)',
+        'inertial_damping': 'damping at least c sqrt(M_jj(q)): the damping ratio where the '
+                            'arm is heavy',
+        'inertial_damping_rate': '1/s, ... at most this x 1 / (M(q)^-1)_jj: what the sampled '
+                                 'loop tolerates',
         'goal_velocity_gain': "damping towards a streamed goal's velocity (0 = off)",
         'preferred_configuration': "rad, the posture a redundant arm's q* leans to",
         'posture_weight': 'of that posture against the distance to the arm (no effect without '

@@ -275,6 +275,20 @@ class RobotModel:
         M = np.triu(M) + np.triu(M, 1).T
         return M[np.ix_(self._idx, self._idx)]
 
+    def inertias(self, q: Sequence[float]) -> tuple[list[float], list[list[float]]]:
+        """
+        Return per joint ``M_jj(q)`` and ``1 / (M(q)^-1)_jj`` (kg m^2), in ``joint_names`` order.
+
+        ``M_jj`` is the inertia joint j moves while the other joints are held; ``1 / (M^-1)_jj``
+        the one it sees while they move freely, at most ``M_jj``: what a torque on that joint
+        alone accelerates first, and what bounds the damping the sampled loop tolerates on it
+        (docs/gain_design.md). The armature is included in both.
+        """
+        qv = self._set_q(q)
+        own = pin.crba(self.model, self.data, qv).diagonal()
+        seen = pin.computeMinverse(self.model, self.data, qv).diagonal()
+        return ([float(own[i]) for i in self._idx], [1.0 / float(seen[i]) for i in self._idx])
+
     def forward_dynamics(self, q: Sequence[float], qdot: Sequence[float],
                          tau: Sequence[float]) -> np.ndarray:
         """

@@ -121,6 +121,9 @@ GAINS = (
          'Add g(q) from the URDF model to the torque (Eq. 22). Live.'),
 )
 
+# beta of the inertial damping at 1 kHz with 1 and 2 ticks of delay (3 checked): what
+# gain_design.inertial_damping_rate gives there (a test checks it)
+DEFAULT_INERTIAL_DAMPING_RATE = 222.5
 MAX_POSTURE_WEIGHT = 100.0  # of the preferred posture against the distance to the arm
 PER_JOINT = {'size': 'n', 'bounds': (0.0, inf)}  # one finite value >= 0 per joint
 
@@ -181,6 +184,20 @@ SHAPING = (
          'v_c (rad/s) of the cubic damping term -k_v qdot (qdot / v_c)^2, one per joint ({n}); '
          '0 = linear damping only. Live.', default_text=JOINT_ZEROS_TEXT,
          field='damping_speed_rad_s', **PER_JOINT),
+    Spec('inertial_damping', Kind.DOUBLE_ARRAY, joint_zeros,
+         'c_j, one per joint ({n}), N m s/rad per sqrt(kg m^2): the damping of joint j is '
+         'max(k_v,j, min(c_j sqrt(M_jj(q)), inertial_damping_rate I_j(q))), M_jj(q) its own '
+         'inertia and I_j(q) = 1 / (M(q)^-1)_jj the inertia it sees while the others move '
+         'freely, at the measured configuration (armature included): it keeps the damping '
+         'ratio zeta of a stiffness k_j (c_j = 2 zeta sqrt(k_j)) where the arm is heavy, within '
+         'what the sampled loop tolerates where it is light (docs/lyapunov.md, section 10). '
+         'Zeros = k_v alone. Live.', default_text=JOINT_ZEROS_TEXT, **PER_JOINT),
+    Spec('inertial_damping_rate', Kind.DOUBLE, DEFAULT_INERTIAL_DAMPING_RATE,
+         'beta (1/s): the inertial damping of a joint is at most beta I_j(q), half the damping '
+         'per kg m^2 of seen inertia that the sampled loop tolerates (design_gains writes it '
+         'for the rate and delays designed for; the default is for 1 kHz and up to 2 ticks of '
+         'delay, checked with 3). Live.', bounds=(1.0, 1e6),
+         field='inertial_damping_rate_per_s'),
     Spec('goal_velocity_gain', Kind.DOUBLE, 0.0,
          'g_v in [0, 1]: for a stream of stamped goals on ~/target_pose, the joint damping '
          'acts on qdot - g_v qdot*_d, qdot*_d the velocity of the goal configuration (the '

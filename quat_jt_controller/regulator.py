@@ -6,7 +6,10 @@ The control tick, written once: joint state in, clamped joint torque out (Eq. 22
 With the extensions (the :class:`~quat_jt_controller.shaping.Shaping` snapshot, ``shaping.py``,
 docs/lyapunov.md) it is
 
-    tau = J^T Q^T grad U_a - grad U_lim(q) - K_v qdot + g(q) + tau_fc,  clamped
+    tau = J^T Q^T grad U_a - grad U_lim(q) - K_v(q) qdot + g(q) + tau_fc,  clamped
+
+(``K_v(q)``: ``K_v`` with its cubic part and, per joint, at least ``min(c_j sqrt(M_jj(q)),
+beta I_j(q))``, docs/lyapunov.md, section 10.)
 
 :class:`Regulator` owns the robot model, the task, the effort limits and immutable snapshots of
 the gains (:class:`~quat_jt_controller.control_law.Gains`) and of the goal (:class:`Goal`).
@@ -382,10 +385,16 @@ class Regulator:
         tau = [tau_p[j] - kv[j] * qdot[j] for j in range(n)]
         if shaping.speed_damping_on:
             sh.add_speed_damping(qdot, kv, shaping, tau, self._speed_cap)
-        if qdot_goal is not None and shaping.goal_velocity_gain > 0.0:
-            g_v = shaping.goal_velocity_gain  # damping on qdot - g_v qdot*_d
+        g_v = (shaping.goal_velocity_gain if qdot_goal is not None else 0.0)
+        if g_v > 0.0:  # damping on qdot - g_v qdot*_d
             for j in range(n):
                 tau[j] += kv[j] * g_v * qdot_goal[j]
+        if shaping.inertial_damping_on:  # docs/lyapunov.md, section 10: on the same velocity
+            d_q = self._inertial_damping(q, kv, shaping)
+            for j in range(n):
+                more = d_q[j] - kv[j]
+                if more > 0.0:
+                    tau[j] -= more * (qdot[j] - g_v * qdot_goal[j] if g_v > 0.0 else qdot[j])
         if shaping.friction_on:
             phi = sh.fade(y, shaping, self.task is cl.Task.POSITION)
             if phi > 0.0:  # else the compensation is zero (near the goal)
@@ -420,6 +429,32 @@ class Regulator:
                               self._unmet, self._held)
         saturated = cl.saturate(tau, self.effort_limits_nm)
         return TickOutput(tau, y, eta_e, p, R, saturated, True, tuple(tau_p), self.task)
+
+    def linear_damping(self, q: Sequence[float]) -> list[float]:
+        """
+        Return the linear damping per joint at ``q`` (N m s/rad), as :meth:`update` applies it.
+
+        ``K_v``, or with ``inertial_damping`` ``max(k_v,j, min(c_j sqrt(M_jj(q)), beta
+        I_j(q)))``, ``I_j(q) = 1 / (M(q)^-1)_jj`` (docs/lyapunov.md, section 10); the cubic
+        part apart.
+        """
+        gains, shaping, _ = self._law
+        if not shaping.inertial_damping_on:
+            return list(gains.kv)
+        return self._inertial_damping(q, gains.kv, shaping)
+
+    def _inertial_damping(self, q: Sequence[float], kv: Sequence[float],
+                          shaping: sh.Shaping) -> list[float]:
+        """``max(k_v,j, min(c_j sqrt(M_jj(q)), beta I_j(q)))`` per joint (N m s/rad)."""
+        own, seen = self.model.inertias(q)
+        beta = shaping.inertial_damping_rate_per_s
+        out = []
+        for j, c in enumerate(shaping.inertial_damping):
+            b = c * sqrt(own[j])
+            cap = beta * seen[j]
+            b = b if b < cap else cap
+            out.append(b if b > kv[j] else kv[j])
+        return out
 
     def potential_energy(self, q: Sequence[float]) -> float:
         """

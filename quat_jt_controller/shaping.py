@@ -111,6 +111,10 @@ class Shaping:
     configuration_radius_rad: float = _default('configuration_radius')
     configuration_ramp_rad: float = _default('configuration_ramp')
     damping_speed_rad_s: tuple[float, ...] = ()
+    # c_j and beta (1/s): the damping of joint j is max(k_v,j, min(c_j sqrt(M_jj(q)),
+    # beta I_j(q))) (docs/lyapunov.md, section 10; empty or zeros: k_v alone)
+    inertial_damping: tuple[float, ...] = ()
+    inertial_damping_rate_per_s: float = _default('inertial_damping_rate')
     # g_v: the joint damping acts on qdot - g_v qdot*_d of a streamed goal; 0 = off
     goal_velocity_gain: float = _default('goal_velocity_gain')
     # a_max per joint, N m: the most the friction estimate may learn at rest (0 = no learning)
@@ -170,6 +174,11 @@ class Shaping:
     def speed_damping_on(self) -> bool:
         """Return True if some joint has the cubic damping term."""
         return any(v > 0.0 for v in self.damping_speed_rad_s)
+
+    @cached_property  # read every tick: computed once per snapshot
+    def inertial_damping_on(self) -> bool:
+        """Return True if some joint's damping grows with the inertia it sees."""
+        return any(c > 0.0 for c in self.inertial_damping)
 
     @cached_property  # read every tick: computed once per snapshot
     def configuration_on(self) -> bool:
@@ -527,6 +536,10 @@ def describe(shaping: Shaping) -> str:
         parts.append(f'goal-configuration term {list(shaping.configuration_gain)} N m')
     if shaping.speed_damping_on:
         parts.append(f'cubic damping v_c {list(shaping.damping_speed_rad_s)} rad/s')
+    if shaping.inertial_damping_on:
+        parts.append(f'damping at least min(c sqrt(M_jj(q)), beta I_j(q)), c '
+                     f'{list(shaping.inertial_damping)}, beta '
+                     f'{shaping.inertial_damping_rate_per_s:g} 1/s')
     if shaping.goal_velocity_gain > 0.0:
         parts.append(f'damping towards a streamed goal velocity, gain '
                      f'{shaping.goal_velocity_gain:g}')

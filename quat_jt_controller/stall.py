@@ -108,7 +108,8 @@ class StallDetector:
                                   f'its {side} limit {limit:g} rad')
         if out.tau_potential_nm:
             causes += self._weak_push(out.tau_potential_nm,
-                                      (0.0,) * model.n if qdot is None else qdot)
+                                      (0.0,) * model.n if qdot is None else qdot,
+                                      reg.linear_damping(q))
         _, _, J = model.kinematics(list(q))
         rows = reg.task.rows(np.array(J))
         self.sigma_min = model.task_sigma_min(rows, reg.task.has_position)
@@ -123,7 +124,8 @@ class StallDetector:
             causes.append('no known cause (a local minimum of the potential)')
         return causes
 
-    def _weak_push(self, tau_p: Sequence[float], qdot: Sequence[float]) -> list[str]:
+    def _weak_push(self, tau_p: Sequence[float], qdot: Sequence[float],
+                   kv: Sequence[float]) -> list[str]:
         """
         Name a friction where it holds a joint, or a slow approach where the push is only weak.
 
@@ -133,7 +135,8 @@ class StallDetector:
         if more (docs/lyapunov.md, section 4). Of the weak joints, those pushed (at least
         PUSHED_SHARE x the largest weak torque) are told apart by their motion. With the
         potential's torque ``tau_p`` balanced by the damping alone, ``K_v qdot = tau_p`` (a
-        frictionless joint crawling, its inertia's share small at such speeds), so a joint
+        frictionless joint crawling, its inertia's share small at such speeds; ``kv`` the
+        linear damping at the joints' configuration, ``Regulator.linear_damping``), so a joint
         moving along its push with ``K_v |qdot| >= MOVING_DAMPING_SHARE |tau_p|`` is moving
         freely: a slow approach, not a friction. A joint at rest, moving against its push, or
         moving along it with less than that share taken by its damping is held: something
@@ -157,7 +160,6 @@ class StallDetector:
         largest = max((abs(tau_p[j]) for j, _ in weak), default=0.0)
         estimated, unmeasured, moving = [], [], []
         speed = 0.0  # the fastest of the joints moving along their push, rad/s
-        kv = reg.gains.kv
         for j, level in weak:
             t = tau_p[j]
             if abs(t) <= 0.0 or abs(t) < PUSHED_SHARE * largest:

@@ -427,3 +427,40 @@ def test_a_light_wrist_does_not_collapse_the_task_gains():
     assert any('--armature' in w for w in light.figures['warnings'])
     assert not any('--armature' in w for w in geared.figures['warnings'])
     assert 'Expected time to a goal' in go.to_yaml(light)
+
+
+def test_the_inertial_damping_damps_the_heavy_arm_within_what_the_light_one_tolerates(designs):
+    """
+    docs/gain_design.md, "Damping that follows the inertia": capped at beta I, b_max's rate.
+
+    The sampled loop tolerates a damping proportional to the seen inertia I: beta is
+    DAMPER_SAFETY x that ratio, so beta I_min is b_max on every joint. On the xArm7, whose
+    joint 1 sees 0.01 to 1.1 kg m^2, the damping of its heavy configurations exceeds K_v.
+    """
+    cases = [designs[name] for name in ('wrist', 'xarm6', 'panda')]
+    model7 = _xarm7()
+    cases.append((model7, gd.design(model7, cl.Task.POSE)))
+    for model, d in cases:
+        c = np.array(d.shaping.inertial_damping)
+        assert c.size == model.n and np.all(c > 0.0)
+        beta = d.shaping.inertial_damping_rate_per_s
+        inertia_min = d.figures['inertia_min']
+        delays = ga.checked_delays(d.figures['delays'])
+        b_max = np.array([gd.DAMPER_SAFETY * ga.largest_stable_damping(i, delays,
+                                                                       1.0 / d.rate_hz)
+                          for i in inertia_min])
+        np.testing.assert_allclose(beta * inertia_min, b_max, rtol=1e-3)
+    rng = np.random.default_rng(0)
+    lower, upper = np.array(model7.position_lower), np.array(model7.position_upper)
+    heavy = max((model7.mass_matrix(rng.uniform(np.maximum(lower, -3.0),
+                                                np.minimum(upper, 3.0)).tolist())
+                 for _ in range(200)), key=lambda M: ga.seen_inertia(M)[0])
+    assert ga.seen_inertia(heavy)[0] > 50.0 * d.figures['inertia_min'][0]
+    assert ga.damping_at(d.kv, c, beta, heavy)[0] > 1.5 * d.kv[0]
+
+
+def test_the_default_inertial_damping_rate_is_the_designs_at_1_khz():
+    """parameter_table's default beta is what design_gains writes at 1 kHz, delays 1 and 2."""
+    from quat_jt_controller import parameter_table as table
+    assert table.DEFAULT_INERTIAL_DAMPING_RATE == pytest.approx(
+        gd.inertial_damping_rate((1, 2), 1e-3), rel=1e-3)

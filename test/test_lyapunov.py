@@ -3,7 +3,8 @@ The Lyapunov argument of docs/lyapunov.md, checked in the ideal loop and at rest
 
 * Ideal loop (reference_sim.ClosedLoop, RK4) with every potential and damping term on: the
   joint-limit band (entered), the large-error term, the goal-configuration term, the cubic
-  damping. V, whose potential is every term's (Regulator.lyapunov), never increases.
+  damping, the inertial damping. V, whose potential is every term's (Regulator.lyapunov),
+  never increases.
 * The friction compensation is not a gradient: its part of the argument is the inequality
   qdot (tau_fc + tau_f) <= 0 against a Coulomb friction with stiction at least as large as
   the estimate plus what was learned, checked pointwise. The ideal loop has no stiction (a
@@ -38,7 +39,8 @@ FRICTION = (2.0, 0.8, 0.5)  # config/wrist_sim.yaml
 EVERYTHING = {'joint_limit_margin': 0.3, 'joint_limit_gain': (40.0, 30.0, 20.0),
               'large_error_gain': 5.0, 'configuration_gain': (6.0, 6.0, 6.0),
               'configuration_radius': 0.0, 'configuration_ramp': 0.25,
-              'damping_speed': (3.0, 3.0, 3.0)}
+              'damping_speed': (3.0, 3.0, 3.0), 'inertial_damping': (8.0, 8.0, 12.0),
+              'inertial_damping_rate': 300.0}
 
 
 @pytest.mark.parametrize('potential', ['quadratic', 'tanh'])
@@ -52,6 +54,9 @@ def test_lyapunov_never_increases_with_every_term_on(potential):
                       shaping=sh.Shaping.create(3, **EVERYTHING), q_star=q_goal)
     # start moving towards joint 2's upper stop, 0.2 rad from it: the band is entered
     q0 = (2.5, model.position_upper[1] - 0.2, 2.8)
+    # the inertial damping is above K_v on some joints here, so its part is tested too
+    own, _ = model.inertias(q0)
+    assert np.any(np.array(EVERYTHING['inertial_damping']) * np.sqrt(own) > np.array(gains.kv))
     traj = loop.run(q0, 3.0, dt_s=5e-4, qdot0=(2.0, 3.0, -2.0))
     band_edge = model.position_upper[1] - 0.3
     assert traj.q_rad[:, 1].max() > band_edge + 0.05, 'the test must enter the band'

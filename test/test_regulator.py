@@ -142,6 +142,54 @@ def test_the_goal_velocity_term_adds_k_v_g_v_qdot_star_and_nothing_else(seed):
         sh.Shaping.create(3, goal_velocity_gain=1.5)
 
 
+@pytest.mark.parametrize('seed', range(4))
+def test_the_inertial_damping_follows_the_joints_inertia_within_the_sampled_cap(seed):
+    """
+    docs/lyapunov.md, section 10: per joint max(k_v, min(c sqrt(M_jj), beta I_j)) on qdot.
+
+    I_j = 1 / (M^-1)_jj. The case has joints on each of the three sides: k_v, c sqrt(M_jj),
+    and the cap beta I_j.
+    """
+    model = xarm6_model()
+    rng = np.random.default_rng(seed)
+    q, qdot = random_q(model, rng).tolist(), rng.normal(size=model.n).tolist()
+    gains = cl.Gains.create('tanh', [50.0] * 3 + [2.0] * 3, [0.5] * 6, [20.0] * 3 + [4.0] * 3,
+                            POSE, 6)
+    unlimited = [math.inf] * model.n
+    goal = Regulator(model, POSE, gains).pose(random_q(model, rng).tolist())
+    M = model.mass_matrix(q)  # the inertias, by hand
+    own, seen = np.diag(M), 1.0 / np.diag(np.linalg.inv(M))
+    np.testing.assert_allclose(model.inertias(q), [own, seen], rtol=1e-9)
+    c = np.array([0.1, 40.0, 0.1, 40.0, 0.1, 0.1]) * rng.uniform(0.8, 1.2, 6)
+    ratios = sorted(c[[1, 3]] * np.sqrt(own[[1, 3]]) / seen[[1, 3]])
+    beta = float(np.sqrt(ratios[0] * ratios[1]))  # the cap binds on one of joints 2 and 4
+    plain = Regulator(model, POSE, gains, unlimited, goal)
+    reg = Regulator(model, POSE, gains, unlimited, goal,
+                    sh.Shaping.create(model.n, inertial_damping=c.tolist(),
+                                      inertial_damping_rate=beta))
+    damping = np.maximum(0.5, np.minimum(c * np.sqrt(own), beta * seen))
+    assert np.any(damping == 0.5), 'k_v must win somewhere'
+    assert np.any((damping > 0.5) & (damping == c * np.sqrt(own))), 'c sqrt(M_jj) somewhere'
+    assert np.any((damping > 0.5) & (damping == beta * seen)), 'the cap somewhere'
+    np.testing.assert_allclose(reg.linear_damping(q), damping, rtol=1e-12)
+    assert plain.linear_damping(q) == [0.5] * 6
+    want = np.array(plain.update(q, qdot).tau_nm) - (damping - 0.5) * np.array(qdot)
+    np.testing.assert_allclose(reg.update(q, qdot).tau_nm, want, rtol=1e-9, atol=1e-12)
+    # towards a streamed goal's velocity it damps qdot - g_v qdot*_d, as k_v does
+    reg.set_shaping(sh.Shaping.create(model.n, inertial_damping=c.tolist(),
+                                      inertial_damping_rate=beta, goal_velocity_gain=1.0))
+    reg.set_goal_joint_velocity(qdot)
+    np.testing.assert_allclose(reg.update(q, qdot).tau_nm, plain.update(q, [0.0] * 6).tau_nm,
+                               atol=1e-9)
+    for values, match in (({'inertial_damping': [-1.0] * 6}, 'inertial_damping'),
+                          ({'inertial_damping': [1.0] * 5}, 'inertial_damping'),
+                          ({'inertial_damping': [math.nan] * 6}, 'inertial_damping'),
+                          ({'inertial_damping_rate': 0.0}, 'inertial_damping_rate'),
+                          ({'inertial_damping_rate': math.inf}, 'inertial_damping_rate')):
+        with pytest.raises(sh.ShapingError, match=match):
+            sh.Shaping.create(model.n, **values)
+
+
 @pytest.mark.parametrize('with_q_star', [True, False])
 def test_the_learned_push_is_gone_along_a_motion_at_six_tenths_of_the_velocity_limit(
         with_q_star):
