@@ -217,21 +217,24 @@ def damper_spectral_radius(inertia: float, damping: float, delays, dt_s) -> floa
 
 
 def cruising_speed(push_nm: np.ndarray, kv: np.ndarray, damping_speed_rad_s: np.ndarray,
-                   speed_cap_rad_s: np.ndarray) -> np.ndarray:
+                   speed_cap_rad_s: np.ndarray,
+                   linear: Optional[np.ndarray] = None) -> np.ndarray:
     """
     Return the steady speed per joint where the damping meets a constant ``push_nm``.
 
-    The damping is the regulator's (``shaping.add_speed_damping``): ``k_v v (1 + min(v, v_m)^2
-    / v_c^2)``, ``v_m`` = ``speed_cap_rad_s``, no cubic part where ``v_c`` is 0. It rises
-    monotonically with ``v``; the speed is found by bisection.
+    The damping is the regulator's (``shaping.add_speed_damping``): ``b v + k_v v min(v,
+    v_m)^2 / v_c^2``, ``v_m`` = ``speed_cap_rad_s``, no cubic part where ``v_c`` is 0, ``b``
+    the linear damping ``linear`` (default ``k_v``; :func:`damping_at` with the inertial
+    damping). It rises monotonically with ``v``; the speed is found by bisection.
     """
     out = np.zeros(len(push_nm))
-    for j, (push, k, v_c, v_m) in enumerate(zip(push_nm, kv, damping_speed_rad_s,
-                                                speed_cap_rad_s)):
-        lo_v, hi_v = 0.0, push / k
+    linear = kv if linear is None else linear
+    for j, (push, k, v_c, v_m, b) in enumerate(zip(push_nm, kv, damping_speed_rad_s,
+                                                   speed_cap_rad_s, linear)):
+        lo_v, hi_v = 0.0, push / b
         for _ in range(60):
             v = 0.5 * (lo_v + hi_v)
-            f = k * v * (1.0 + (min(v, v_m) / v_c) ** 2 if v_c > 0.0 else 1.0)
+            f = b * v + (k * v * (min(v, v_m) / v_c) ** 2 if v_c > 0.0 else 0.0)
             lo_v, hi_v = (v, hi_v) if f < push else (lo_v, v)
         out[j] = 0.5 * (lo_v + hi_v)
     return out
@@ -244,7 +247,8 @@ def time_to_goal_s(cruise_rad_s: np.ndarray, configs, kp: np.ndarray, kv: np.nda
     """
     Return the expected time to a goal ``move_rad`` away in every joint (s), roughly.
 
-    The slowest joint's cruise, ``move_rad / v_j`` at its cruising speed, plus the linearised
+    The slowest joint's cruise, ``move_rad / v_j`` at its cruising speed (the design passes the
+    median over its configurations, with the damping there), plus the linearised
     tanh loop's settling, ln(1000) time constants of its slowest mode (an error 1000 x
     smaller: a 0.5 rad error down to ~0.5 mrad), at the median of the representative
     configurations, nominal gains (the damping of :func:`damping_at`) and one tick of delay.

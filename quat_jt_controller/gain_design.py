@@ -41,7 +41,7 @@ import numpy as np
 from quat_jt_controller import control_law as cl
 from quat_jt_controller import parameter_table as table
 from quat_jt_controller.gain_analysis import (
-    checked_delays, configuration_stiffness, cruising_speed, joint_spectral_radius,
+    checked_delays, configuration_stiffness, cruising_speed, damping_at, joint_spectral_radius,
     joint_stiffness, largest_stable_damping, median_damping_ratio, QO, seen_inertia, sigma_min,
     time_to_goal_s, worst_rho)
 from quat_jt_controller.model import RobotModel
@@ -269,6 +269,24 @@ def _inertial_damping(configs, slope: np.ndarray, extra: np.ndarray,
     return 2.0 * INERTIAL_DAMPING_RATIO * np.sqrt(k)
 
 
+def _round_up(value: float) -> float:
+    """Return ``value`` to 4 significant figures, never below it (a floor stays met)."""
+    rounded = float(f'{value:.4g}')
+    return rounded if rounded >= value else float(f'{value * (1.0 + 5e-4):.4g}')
+
+
+def _joint_unstable(inertia: float, stiffness: float, kv: float, b_max: float, delays,
+                    dt_s: float) -> bool:
+    """
+    Return True if a joint's spring is unstable on its least inertia with either damping.
+
+    There the tick damps with ``k_v`` or, with the inertial damping, up to ``b_max``
+    (``beta I_min``): both ends are checked (:func:`joint_spectral_radius`, with the margins).
+    """
+    return max(joint_spectral_radius(inertia, stiffness, kv, delays, dt_s),
+               joint_spectral_radius(inertia, stiffness, b_max, delays, dt_s)) >= 1.0
+
+
 def inertial_damping_rate(delays: Sequence[int], dt_s: float) -> float:
     """
     Return ``beta`` (1/s): DAMPER_SAFETY x the damping per kg m^2 the sampled loop tolerates.
@@ -467,8 +485,8 @@ def design(model: RobotModel, task: cl.Task, rate_hz: float = 1000.0,
                            np.maximum(guide_cap, GUIDE_OVER_TASK * bound))
         kv = np.minimum(_damping(configs, kp, lam, guide / GUIDE_RAMP_RAD, task), b_max)
         for j in range(n):
-            while joint_spectral_radius(inertia[j], guide[j] / GUIDE_RAMP_RAD, kv[j], delays,
-                                        dt_s) >= 1.0:
+            while _joint_unstable(inertia[j], guide[j] / GUIDE_RAMP_RAD, kv[j], b_max[j],
+                                  delays, dt_s):
                 guide[j] *= SHRINK
         extra = guide / GUIDE_RAMP_RAD
         kv = np.minimum(_damping(configs, kp, lam, extra, task), b_max)
@@ -510,7 +528,7 @@ def design(model: RobotModel, task: cl.Task, rate_hz: float = 1000.0,
         margin = round(min(LIMIT_MARGIN_MAX_RAD, LIMIT_MARGIN_FRACTION * half), 3)
         for j in np.flatnonzero(limited):
             k = min(LIMIT_OVER_TASK * bound[j], effort[j] - data['gravity_max'][j]) / margin
-            while joint_spectral_radius(inertia[j], k, kv[j], delays, dt_s) >= 1.0:
+            while _joint_unstable(inertia[j], k, kv[j], b_max[j], delays, dt_s):
                 k *= SHRINK
             limit_gain[j] = k
 
@@ -525,7 +543,14 @@ def design(model: RobotModel, task: cl.Task, rate_hz: float = 1000.0,
                   velocity[j] * sqrt(3.0 * kv[j] / (b_max[j] - kv[j])))
         if v_c < NEGLIGIBLE_CUBIC * velocity[j]:  # else it brakes < 1e-4 of k_v v: none
             damping_speed[j] = v_c
-    terminal = cruising_speed(push, kv, damping_speed, velocity)
+    terminal = cruising_speed(push, kv, damping_speed, velocity)  # where K_v alone damps
+    kp_r = tuple(float(f'{v:.4g}') for v in kp)
+    kv_r = tuple(float(f'{v:.4g}') for v in kv)
+    lam_r = tuple(float(f'{v:.4g}') for v in lam)
+    # c from the values as written, a little above the ratio, so the floor survives rounding
+    guide_r = guide.round(3)
+    inertial = (1.0 + 1e-3) * _inertial_damping(configs, np.array(kp_r) * np.array(lam_r),
+                                                guide_r / GUIDE_RAMP_RAD, task)
     shaping = Shaping.create(
         n, joint_limit_margin=margin, joint_limit_gain=limit_gain.round(3).tolist(),
         friction_compensation=friction.tolist(), friction_velocity=FRICTION_VELOCITY_RAD_S,
@@ -533,20 +558,21 @@ def design(model: RobotModel, task: cl.Task, rate_hz: float = 1000.0,
         friction_learning_time=FRICTION_LEARNING_TIME_S,
         friction_error_band=FRICTION_ERROR_BAND,
         friction_position_band=FRICTION_POSITION_BAND_M,
-        configuration_gain=guide.round(3).tolist(), configuration_radius=GUIDE_RADIUS_RAD,
+        configuration_gain=guide_r.tolist(), configuration_radius=GUIDE_RADIUS_RAD,
         configuration_ramp=GUIDE_RAMP_RAD, damping_speed=damping_speed.round(3).tolist(),
-        inertial_damping=[float(f'{v:.4g}') for v in inertial],
+        inertial_damping=[_round_up(v) for v in inertial],
         inertial_damping_rate=float(f'{beta:.4g}'),
         goal_velocity_gain=GOAL_VELOCITY_GAIN,
         preferred_configuration=(model.middle_of_ranges() if preferred_configuration_rad is None
                                  else preferred_configuration_rad),
         posture_weight=POSTURE_WEIGHT)
-    kp_r = tuple(float(f'{v:.4g}') for v in kp)
-    kv_r = tuple(float(f'{v:.4g}') for v in kv)
-    lam_r = tuple(float(f'{v:.4g}') for v in lam)
     extra = configuration_stiffness(shaping)
     inertial = np.array(shaping.inertial_damping)
     beta = shaping.inertial_damping_rate_per_s
+    # ... and the median cruise over the configurations, with the inertial damping there
+    typical = np.median([cruising_speed(push, kv, damping_speed, velocity,
+                                        damping_at(kv, inertial, beta, M))
+                         for _, _, M in configs], axis=0)
     final = worst_rho(configs, np.array(kp_r), np.array(kv_r), np.array(lam_r), extra,
                       delays, dt_s, task, inertial, beta)
     ratios = {'quadratic': median_damping_ratio(configs, np.array(kp_r), np.array(kv_r), extra,
@@ -566,7 +592,8 @@ def design(model: RobotModel, task: cl.Task, rate_hz: float = 1000.0,
         'warnings': (friction_warnings(model, friction, learning)
                      + inertia_warnings(model, effort, inertia)),
         'speed_ceiling_rad_s': np.where(limited_speed, ceiling, np.inf),
-        'time_to_goal_s': time_to_goal_s(np.array(terminal), configs, np.array(kp_r),
+        'typical_speed_rad_s': typical,
+        'time_to_goal_s': time_to_goal_s(typical, configs, np.array(kp_r),
                                          np.array(kv_r), np.array(lam_r), extra, dt_s,
                                          task=task, inertial=inertial, rate_per_s=beta),
         'friction_effort_share': friction_effort_share,

@@ -121,12 +121,15 @@ def to_yaml(d: Design, potential: str = 'tanh', command: str = '',
         'worst spectral '
         f'radius {rho["tanh"]:.6f} (tanh), {rho["quadratic"]:.6f} (quadratic) < 1; median '
         f'damping ratios tanh {_fmt(zeta["tanh"])}, quadratic {_fmt(zeta["quadratic"])};',
-        f'  cruising speeds far from the goal {_fmt(f["terminal_speed_rad_s"])} rad/s '
-        f'(velocity limits {_fmt(f["velocity_limits_rad_s"])}, aimed at '
+        f'  cruising speeds far from the goal {_fmt(f["terminal_speed_rad_s"])} rad/s where '
+        'K_v alone damps (the fastest; velocity limits '
+        f'{_fmt(f["velocity_limits_rad_s"])}, aimed at '
         f'{f["cruise_fraction"]:g} x them, at most {SPEED_MARGIN:g} x them: K_v is raised where '
-        'the cubic damping cannot hold the push there).',
+        'the cubic damping cannot hold the push there), median over the configurations with '
+        f'the inertial damping {_fmt(f["typical_speed_rad_s"])} rad/s.',
         f'Expected time to a goal: about {f["time_to_goal_s"]:.2g} s for a 1 rad move of every '
-        'joint (the slowest cruise, then ln(1000) time constants of the slowest linear mode).',
+        'joint (the slowest median cruise, then ln(1000) time constants of the slowest linear '
+        'mode).',
     ]
     header += [f'WARNING: {w}' for w in f.get('warnings', ())]
     lines = []

@@ -275,7 +275,7 @@ class RobotModel:
         M = np.triu(M) + np.triu(M, 1).T
         return M[np.ix_(self._idx, self._idx)]
 
-    def inertias(self, q: Sequence[float]) -> tuple[list[float], list[list[float]]]:
+    def inertias(self, q: Sequence[float]) -> tuple[list[float], list[float]]:
         """
         Return per joint ``M_jj(q)`` and ``1 / (M(q)^-1)_jj`` (kg m^2), in ``joint_names`` order.
 

@@ -177,10 +177,12 @@ def test_the_inertial_damping_follows_the_joints_inertia_within_the_sampled_cap(
     np.testing.assert_allclose(reg.update(q, qdot).tau_nm, want, rtol=1e-9, atol=1e-12)
     # towards a streamed goal's velocity it damps qdot - g_v qdot*_d, as k_v does
     reg.set_shaping(sh.Shaping.create(model.n, inertial_damping=c.tolist(),
-                                      inertial_damping_rate=beta, goal_velocity_gain=1.0))
+                                      inertial_damping_rate=beta, goal_velocity_gain=0.5))
     reg.set_goal_joint_velocity(qdot)
-    np.testing.assert_allclose(reg.update(q, qdot).tau_nm, plain.update(q, [0.0] * 6).tau_nm,
-                               atol=1e-9)
+    half = (0.5 * np.array(qdot)).tolist()
+    np.testing.assert_allclose(reg.update(q, qdot).tau_nm,
+                               np.array(plain.update(q, half).tau_nm)
+                               - (damping - 0.5) * np.array(half), rtol=1e-9, atol=1e-9)
     for values, match in (({'inertial_damping': [-1.0] * 6}, 'inertial_damping'),
                           ({'inertial_damping': [1.0] * 5}, 'inertial_damping'),
                           ({'inertial_damping': [math.nan] * 6}, 'inertial_damping'),
