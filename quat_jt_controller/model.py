@@ -285,9 +285,9 @@ class RobotModel:
         (docs/gain_design.md). The armature is included in both.
         """
         qv = self._set_q(q)
-        own = pin.crba(self.model, self.data, qv).diagonal()
-        seen = pin.computeMinverse(self.model, self.data, qv).diagonal()
-        return ([float(own[i]) for i in self._idx], [1.0 / float(seen[i]) for i in self._idx])
+        own = pin.crba(self.model, self.data, qv).diagonal().tolist()
+        seen = pin.computeMinverse(self.model, self.data, qv).diagonal().tolist()
+        return [own[i] for i in self._idx], [1.0 / seen[i] for i in self._idx]
 
     def forward_dynamics(self, q: Sequence[float], qdot: Sequence[float],
                          tau: Sequence[float]) -> np.ndarray:

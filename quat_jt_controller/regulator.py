@@ -390,11 +390,10 @@ class Regulator:
             for j in range(n):
                 tau[j] += kv[j] * g_v * qdot_goal[j]
         if shaping.inertial_damping_on:  # docs/lyapunov.md, section 10: on the same velocity
-            d_q = self._inertial_damping(q, kv, shaping)
-            for j in range(n):
-                more = d_q[j] - kv[j]
-                if more > 0.0:
-                    tau[j] -= more * (qdot[j] - g_v * qdot_goal[j] if g_v > 0.0 else qdot[j])
+            for j, d in enumerate(self._inertial_damping(q, kv, shaping)):
+                if d > kv[j]:
+                    tau[j] -= (d - kv[j]) * (qdot[j] - g_v * qdot_goal[j] if g_v > 0.0
+                                             else qdot[j])
         if shaping.friction_on:
             phi = sh.fade(y, shaping, self.task is cl.Task.POSITION)
             if phi > 0.0:  # else the compensation is zero (near the goal)
