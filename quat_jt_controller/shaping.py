@@ -69,9 +69,13 @@ FADE_SPEED_FACTOR = 8.0
 CREEP_GAIN = 4.0
 CREEP_TOP_FRACTION = 0.4
 FADE_TOP_FRACTION = 0.6
-# The learning low-passes how stuck a joint is with this fraction of the learning time, and
+# The learning low-passes how held a joint is with this fraction of the learning time, and
 # learns only once the filtered value is above 1/2 (learn_friction).
 HOLD_TIME_FRACTION = 0.2
+# ... where a joint slower than this share of its creep speed counts as fully held, one
+# between it and the creep speed the less the faster (so a steady creep below the creep speed
+# keeps learning; only a turning point's short stop is too brief to count)
+HELD_SPEED_SHARE = 0.5
 # The cubic damping turns linear above the URDF velocity limit, or above this without one.
 DEFAULT_SPEED_CAP_RAD_S = 2.0 * pi
 
@@ -422,11 +426,12 @@ def learn_friction(learned_nm: list[float], stuck: Sequence[float], phi: float,
     time, ``c = HOLD_TIME_FRACTION``), clipped to ``[0, a_max]``. ``stuck`` (``slow |t_p| w``,
     ``slow = max(0, 1 - |qdot| / v_cr)``) and ``unmet`` (``w``) are per joint as
     :func:`friction_compensation` gave them this tick (unread when ``phi`` is 0; ``unmet``
-    None: ``w`` = 1). ``held``, if given, is ``h`` per joint, advanced here in place:
-    ``stuck`` low-passed with the time constant ``c T``; ``s`` is ``stuck`` times a ramp of
-    ``h`` from 0 at ``h = 1/2`` to 1 at ``3/4``, so a joint must stay stuck for a while
-    (about ``0.7 c T``) before anything is learned, which the turning point of a swing does
-    not, and learns less as it nears its creep speed.
+    None: ``w`` = 1). ``held``, if given, is ``h`` per joint, advanced here in place: how held
+    the joint is, ``min(w, stuck / HELD_SPEED_SHARE)`` (``w |t_p|`` up to half the creep
+    speed, less up to it), low-passed with the time constant ``c T``; ``s`` is ``stuck`` times
+    a ramp of ``h`` from 0 at ``h = 1/2`` to 1 at ``3/4``, so a joint must stay held for a
+    while (about ``0.7 c T``) before anything is learned, which the turning point of a swing
+    does not, and learns less as it nears its creep speed.
     Without ``held``, ``s`` is ``stuck``.
 
     So ``a`` grows only while a joint stays at rest or creeps, pushed and not moved by the push
@@ -447,7 +452,12 @@ def learn_friction(learned_nm: list[float], stuck: Sequence[float], phi: float,
         if phi > 0.0:
             s = stuck[j]
             if held is not None:
-                h = held[j] + hold_rate * (s - held[j])
+                x = s / HELD_SPEED_SHARE  # held: w |t_p| up to half the creep speed
+                if unmet is not None and unmet[j] < x:
+                    x = unmet[j]
+                elif x > 1.0:
+                    x = 1.0
+                h = held[j] + hold_rate * (x - held[j])
                 held[j] = h
                 if h < 0.75:  # not stuck for long enough: s = 0 below h = 1/2
                     s = s * (4.0 * h - 2.0) if h > 0.5 else 0.0

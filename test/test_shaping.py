@@ -249,6 +249,25 @@ def test_friction_learning_tells_a_stuck_joint_from_a_slow_approach_and_a_turnin
     assert learned[0] > 0.0
 
 
+def test_friction_learning_goes_on_in_a_steady_creep_below_the_creep_speed():
+    """
+    A joint sliding steadily at 0.6 x its creep speed, a friction taking the push, learns.
+
+    It is held (the damping takes almost none of the push) and slower than its creep speed:
+    the compensation is not yet enough, so ``a`` must grow until the joint reaches the creep
+    speed, not stall at a crawl. The same slide at the creep speed learns nothing.
+    """
+    shaping = sh.Shaping.create(2, friction_learning_limit=(1.0, 1.0), friction_velocity=0.05)
+    creep = sh.CREEP_SPEED_FACTOR * 0.05
+    kv = 0.01
+    learned, held = [0.0, 0.0], [0.0, 0.0]
+    qdot = [0.6 * creep, creep]
+    for _ in range(1000):
+        _learning_tick(shaping, learned, held, [0.3, 0.3], qdot, [-kv * v for v in qdot])
+    assert learned[0] > 0.1
+    assert learned[1] == 0.0
+
+
 def test_learned_friction_holds_against_a_friction_and_leaks_where_the_damping_takes_it():
     """Sliding with friction taking the push, ``a`` holds; moving freely it leaks fast."""
     shaping = sh.Shaping.create(1, friction_learning_limit=(1.0,), friction_velocity=0.05)
