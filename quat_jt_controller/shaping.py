@@ -422,7 +422,7 @@ def learn_friction(learned_nm: list[float], stuck: Sequence[float], phi: float,
     """
     Advance ``a``, the learned part of the friction estimate, by one tick of ``dt_s``, in place.
 
-    ``da/dt = (a_max / T) phi s - [(1 - phi) + phi (1 - w) / c] a / T`` (``T`` the learning
+    ``da/dt = (a_max / T) phi s - [(1 - phi) + phi (1 - w)^2 / c] a / T`` (``T`` the learning
     time, ``c = HOLD_TIME_FRACTION``), clipped to ``[0, a_max]``. ``stuck`` (``slow |t_p| w``,
     ``slow = max(0, 1 - |qdot| / v_cr)``) and ``unmet`` (``w``) are per joint as
     :func:`friction_compensation` gave them this tick (unread when ``phi`` is 0; ``unmet``
@@ -438,8 +438,9 @@ def learn_friction(learned_nm: list[float], stuck: Sequence[float], phi: float,
     against its damping, outside the error band (``phi`` > 0): while the compensation does not
     yet move it at its creep speed against the friction that holds it. It holds while a
     friction takes the push of a moving joint (``w`` ~ 1), leaks in
-    ``c T`` while the damping takes it (``w`` ~ 0: nothing to compensate), and in ``T``
-    within the band (docs/lyapunov.md, section 4).
+    ``c T`` while the damping takes it (``w`` ~ 0: nothing to compensate), the slower the
+    more of the push a friction takes, and in ``T`` within the band (docs/lyapunov.md,
+    section 4).
     """
     rate = dt_s / shaping.friction_learning_time_s
     hold_rate = rate / HOLD_TIME_FRACTION
@@ -464,7 +465,8 @@ def learn_friction(learned_nm: list[float], stuck: Sequence[float], phi: float,
             # leaks in T within the band, in HOLD_TIME_FRACTION T where the damping takes the push
             leak = 1.0 - phi
             if unmet is not None:
-                leak += phi * (1.0 - unmet[j]) / HOLD_TIME_FRACTION
+                taken = 1.0 - unmet[j]
+                leak += phi * taken * taken / HOLD_TIME_FRACTION
             a += rate * (a_max * phi * s - leak * a)
         else:
             if held is not None:

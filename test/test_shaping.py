@@ -268,6 +268,24 @@ def test_friction_learning_goes_on_in_a_steady_creep_below_the_creep_speed():
     assert learned[1] == 0.0
 
 
+def test_friction_learning_outgrows_its_leak_where_a_friction_takes_most_of_the_push():
+    """
+    Sliding at half its creep speed with a friction taking 80% of the push, ``a`` grows.
+
+    The damping takes the other 20%: the joint is moving, but slower than its creep speed
+    because the friction holds it back, so the learned push must grow past its leak (with a
+    leak linear in the damping's share, it settled where it was, a crawl).
+    """
+    shaping = sh.Shaping.create(1, friction_learning_limit=(1.0,), friction_velocity=0.05)
+    creep = sh.CREEP_SPEED_FACTOR * 0.05
+    learned, held = [0.3], [1.0]
+    qdot = [0.5 * creep]
+    for _ in range(2000):
+        push = 0.3 + learned[0]  # tau_p + the learned push along the motion
+        _learning_tick(shaping, learned, held, [0.3], qdot, [-0.2 * push])
+    assert learned[0] > 0.6
+
+
 def test_learned_friction_holds_against_a_friction_and_leaks_where_the_damping_takes_it():
     """Sliding with friction taking the push, ``a`` holds; moving freely it leaks fast."""
     shaping = sh.Shaping.create(1, friction_learning_limit=(1.0,), friction_velocity=0.05)
