@@ -366,8 +366,8 @@ def design(model: RobotModel, task: cl.Task, rate_hz: float = 1000.0,
     joint (default zeros: no friction compensation); ``delays`` the ticks of delay the
     sampled loop must be stable with; ``friction_learning`` how much more than the estimate
     (x the estimate) the regulator may learn at rest, and on a joint without an estimate
-    ``friction_effort_share`` of its effort limit (at most what its damping takes at the
-    velocity limit); ``cruise_fraction`` of the velocity
+    ``friction_effort_share`` of its effort limit (at most what changes its speed by
+    ``TICK_SPEED_SHARE`` of its velocity limit in one tick); ``cruise_fraction`` of the velocity
     limits the speed far from the goal that the goal-configuration gain is raised towards and
     the cubic damping holds (``_cruising_guide``); ``preferred_configuration_rad`` the
     posture a redundant arm's q* leans to (default: the middle of the ranges). Raises
@@ -590,7 +590,9 @@ def design(model: RobotModel, task: cl.Task, rate_hz: float = 1000.0,
         'cruise_fraction': cruise_fraction,
         'regular_sigma_min': data['regular_sigma_min'],
         'warnings': (friction_warnings(model, friction, learning)
-                     + inertia_warnings(model, effort, inertia)),
+                     + inertia_warnings(model, effort, inertia)
+                     + learning_warnings(model, friction, learning,
+                                         friction_effort_share * effort)),
         'speed_ceiling_rad_s': np.where(limited_speed, ceiling, np.inf),
         'typical_speed_rad_s': typical,
         'time_to_goal_s': time_to_goal_s(typical, configs, np.array(kp_r),
@@ -622,6 +624,29 @@ def inertia_warnings(model: RobotModel, effort: np.ndarray, inertia: np.ndarray)
             "The URDF's inertias likely leave out the drives' rotor inertia, and the gains are "
             'sized for that light a joint (slow, weakly damped). Give the rotor inertia with '
             f'--armature (e.g. --armature {SUGGESTED_ARMATURE:g} kg m^2 per joint)']
+
+
+def learning_warnings(model: RobotModel, friction: np.ndarray, learning: np.ndarray,
+                      asked: np.ndarray) -> list[str]:
+    """
+    Warn of joints without an estimate whose learnable friction is held below the share asked.
+
+    On a joint without a friction estimate the regulator may learn ``asked`` (the effort
+    share), at most what changes the joint's speed by ``TICK_SPEED_SHARE`` of its limit in one
+    tick on the least inertia it sees. Where that is less, a friction above it is never
+    broken: the joint stops short of the goal, and /diagnostics says "likely friction".
+    """
+    short = [f'{name} to {a:.3g} N m (not {want:.3g})'
+             for name, f, a, want in zip(model.joint_names, friction, learning, asked)
+             if f <= 0.0 and a < (1.0 - 1e-9) * want]
+    if not short:
+        return []
+    return ['the friction the regulator may learn at rest is held down on joints too light '
+            f'for it: {", ".join(short)}, so that releasing it cannot jump the joint past its '
+            'velocity limit in one tick. A larger friction holds the joint short of the goal. '
+            'Give the '
+            "drives' rotor inertia with --armature, or measure the friction and give it with "
+            '--friction']
 
 
 def friction_warnings(model: RobotModel, friction: np.ndarray,

@@ -426,6 +426,10 @@ def test_a_light_wrist_does_not_collapse_the_task_gains():
         assert 0.0 < d.figures['time_to_goal_s'] < 10.0
     assert any('--armature' in w for w in light.figures['warnings'])
     assert not any('--armature' in w for w in geared.figures['warnings'])
+    # its friction learning is held below the 3% of the effort asked, and it says so
+    held = [w for w in light.figures['warnings'] if 'may learn' in w]
+    assert len(held) == 1 and 'joint7' in held[0] and 'joint1 ' not in held[0]
+    assert not any('may learn' in w for w in geared.figures['warnings'])
     assert 'Expected time to a goal' in go.to_yaml(light)
 
 
