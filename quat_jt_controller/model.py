@@ -120,6 +120,7 @@ class RobotModel:
                              'it must be fixed to the URDF root')
         self._q = pin.neutral(model)
         self._link_data = None  # link_pose's own, made when first asked
+        self._inertial = None  # inertial_torque's model without gravity, made when first asked
         pin.framesForwardKinematics(model, self.data, self._q)
         base = self.data.oMf[self._base_id]
         self._base_is_root = bool(np.allclose(base.homogeneous, np.eye(4)))
@@ -274,6 +275,24 @@ class RobotModel:
         M = pin.crba(self.model, self.data, self._set_q(q).copy())
         M = np.triu(M) + np.triu(M, 1).T
         return M[np.ix_(self._idx, self._idx)]
+
+    def inertial_torque(self, q: Sequence[float], qddot: Sequence[float]) -> list[float]:
+        """
+        Return ``M(q) qddot`` (N m per joint), the armature included, in ``joint_names`` order.
+
+        The torque that went into accelerating the joints at ``qddot``: the inverse dynamics
+        at zero velocity and zero gravity (Pinocchio's RNEA on a copy of the model without
+        gravity, made on the first call).
+        """
+        if self._inertial is None:
+            model = pin.Model(self.model)
+            model.gravity.setZero()
+            self._inertial = (model, model.createData(), np.zeros(self.n), np.zeros(self.n))
+        model, data, zero, a = self._inertial
+        for i, v in zip(self._idx, qddot):
+            a[i] = v
+        tau = pin.rnea(model, data, self._set_q(q), zero, a).tolist()
+        return [tau[i] for i in self._idx]
 
     def inertias(self, q: Sequence[float]) -> tuple[list[float], list[float]]:
         """

@@ -202,6 +202,10 @@ class Regulator:
         self._creep_top = [sh.CREEP_TOP_FRACTION * v for v in self._speed_cap]  # their tops
         self._fade_top = [sh.FADE_TOP_FRACTION * v for v in self._speed_cap]
         self._held = [0.0] * self.n  # how stuck each joint has stayed (learn_friction's h)
+        # the learning's acceleration estimate: qdot's low-pass (rad/s) and
+        # (qdot - low-pass) / ACCELERATION_TIME_S (rad/s^2), advanced by the ticks given a step
+        self._qdot_slow = [0.0] * self.n
+        self._qddot = [0.0] * self.n
         # the limit band ending at q* (LimitBand.ending_at), cached for (band, q*): derived
         self._band_at_goal: tuple = (None, None, None)
 
@@ -374,6 +378,8 @@ class Regulator:
         goal, q_star = self._target
         band = self._band_at(band, q_star)
         qdot_goal = self._goal_joint_velocity
+        if dt_s > 0.0 and shaping.learning_on:  # the learning's acceleration estimate
+            self._track_acceleration(qdot, dt_s)
         y, eta_e, rows, p, R = self.error(q, goal)
         n = self.n
         tau_p = cl.potential_torque(rows, y, eta_e, gains, shaping.large_error_gain, self.task)
@@ -402,14 +408,15 @@ class Regulator:
                 if learning:  # the damping terms so far: tau = tau_p + damping
                     for j in range(n):
                         damping[j] = tau[j] - tau_p[j]
-                creep = fade = None
+                creep = fade = inertial = None
                 if learning:  # the creep and fade speeds, the creep from q* if known
                     creep, fade = self._creep, self._fade
                     sh.creep_speeds(q, q_star, shaping, self._creep_top, self._fade_top,
                                     creep, fade)
+                    inertial = self.model.inertial_torque(q, self._qddot)
                 fc = sh.friction_compensation(
                     tau_p, qdot, phi, shaping, self._learned_friction_nm if learning else None,
-                    self._stuck, damping, self._unmet, creep, fade)
+                    self._stuck, damping, self._unmet, creep, fade, inertial)
                 for j in range(n):
                     tau[j] += fc[j]
         if gains.gravity_compensation:
@@ -428,6 +435,16 @@ class Regulator:
                               self._unmet, self._held)
         saturated = cl.saturate(tau, self.effort_limits_nm)
         return TickOutput(tau, y, eta_e, p, R, saturated, True, tuple(tau_p), self.task)
+
+    def _track_acceleration(self, qdot: Sequence[float], dt_s: float) -> None:
+        """Advance the filtered derivative of ``qdot`` by one tick (``ACCELERATION_TIME_S``)."""
+        tau = sh.ACCELERATION_TIME_S
+        k = dt_s / tau if dt_s < tau else 1.0
+        slow, qddot = self._qdot_slow, self._qddot
+        for j, v in enumerate(qdot):
+            change = v - slow[j]
+            qddot[j] = change / tau  # a steady ramp's slope, at any k
+            slow[j] += k * change
 
     def linear_damping(self, q: Sequence[float]) -> list[float]:
         """

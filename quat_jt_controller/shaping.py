@@ -76,6 +76,9 @@ HOLD_TIME_FRACTION = 0.2
 # between it and the creep speed the less the faster (so a steady creep below the creep speed
 # keeps learning; only a turning point's short stop is too brief to count)
 HELD_SPEED_SHARE = 0.5
+# The learning's estimate of a joint's acceleration: its velocity minus the velocity's
+# low-pass of this time constant, over it (s; Regulator.update)
+ACCELERATION_TIME_S = 0.02
 # The cubic damping turns linear above the URDF velocity limit, or above this without one.
 DEFAULT_SPEED_CAP_RAD_S = 2.0 * pi
 
@@ -314,7 +317,8 @@ def friction_compensation(tau_potential: Sequence[float], qdot: Sequence[float],
                           damping_nm: Optional[Sequence[float]] = None,
                           unmet_out: Optional[list[float]] = None,
                           creep_rad_s: Optional[Sequence[float]] = None,
-                          fade_rad_s: Optional[Sequence[float]] = None) -> list[float]:
+                          fade_rad_s: Optional[Sequence[float]] = None,
+                          inertial_nm: Optional[Sequence[float]] = None) -> list[float]:
     """
     tau_fc per joint: phi t_p [(f + r a) max(0, t_v t_p) + (f + a) (1 - |t_v|)], |.| <= f + a.
 
@@ -335,10 +339,13 @@ def friction_compensation(tau_potential: Sequence[float], qdot: Sequence[float],
 
     For the learning, ``unmet_out``, if given, receives per joint the share of the push
     ``u = tau_p + tau_fc`` that the damping torque ``damping_nm`` (the joint damping terms of
-    the law, ``-K_v qdot`` and the rest) does not take: ``w = max(0, 1 - |d| / |u|)``. In a
-    joint that the push moves freely against its damping (a slow approach) ``w`` is near 0;
-    in one held by stiction it is 1 (no damping at rest); one moving against the push gets
-    ``slow w`` (it is not held); with ``damping_nm`` None, ``w`` is 1. ``stuck_out``, if
+    the law, ``-K_v qdot`` and the rest) does not take: ``w = max(0, 1 - |d| / |u|)``, and
+    with ``inertial_nm`` (``M(q) qddot``, the torque the joints' acceleration took) neither
+    the damping nor the acceleration: ``w = min(1, max(0, 1 - (|d| + sgn(u) (M qddot)_j) /
+    |u|))``. In a joint that the push moves freely against its damping (a slow approach) or
+    accelerates (a swing) ``w`` is near 0; in one held by stiction it is 1 (no damping, no
+    acceleration at rest); one moving against the push gets ``slow w`` (it is not held); with
+    ``damping_nm`` None, ``w`` is 1. ``stuck_out``, if
     given, receives ``slow |t_p| w`` (how stuck, pushed and unmoved by the push each joint
     is), ``slow = max(0, 1 - |qdot| / creep)``: a joint creeping slower than its creep speed
     still counts, the less the nearer it is to it. Both are left alone when ``phi`` is 0.
@@ -381,7 +388,11 @@ def friction_compensation(tau_potential: Sequence[float], qdot: Sequence[float],
                 signed = tau_potential[j] + out[j]
                 push = abs(signed)
                 left = push - abs(damping_nm[j])
-                w = left / push if left > 0.0 else 0.0
+                if inertial_nm is not None:  # what the acceleration took, along the push
+                    left -= inertial_nm[j] if signed > 0.0 else -inertial_nm[j]
+                w = left / push if left > 0.0 and push > 0.0 else 0.0
+                if w > 1.0:  # decelerated against the push by more than the damping
+                    w = 1.0
                 if qdot[j] * signed < 0.0:  # moving against the push: it is not held
                     w *= slow
             if stuck_out is not None:

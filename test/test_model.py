@@ -155,6 +155,11 @@ def test_armature_adds_to_the_diagonal_of_the_inertia_in_the_callers_order():
         order = [2, 0, 1]
         np.testing.assert_allclose(perm.mass_matrix(np.asarray(q)[order]),
                                    (M0 + np.diag(armature))[np.ix_(order, order)], atol=1e-12)
+        qddot = rng.uniform(-3.0, 3.0, 3)  # M(q) qddot, the armature in, no gravity
+        np.testing.assert_allclose(rotor.inertial_torque(q, qddot.tolist()),
+                                   (M0 + np.diag(armature)) @ qddot, atol=1e-12)
+        np.testing.assert_allclose(perm.inertial_torque(np.asarray(q)[order], qddot[order]),
+                                   ((M0 + np.diag(armature)) @ qddot)[order], atol=1e-12)
         qdot = rng.uniform(-1.0, 1.0, 3)
         tau = rng.uniform(-5.0, 5.0, 3)
         # qddot = (M0 + A)^-1 (tau - h), h = C qdot + g from the plain model's dynamics

@@ -249,6 +249,31 @@ def test_friction_learning_tells_a_stuck_joint_from_a_slow_approach_and_a_turnin
     assert learned[0] > 0.0
 
 
+def test_a_joint_the_push_accelerates_is_not_held():
+    """
+    What the acceleration takes (``M qddot``) is not friction: a joint it takes is not held.
+
+    Joint 0 is at rest, pushed, not accelerating: held (``w`` = 1). Joint 1 is at rest at a
+    swing's turning point, its push all going into acceleration: ``w`` = 0, and nothing is
+    learned however long that lasts. Joint 2 is braked harder than its damping explains (a
+    friction): ``w`` stays at most 1.
+    """
+    shaping = sh.Shaping.create(3, friction_learning_limit=(0.5, 0.5, 0.5))
+    stuck, unmet = [0.0] * 3, [0.0] * 3
+    tau_p = [0.3, 0.3, 0.3]
+    sh.friction_compensation(tau_p, [0.0] * 3, 1.0, shaping, [0.0] * 3, stuck, [0.0] * 3,
+                             unmet, inertial_nm=[0.0, 0.3, -0.2])
+    assert unmet == [1.0, 0.0, 1.0]
+    assert stuck[0] == pytest.approx(1.0) and stuck[1] == 0.0
+    learned, held = [0.0] * 3, [0.0] * 3
+    for _ in range(1000):
+        stuck, unmet = [0.0] * 3, [0.0] * 3
+        sh.friction_compensation(tau_p, [0.0] * 3, 1.0, shaping, learned, stuck, [0.0] * 3,
+                                 unmet, inertial_nm=[0.0, 0.3 + learned[1], 0.0])
+        sh.learn_friction(learned, stuck, 1.0, shaping, 1e-3, unmet, held)
+    assert learned[0] > 0.25 and learned[1] == 0.0
+
+
 def test_friction_learning_goes_on_in_a_steady_creep_below_the_creep_speed():
     """
     A joint sliding steadily at 0.6 x its creep speed, a friction taking the push, learns.
