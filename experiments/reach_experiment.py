@@ -78,6 +78,7 @@ from quat_jt_controller import control_law as cl
 from quat_jt_controller import quaternion as quat
 from quat_jt_controller import shaping as sh
 from quat_jt_controller.controller_config import controller_from_package_config
+from quat_jt_controller.gain_design import CRUISE_FRACTION
 from quat_jt_controller.inverse_kinematics import goal_configuration
 from quat_jt_controller.model import RobotModel
 from quat_jt_controller.reference_sim import ClosedLoop, run_sampled
@@ -199,6 +200,9 @@ class Outcome:
     from_q_star_rad: float = math.nan  # max_j |q_j - q*_j| at the end (nan: no q*)
     cause: str = ''
     speed_ratio: float = math.nan  # max over joints and time of |qdot_j| / velocity limit_j
+    # max_j |q*_j - q_start,j| / velocity limit_j: the least time to the goal configuration
+    # at the velocity limits, acceleration aside (nan: no q* or no limits)
+    travel_s: float = math.nan
 
 
 class PositionsOnly:
@@ -291,7 +295,9 @@ def run_case(robot: Robot, model: RobotModel, gains: cl.Gains, shaping: sh.Shapi
                       final_speed_rad_s=float(np.abs(np.diff(last, axis=0)).max() / dt_s),
                       from_q_star_rad=(math.nan if q_star is None else
                                        float(np.abs(held.q_rad[-1] - q_star).max())),
-                      speed_ratio=float((qdot / limits).max()))
+                      speed_ratio=float((qdot / limits).max()),
+                      travel_s=(math.nan if q_star is None else
+                                float((np.abs(np.asarray(q_star) - q0) / limits).max())))
     if not reached:
         outcome.cause = classify(model, loop, shaping, q_star, run)
     if outcome.flips_per_s > LIMIT_CYCLE_FLIPS_PER_S:
@@ -367,6 +373,13 @@ def report(robot: Robot, potential: str, outcomes: list, elapsed_s: float) -> st
     lines.append(f'  torque sign changes in the last second (tau - g, worst joint): median '
                  f'{np.median(flips):.2f}, max {flips.max():.2f}; limit cycles (> '
                  f'{LIMIT_CYCLE_FLIPS_PER_S:g}) in {cycles} cases')
+    travel = np.array([o.travel_s for o in outcomes])
+    if np.any(np.isfinite(travel) & (travel > 0.0)):  # what the velocity limits allow
+        over = int(np.count_nonzero(travel > robot.duration_s))
+        cruise = int(np.count_nonzero(travel / CRUISE_FRACTION > robot.duration_s))
+        lines.append(f'  the longest joint travel to q* takes more than {robot.duration_s:g} s '
+                     f'at the velocity limits in {over} cases, at the design cruise '
+                     f'({CRUISE_FRACTION:g} x the limits) in {cruise}')
     if robot.hold_s > 0.0 and ok:  # after settling: the cases reached
         drift = np.array([o.final_speed_rad_s for o in outcomes if o.reached])
         away = np.array([o.from_q_star_rad for o in outcomes if o.reached])
@@ -382,7 +395,8 @@ def report(robot: Robot, potential: str, outcomes: list, elapsed_s: float) -> st
                       f'{pos.max() * 1e3:.3f} mm')
     lines.append('  ' + '; '.join(finals) + f' ({elapsed_s:.0f} s)')
     for o in outcomes:
-        if not o.reached or o.touched or o.flips_per_s > LIMIT_CYCLE_FLIPS_PER_S:
+        if (not o.reached or o.touched or o.flips_per_s > LIMIT_CYCLE_FLIPS_PER_S
+                or o.speed_ratio > 1.0):
             lines.append(
                 f'  case {o.index}: start {np.round(o.q_start, 2).tolist()} goal '
                 f'{np.round(o.q_goal, 2).tolist()} end {np.round(o.q_final, 2).tolist()}: '
@@ -391,6 +405,8 @@ def report(robot: Robot, potential: str, outcomes: list, elapsed_s: float) -> st
                             + ([f'{o.position_error_m * 1e3:.2f} mm']
                                if robot.task.has_position else []))
                 + (', TOUCHED A STOP' if o.touched else '')
+                + (f', PAST A VELOCITY LIMIT ({o.speed_ratio:.2f} x)' if o.speed_ratio > 1.0
+                   else '')
                 + (f'; {o.cause}' if o.cause else ''))
     return '\n'.join(lines)
 
