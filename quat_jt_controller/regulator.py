@@ -23,7 +23,7 @@ A parameter or goal change builds a new immutable object and swaps one reference
 each reference once, so it never sees half an update.
 """
 from dataclasses import dataclass
-from math import isfinite, sqrt
+from math import inf, isfinite, sqrt
 from typing import NamedTuple, Optional, Sequence
 
 from quat_jt_controller import control_law as cl
@@ -200,6 +200,11 @@ class Regulator:
         self._creep = [0.0] * self.n  # the creep speed per joint (rad/s), for the learning
         self._fade = [0.0] * self.n  # ... and the fade speed of the learned push (rad/s)
         self._creep_top = [sh.CREEP_TOP_FRACTION * v for v in self._speed_cap]  # their tops
+        # the speed guard: above this (rad/s, a share of the URDF velocity limit; none without
+        # one) a joint's damping rises to beta I_j(q), the most the sampled loop tolerates
+        self._guard = [sh.SPEED_GUARD_FRACTION * v if isfinite(v) and v > 0.0 else inf
+                       for v in model.velocity_limits]
+        self._caps = [0.0] * self.n  # beta I_j(q) this tick
         self._fade_top = [sh.FADE_TOP_FRACTION * v for v in self._speed_cap]
         self._held = [0.0] * self.n  # how stuck each joint has stayed (learn_friction's h)
         # the learning's acceleration estimate: qdot's low-pass (rad/s) and
@@ -396,10 +401,16 @@ class Regulator:
             for j in range(n):
                 tau[j] += kv[j] * g_v * qdot_goal[j]
         if shaping.inertial_damping_on:  # docs/lyapunov.md, section 10: on the same velocity
-            for j, d in enumerate(self._inertial_damping(q, kv, shaping)):
+            caps = self._caps
+            for j, d in enumerate(self._inertial_damping(q, kv, shaping, caps)):
                 if d > kv[j]:
                     tau[j] -= (d - kv[j]) * (qdot[j] - g_v * qdot_goal[j] if g_v > 0.0
                                              else qdot[j])
+                v = qdot[j]
+                over = (v - self._guard[j] if v > self._guard[j] else
+                        (v + self._guard[j] if v < -self._guard[j] else 0.0))
+                if over != 0.0 and caps[j] > d:  # the speed guard, docs/lyapunov.md s. 6
+                    tau[j] -= (caps[j] - d) * over
         if shaping.friction_on:
             phi = sh.fade(y, shaping, self.task is cl.Task.POSITION)
             if phi > 0.0:  # else the compensation is zero (near the goal)
@@ -460,14 +471,21 @@ class Regulator:
         return self._inertial_damping(q, gains.kv, shaping)
 
     def _inertial_damping(self, q: Sequence[float], kv: Sequence[float],
-                          shaping: sh.Shaping) -> list[float]:
-        """``max(k_v,j, min(c_j sqrt(M_jj(q)), beta I_j(q)))`` per joint (N m s/rad)."""
+                          shaping: sh.Shaping,
+                          caps_out: Optional[list[float]] = None) -> list[float]:
+        """
+        ``max(k_v,j, min(c_j sqrt(M_jj(q)), beta I_j(q)))`` per joint (N m s/rad).
+
+        ``caps_out``, if given, receives ``beta I_j(q)`` per joint.
+        """
         own, seen = self.model.inertias(q)
         beta = shaping.inertial_damping_rate_per_s
         out = []
         for j, c in enumerate(shaping.inertial_damping):
             b = c * sqrt(own[j])
             cap = beta * seen[j]
+            if caps_out is not None:
+                caps_out[j] = cap
             b = b if b < cap else cap
             out.append(b if b > kv[j] else kv[j])
         return out

@@ -79,6 +79,9 @@ HELD_SPEED_SHARE = 0.5
 # The learning's estimate of a joint's acceleration: its velocity minus the velocity's
 # low-pass of this time constant, over it (s; Regulator.update)
 ACCELERATION_TIME_S = 0.02
+# Above this share of its URDF velocity limit a joint's damping rises to the most the sampled
+# loop tolerates (the speed guard, with the inertial damping; docs/lyapunov.md, section 6)
+SPEED_GUARD_FRACTION = 0.8
 # The cubic damping turns linear above the URDF velocity limit, or above this without one.
 DEFAULT_SPEED_CAP_RAD_S = 2.0 * pi
 

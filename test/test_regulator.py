@@ -192,6 +192,39 @@ def test_the_inertial_damping_follows_the_joints_inertia_within_the_sampled_cap(
             sh.Shaping.create(model.n, **values)
 
 
+def test_above_the_speed_guard_the_damping_rises_to_the_sampled_cap():
+    """
+    docs/lyapunov.md, section 6: above 0.8 v_lim a joint is damped at beta I_j(q) on the excess.
+
+    Below the guard the tick is the inertial damping's alone; a joint at 0.95 of its limit gets
+    ``-(beta I_j - d_j) (|qdot| - 0.8 v_lim) sgn(qdot)`` more, and no other joint does.
+    """
+    model = xarm6_model()
+    rng = np.random.default_rng(4)
+    q = random_q(model, rng).tolist()
+    limits = np.array(model.velocity_limits)
+    assert np.all(np.isfinite(limits))
+    gains = cl.Gains.create('tanh', [50.0] * 3 + [2.0] * 3, [0.5] * 6, [20.0] * 3 + [4.0] * 3,
+                            POSE, 6)
+    goal = Regulator(model, POSE, gains).pose(random_q(model, rng).tolist())
+    seen = np.array(model.inertias(q)[1])
+    beta = 4.0 / seen.min()  # the cap above k_v = 0.5 on every joint
+    reg = Regulator(model, POSE, gains, [math.inf] * 6, goal,
+                    sh.Shaping.create(model.n, inertial_damping=[0.1] * 6,
+                                      inertial_damping_rate=beta))
+    d = np.array(reg.linear_damping(q))
+    slow = (0.7 * limits * np.where(np.arange(6) % 2, 1.0, -1.0)).tolist()
+    base = np.array(reg.update(q, slow).tau_nm)
+    for j in (0, 5):
+        fast = list(slow)
+        fast[j] = 0.95 * limits[j] * (1.0 if j else -1.0)
+        want = base.copy()
+        want[j] -= d[j] * (fast[j] - slow[j])  # the linear damping on the faster joint
+        guard = sh.SPEED_GUARD_FRACTION * limits[j]
+        want[j] -= (beta * seen[j] - d[j]) * (fast[j] - np.sign(fast[j]) * guard)
+        np.testing.assert_allclose(reg.update(q, fast).tau_nm, want, rtol=1e-9, atol=1e-9)
+
+
 @pytest.mark.parametrize('with_q_star', [True, False])
 def test_the_learned_push_is_gone_along_a_motion_at_six_tenths_of_the_velocity_limit(
         with_q_star):
