@@ -66,6 +66,34 @@ def test_lyapunov_never_increases_with_every_term_on(potential):
     assert traj.lyapunov[-1] < 1e-3 * traj.lyapunov[0]
 
 
+def test_lyapunov_never_increases_through_the_speed_guard():
+    """
+    Started above 0.8 of the wrist's velocity limits, the speed guard damps the excess.
+
+    docs/lyapunov.md, section 6: it is a dissipation (the inertial damping's cap on the
+    speed above the guard), so V never increases while it acts.
+    """
+    model = wrist_model()
+    gains = cl.Gains.create('tanh', (8.0, 8.0, 8.0), (1.5, 1.2, 0.8), (4.0, 4.0, 4.0), ORI, 3)
+    q_goal = (0.5, 1.2, -0.4)
+    _, R = model.forward_kinematics(list(q_goal))
+    # the inertial damping below its cap beta I_j, and no cubic part: the guard damps the excess
+    values = dict(EVERYTHING, inertial_damping=(0.5, 0.5, 0.5), damping_speed=(0.0, 0.0, 0.0))
+    loop = ClosedLoop(model, gains, ORI, quat.from_rotation_matrix(R),
+                      shaping=sh.Shaping.create(3, **values), q_star=q_goal)
+    q0 = (0.0, 1.0, 0.0)
+    cap = values['inertial_damping_rate'] * np.array(model.inertias(list(q0))[1])
+    assert np.all(cap > np.array(loop.regulator.linear_damping(q0)))
+    guard = sh.SPEED_GUARD_FRACTION * np.array(model.velocity_limits)
+    qdot0 = 0.98 * np.array(model.velocity_limits) * np.array([1.0, -1.0, 1.0])
+    traj = loop.run(q0, 1.0, dt_s=2e-4, qdot0=tuple(qdot0))
+    dV = np.diff(traj.lyapunov)
+    assert dV.max() <= 1e-9 * traj.lyapunov[0], f'V increased by {dV.max()}'
+    speeds = np.abs(np.diff(traj.q_rad, axis=0)) / np.diff(traj.t_s)[:, None]
+    assert np.any(speeds > guard)  # the guard acted
+    assert traj.lyapunov[-1] < 0.5 * traj.lyapunov[0]
+
+
 def test_compensation_never_does_more_than_the_friction_it_cancels():
     """
     Check section 4's inequality pointwise.
