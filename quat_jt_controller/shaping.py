@@ -75,7 +75,7 @@ HOLD_TIME_FRACTION = 0.2
 # ... where a joint slower than this share of its creep speed counts as fully held, one
 # between it and the creep speed the less the faster (so a steady creep below the creep speed
 # keeps learning; only a turning point's short stop is too brief to count)
-HELD_SPEED_SHARE = 0.5
+HELD_SPEED_SHARE = 0.75
 # The learning's estimate of a joint's acceleration: its velocity minus the velocity's
 # low-pass of this time constant, over it (s; Regulator.update)
 ACCELERATION_TIME_S = 0.02
@@ -441,7 +441,7 @@ def learn_friction(learned_nm: list[float], stuck: Sequence[float], phi: float,
     ``slow = max(0, 1 - |qdot| / v_cr)``) and ``unmet`` (``w``) are per joint as
     :func:`friction_compensation` gave them this tick (unread when ``phi`` is 0; ``unmet``
     None: ``w`` = 1). ``held``, if given, is ``h`` per joint, advanced here in place: how held
-    the joint is, ``min(w, stuck / HELD_SPEED_SHARE)`` (``w |t_p|`` up to half the creep
+    the joint is, ``min(w, stuck / (1 - HELD_SPEED_SHARE))`` (``w |t_p|`` up to 3/4 of the creep
     speed, less up to it), low-passed with the time constant ``c T``; ``s`` is ``stuck`` times
     a ramp of ``h`` from 0 at ``h = 1/2`` to 1 at ``3/4``, so a joint must stay held for a
     while (about ``0.7 c T``) before anything is learned, which the turning point of a swing
@@ -467,7 +467,7 @@ def learn_friction(learned_nm: list[float], stuck: Sequence[float], phi: float,
         if phi > 0.0:
             s = stuck[j]
             if held is not None:
-                x = s / HELD_SPEED_SHARE  # held: w |t_p| up to half the creep speed
+                x = s / (1.0 - HELD_SPEED_SHARE)  # held: w |t_p| up to 3/4 of the creep
                 if unmet is not None and unmet[j] < x:
                     x = unmet[j]
                 elif x > 1.0:
