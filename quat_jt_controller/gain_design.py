@@ -638,7 +638,7 @@ def learning_warnings(model: RobotModel, friction: np.ndarray, learning: np.ndar
     """
     short = [f'{name} to {a:.3g} N m (not {want:.3g})'
              for name, f, a, want in zip(model.joint_names, friction, learning, asked)
-             if f <= 0.0 and a < (1.0 - 1e-9) * want]
+             if f <= 0.0 and isfinite(want) and a < (1.0 - 1e-9) * want]
     if not short:
         return []
     return ['the friction the regulator may learn at rest is held down on joints too light '

@@ -211,6 +211,7 @@ class Regulator:
         # (qdot - low-pass) / ACCELERATION_TIME_S (rad/s^2), advanced by the ticks given a step
         self._qdot_slow = [0.0] * self.n
         self._qddot = [0.0] * self.n
+        self._accel_seeded = False  # the filter starts at the first tracked qdot
         # the limit band ending at q* (LimitBand.ending_at), cached for (band, q*): derived
         self._band_at_goal: tuple = (None, None, None)
 
@@ -269,6 +270,7 @@ class Regulator:
         self._learned_friction_nm = [min(a, a_max) for a, a_max in
                                      zip(self._learned_friction_nm, limits)]
         self._held = [h if a_max > 0.0 else 0.0 for h, a_max in zip(self._held, limits)]
+        self._accel_seeded = False  # the filter may have stood still while the learning was off
         self._law = self._law._replace(shaping=shaping, band=band)
 
     @property
@@ -372,9 +374,11 @@ class Regulator:
         One control tick at the measured ``(q, qdot)``: Eq. (22) + g(q), checked and clamped.
 
         With the extensions of :attr:`shaping`: + the joint-limit, large-error and
-        goal-configuration terms of the potential, + friction compensation (``shaping.py``).
-        Reads the law and the target once each. A goal must have been set (or :meth:`hold`).
-        If the law gives a non-finite torque the command is zero and ``finite`` is False.
+        goal-configuration terms of the potential, the cubic and inertial damping and the
+        speed guard (docs/lyapunov.md, sections 6 and 10), + friction compensation
+        (``shaping.py``). Reads the law and the target once each. A goal must have been set
+        (or :meth:`hold`). If the law gives a non-finite torque the command is zero and
+        ``finite`` is False.
         ``dt_s``, the time since the last tick (s; at most ``MAX_LEARNING_STEP_S`` counts),
         advances the friction learned at rest; 0 (a re-evaluation, the ideal loop's stages)
         leaves it as it is.
@@ -448,10 +452,26 @@ class Regulator:
         return TickOutput(tau, y, eta_e, p, R, saturated, True, tuple(tau_p), self.task)
 
     def _track_acceleration(self, qdot: Sequence[float], dt_s: float) -> None:
-        """Advance the filtered derivative of ``qdot`` by one tick (``ACCELERATION_TIME_S``)."""
+        """
+        Advance the learning's filtered derivative of ``qdot`` by one tick (docs/lyapunov.md, 4).
+
+        ``qddot = (qdot - s) / ACCELERATION_TIME_S``, ``s`` the low-pass of ``qdot`` before this
+        tick: a steady ramp's slope at any step. Seeded at ``qdot`` (``qddot`` 0) on its first
+        tick and after :meth:`set_shaping`; a non-finite ``qdot`` is skipped, never kept.
+        """
+        total = 0.0
+        for v in qdot:
+            total += v
+        if total - total != 0.0:  # NaN or Inf: the tick will say so; the filter stays
+            return
+        slow, qddot = self._qdot_slow, self._qddot
+        if not self._accel_seeded:
+            slow[:] = qdot
+            qddot[:] = self._zero
+            self._accel_seeded = True
+            return
         tau = sh.ACCELERATION_TIME_S
         k = dt_s / tau if dt_s < tau else 1.0
-        slow, qddot = self._qdot_slow, self._qddot
         for j, v in enumerate(qdot):
             change = v - slow[j]
             qddot[j] = change / tau  # a steady ramp's slope, at any k

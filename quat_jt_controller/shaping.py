@@ -441,9 +441,10 @@ def learn_friction(learned_nm: list[float], stuck: Sequence[float], phi: float,
     ``slow = max(0, 1 - |qdot| / v_cr)``) and ``unmet`` (``w``) are per joint as
     :func:`friction_compensation` gave them this tick (unread when ``phi`` is 0; ``unmet``
     None: ``w`` = 1). ``held``, if given, is ``h`` per joint, advanced here in place: how held
-    the joint is, ``min(w, stuck / (1 - HELD_SPEED_SHARE))`` (``w |t_p|`` up to 3/4 of the creep
-    speed, less up to it), low-passed with the time constant ``c T``; ``s`` is ``stuck`` times
-    a ramp of ``h`` from 0 at ``h = 1/2`` to 1 at ``3/4``, so a joint must stay held for a
+    the joint is, ``min(w, stuck / (1 - HELD_SPEED_SHARE))`` (``w`` up to 3/4 of the creep
+    speed with ``|t_p|`` = 1, less up to it), low-passed with the time constant ``c T``;
+    ``s`` is ``stuck`` times a ramp of ``h`` from 0 at ``h = 1/2`` to 1 at ``3/4``, so a
+    joint must stay held for a
     while (about ``0.7 c T``) before anything is learned, which the turning point of a swing
     does not, and learns less as it nears its creep speed.
     Without ``held``, ``s`` is ``stuck``.
@@ -467,7 +468,7 @@ def learn_friction(learned_nm: list[float], stuck: Sequence[float], phi: float,
         if phi > 0.0:
             s = stuck[j]
             if held is not None:
-                x = s / (1.0 - HELD_SPEED_SHARE)  # held: w |t_p| up to 3/4 of the creep
+                x = s / (1.0 - HELD_SPEED_SHARE)  # held: w up to 3/4 of the creep speed
                 if unmet is not None and unmet[j] < x:
                     x = unmet[j]
                 elif x > 1.0:

@@ -71,6 +71,46 @@ def test_a_non_finite_tick_does_not_poison_the_learned_friction():
     assert reg.learned_friction_nm == (0.0, 0.0, 0.0)
 
 
+def test_a_non_finite_velocity_does_not_poison_the_acceleration_the_learning_reads():
+    """One NaN velocity, then the joints held at rest: the learning still learns."""
+    shaping = sh.Shaping.create(3, friction_learning_limit=(0.5, 0.5, 0.5))
+    reg = Regulator(wrist_model(), ORI, paper_gains(), goal=Goal(paper.Q_DESIRED),
+                    shaping=shaping)
+    near = [v + 0.05 for v in paper.Q_JOINT_DESIRED_RAD]
+    assert not reg.update(near, [math.nan, 0.0, 0.0], 1e-3).finite
+    for _ in range(500):
+        reg.update(near, [0.0, 0.0, 0.0], 1e-3)
+    assert min(reg.learned_friction_nm) > 0.0
+
+
+def test_a_joint_its_push_accelerates_learns_nothing_one_held_at_rest_does():
+    """
+    docs/lyapunov.md, section 4: the tick reads M(q) qddot from the velocities it is given.
+
+    Fed velocities that ramp as M(q) qddot = tau_p (a frictionless joint starting to move
+    under its push, slower than its creep speed throughout), the learning finds nothing held;
+    fed zeros (held at rest), it learns.
+    """
+    model = wrist_model()
+    shaping = sh.Shaping.create(3, friction_learning_limit=(0.5, 0.5, 0.5))
+    # a weak push and weaker damping: the push goes into the acceleration, not the damping
+    gains = cl.Gains.create('tanh', tuple(2e-4 * k for k in paper.KP),
+                            tuple(1e-3 * k for k in paper.KV), paper.LAMBDA, ORI, 3)
+    near = [v + 0.05 for v in paper.Q_JOINT_DESIRED_RAD]
+    held = Regulator(model, ORI, gains, goal=Goal(paper.Q_DESIRED), shaping=shaping)
+    moving = Regulator(model, ORI, gains, goal=Goal(paper.Q_DESIRED), shaping=shaping)
+    tau_p = np.array(held.update(near, [0.0] * 3).tau_potential_nm)
+    qddot = np.linalg.solve(model.mass_matrix(near), tau_p)
+    dt, steps = 1e-3, 400
+    creep = sh.CREEP_SPEED_FACTOR * shaping.friction_velocity_rad_s
+    assert np.abs(qddot).max() * dt * steps < creep / 2  # slower than its creep speed
+    for k in range(steps):
+        held.update(near, [0.0] * 3, dt)
+        moving.update(near, (qddot * k * dt).tolist(), dt)
+    assert min(held.learned_friction_nm) > 0.0
+    assert moving.learned_friction_nm == (0.0, 0.0, 0.0)
+
+
 def test_hold_makes_the_measured_pose_the_goal_and_gives_gravity_alone():
     model = wrist_model()
     reg = Regulator(model, ORI, paper_gains())
