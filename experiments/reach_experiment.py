@@ -82,7 +82,6 @@ from quat_jt_controller.gain_design import CRUISE_FRACTION
 from quat_jt_controller.inverse_kinematics import goal_configuration
 from quat_jt_controller.model import RobotModel
 from quat_jt_controller.reference_sim import ClosedLoop, run_sampled
-from quat_jt_controller.regulator import Regulator
 from quat_jt_controller.stall import StallDetector
 from quat_jt_runtime.resources import config_parameters, default_urdf_xml
 import yaml
@@ -336,9 +335,10 @@ def classify(model: RobotModel, loop: ClosedLoop, shaping: sh.Shaping, q_star,
     if speed > 0.02:
         causes.append(f'still moving at the end (up to {speed:.3f} rad/s): too slow')
     else:
-        reg = Regulator(model, loop.task, loop.gains, None, loop.goal, shaping)
-        # the mean velocity of the last samples: a crawl tells a slow approach from a hold (the
-        # learned friction is not the run's: this regulator has learned none)
+        # the run's own regulator, as the node's detector reads it: what it learned of the
+        # friction and how held it saw each joint, at the end of the run (and of its hold_s)
+        reg = loop.clamped
+        # the mean velocity of the last samples: a crawl tells a slow approach from a hold
         k = min(100, len(run.t_s) - 1)
         qdot = ((run.q_rad[-1] - run.q_rad[-1 - k]) / (run.t_s[-1] - run.t_s[-1 - k])).tolist()
         out = reg.update(run.q_rad[-1].tolist(), qdot)

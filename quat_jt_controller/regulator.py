@@ -274,6 +274,17 @@ class Regulator:
         self._law = self._law._replace(shaping=shaping, band=band)
 
     @property
+    def friction_held(self) -> tuple[float, ...]:
+        """
+        Return ``h`` per joint: how long each has stayed held by a friction, as the learning sees.
+
+        In ``[0, 1]``; above 1/2 the joint has been held (pushed, its push taken neither by its
+        damping nor by its acceleration) for about ``0.14 T`` (``shaping.learn_friction``).
+        Zeros while nothing is learned.
+        """
+        return tuple(self._held)
+
+    @property
     def learned_friction_nm(self) -> tuple[float, ...]:
         """Return ``a``, the part of the friction estimate learned at rest so far (N m)."""
         return tuple(self._learned_friction_nm)

@@ -39,6 +39,9 @@ PUSHED_SHARE = 0.1
 MOVING_DAMPING_SHARE = 0.5
 # A joint that has learned this share of its a_max has learned all it may
 LEARNED_FULL_SHARE = 0.999
+# With no estimate and the learning on, a weak joint the learning has seen held for less than
+# this (its h, Regulator.friction_held) is not held by a friction (shaping.learn_friction)
+HELD_LEARNING = 0.5
 
 
 class StallDetector:
@@ -158,7 +161,8 @@ class StallDetector:
             if isfinite(level) and t <= level:
                 weak.append((j, level))
         largest = max((abs(tau_p[j]) for j, _ in weak), default=0.0)
-        estimated, unmeasured, moving = [], [], []
+        estimated, unmeasured, moving, loose = [], [], [], []
+        held = reg.friction_held
         speed = 0.0  # the fastest of the joints moving along their push, rad/s
         for j, level in weak:
             t = tau_p[j]
@@ -168,6 +172,10 @@ class StallDetector:
             if qdot[j] * t > 0.0 and kv[j] * abs(qdot[j]) >= MOVING_DAMPING_SHARE * abs(t):
                 moving.append(f'{name} |tau| {abs(t):.3g} N m, qdot {qdot[j]:.3g} rad/s')
                 speed = max(speed, abs(qdot[j]))
+                continue
+            if friction[j] <= 0.0 < limits[j] and held[j] < HELD_LEARNING:
+                # the learning watched it: its push went into its damping or its acceleration
+                loose.append(f'{name} |tau| {abs(t):.3g} N m, qdot {qdot[j]:.3g} rad/s')
                 continue
             what = (f'{name} |tau| {abs(t):.3g} N m <= {level:.3g} N m'
                     + (f', qdot {qdot[j]:.3g} rad/s' if qdot[j] != 0.0 else '')
@@ -183,6 +191,11 @@ class StallDetector:
                           'while the joint is held (' + ', '.join(unmeasured) + '); measure '
                           'the breakaway torque per joint and set friction_compensation, or '
                           'raise friction_learning_limit')
+        if loose:
+            causes.append("no friction holds the weak joints: the potential's torque is weak "
+                          'here (' + ', '.join(loose) + '), and the friction learning saw '
+                          'their push go into moving them, not into a friction; the arm is '
+                          'settling slowly about the goal; raise kp or allow more time')
         if moving:
             causes.append("a slow approach: the potential's torque is weak here ("
                           + ', '.join(moving) + '); the arm is still moving towards the goal at '

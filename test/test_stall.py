@@ -146,6 +146,40 @@ def test_a_joint_at_rest_or_moving_against_its_push_is_held(direction):
     assert det.stalled and 'likely friction' in message and 'slow approach' not in message
 
 
+def test_a_joint_the_learning_saw_accelerate_is_not_held_by_a_friction():
+    """
+    At rest by the detector's measure, but its push goes into its acceleration: no friction.
+
+    The velocities ramp as M(q) qddot = tau_p, below the rest speed for the whole stall (a
+    frictionless wrist starting to move under a very weak potential, its damping small). With
+    the learning on, the regulator saw the push taken by the acceleration (its ``h`` stays
+    below 1/2), so the detector does not name a friction; the same joints fed at rest are held.
+    """
+    model = wrist_model()
+    gains = cl.Gains.create('tanh', tuple(5e-5 * k for k in paper.KP),
+                            tuple(1e-3 * k for k in paper.KV), paper.LAMBDA,
+                            cl.Task.ORIENTATION, 3)
+    shaping = sh.Shaping.create(3, friction_learning_limit=(0.5, 0.5, 0.5))
+    near = [v + 0.05 for v in paper.Q_JOINT_DESIRED_RAD]
+    messages = {}
+    for case in ('accelerating', 'at rest'):
+        reg = Regulator(model, cl.Task.ORIENTATION, gains, goal=Goal(paper.Q_DESIRED),
+                        shaping=shaping)
+        det = stall.StallDetector(reg)
+        tau_p = np.array(reg.update(near, REST).tau_potential_nm)
+        qddot = np.linalg.solve(model.mass_matrix(near), tau_p)
+        dt, steps = 1e-3, 800
+        assert np.abs(qddot).max() * dt * steps < stall.REST_SPEED_RAD_S
+        for k in range(steps):
+            qdot = (qddot * k * dt).tolist() if case == 'accelerating' else REST
+            det.feed(k * dt, near, qdot, reg.update(near, qdot, dt))
+        assert det.stalled, case
+        messages[case] = det.status()[1]
+    assert 'likely friction' not in messages['accelerating'], messages['accelerating']
+    assert 'no friction holds' in messages['accelerating']
+    assert 'likely friction' in messages['at rest'], messages['at rest']
+
+
 def test_on_a_frictionless_plant_a_slow_crawl_is_a_slow_approach_not_friction():
     """
     A weak potential on the ideal plant: the arm crawls below the rest speed, not held.
