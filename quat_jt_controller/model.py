@@ -111,6 +111,11 @@ class RobotModel:
         for i, a in zip(self._idx, self.armature):  # velocity indices
             model.armature[i] = a
         self._identity_order = self._idx == list(range(self.n))
+        # inertial_torque's gravity-free copy of the model (the armature in), its data and
+        # buffers: made here, never in the tick
+        free = pin.Model(model)
+        free.gravity.setZero()
+        self._inertial = (free, free.createData(), np.zeros(self.n), np.zeros(self.n))
         self._identity_q = self._identity_order and not self._any_unbounded
         self._base_id = model.getFrameId(base_link, pin.BODY)
         self._tip_id = model.getFrameId(tip_link, pin.BODY)
@@ -120,7 +125,6 @@ class RobotModel:
                              'it must be fixed to the URDF root')
         self._q = pin.neutral(model)
         self._link_data = None  # link_pose's own, made when first asked
-        self._inertial = None  # inertial_torque's model without gravity, made when first asked
         pin.framesForwardKinematics(model, self.data, self._q)
         base = self.data.oMf[self._base_id]
         self._base_is_root = bool(np.allclose(base.homogeneous, np.eye(4)))
@@ -281,18 +285,16 @@ class RobotModel:
         Return ``M(q) qddot`` (N m per joint), the armature included, in ``joint_names`` order.
 
         The torque that went into accelerating the joints at ``qddot``: the inverse dynamics
-        at zero velocity and zero gravity (Pinocchio's RNEA on a copy of the model without
-        gravity, made on the first call).
+        at zero velocity and zero gravity (Pinocchio's RNEA on the model's gravity-free copy).
         """
-        if self._inertial is None:
-            model = pin.Model(self.model)
-            model.gravity.setZero()
-            self._inertial = (model, model.createData(), np.zeros(self.n), np.zeros(self.n))
         model, data, zero, a = self._inertial
-        for i, v in zip(self._idx, qddot):
-            a[i] = v
-        tau = pin.rnea(model, data, self._set_q(q), zero, a).tolist()
-        return [tau[i] for i in self._idx]
+        if self._identity_order:
+            a[:] = qddot
+        else:
+            for i, v in zip(self._idx, qddot):
+                a[i] = v
+        tau = pin.rnea(model, data, self._set_q(q), zero, a)
+        return tau.tolist() if self._identity_order else [float(tau[i]) for i in self._idx]
 
     def inertias(self, q: Sequence[float]) -> tuple[list[float], list[float]]:
         """

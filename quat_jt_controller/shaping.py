@@ -444,9 +444,8 @@ def learn_friction(learned_nm: list[float], stuck: Sequence[float], phi: float,
     the joint is, ``min(w, stuck / (1 - HELD_SPEED_SHARE))`` (``w`` up to 3/4 of the creep
     speed with ``|t_p|`` = 1, less up to it), low-passed with the time constant ``c T``;
     ``s`` is ``stuck`` times a ramp of ``h`` from 0 at ``h = 1/2`` to 1 at ``3/4``, so a
-    joint must stay held for a
-    while (about ``0.7 c T``) before anything is learned, which the turning point of a swing
-    does not, and learns less as it nears its creep speed.
+    joint must stay held for a while (about ``0.7 c T``) before anything is learned, which the
+    turning point of a swing does not, and learns less as it nears its creep speed.
     Without ``held``, ``s`` is ``stuck``.
 
     So ``a`` grows only while a joint stays at rest or creeps, pushed and not moved by the push
