@@ -693,18 +693,25 @@ def arm_design(robot: Robot, told_armature: float, rate_hz: float,
 def run_arm(robot: Robot, cond: Condition, potential: str, count: int, seed: int,
             rate_hz: float = 1000.0, engine: str = 'mujoco', progress=print,
             workers: Optional[int] = None, ray_address: Optional[str] = None,
-            friction_effort_share: Optional[float] = None) -> list:
+            friction_effort_share: Optional[float] = None,
+            overrides: Optional[dict] = None) -> list:
     """
     Run ``count`` cases of an arm from its URDF in condition ``cond``; their outcomes.
 
     The gains are ``design_gains``' from the URDF, the told armature and the rate; the plant
     is ``engine``'s, without the velocity clamp (a speed past the URDF limit is measured, not
     hidden), with ``cond``'s rotor inertia and Coulomb friction; the control period is
-    1 / ``rate_hz``.
+    1 / ``rate_hz``. ``overrides`` replace parameters of the design, by their ROS names
+    (validated as the node does; ShapingError or GainsError names a bad one).
     """
     model, d = arm_design(robot, cond.told_armature, float(rate_hz), friction_effort_share)
-    gains, shaping = d.gains(potential), d.shaping
     n = model.n
+    gains, shaping = d.gains(potential), d.shaping
+    if overrides:
+        p = {**d.parameters(potential), **overrides}
+        gains = cl.Gains.create(p['potential'], p['kp'], p['kv'], p['lambda'], robot.task, n,
+                                p['gravity_compensation'], model.effort_limits)
+        shaping = sh.from_parameters(p, n)
     sim_params = {'viscous_friction': [0.0] * n,
                   'coulomb_friction': [cond.coulomb_effort_fraction * e
                                        for e in model.effort_limits],
@@ -800,14 +807,14 @@ def main(argv: Optional[list] = None) -> int:
     args = parser.parse_args(argv)
     if args.workers is not None and args.workers < 1:
         parser.error(f'--workers must be >= 1, got {args.workers}')
-    if args.urdf or args.example_robot:
-        return main_arm(parser, args)
     overrides = {}
     for item in args.param:
         name, sep, value = item.partition(':=')
         if not sep:
             parser.error(f'--param takes NAME:=VALUE, got {item!r}')
         overrides[name.strip()] = yaml.safe_load(value)
+    if args.urdf or args.example_robot:
+        return main_arm(parser, args, overrides)
     plant = Plant(args.sim_coulomb_scale, args.sim_coulomb_effort_fraction,
                   args.estimate_of_sim)
     default_cases = {'wrist': 200, 'xarm6': 100, 'panda': 100}
@@ -838,8 +845,12 @@ def main(argv: Optional[list] = None) -> int:
     return 0
 
 
-def main_arm(parser: argparse.ArgumentParser, args) -> int:
-    """Run the conditions on one arm from its URDF (``--urdf`` or ``--example-robot``)."""
+def main_arm(parser: argparse.ArgumentParser, args, overrides: dict) -> int:
+    """
+    Run the conditions on one arm from its URDF (``--urdf`` or ``--example-robot``).
+
+    ``overrides`` (``--param``) replace parameters of the design, by their ROS names.
+    """
     try:
         path = args.urdf or arms.example_robot_urdf(args.example_robot)
         if not Path(path).is_file():
@@ -861,12 +872,17 @@ def main_arm(parser: argparse.ArgumentParser, args) -> int:
         cond = condition(name, args.armature, args.armature_told_scale, args.friction_fraction)
         for potential in args.potential:
             t0 = time.monotonic()
-            outcomes = run_arm(robot, cond, potential, args.cases or 20, args.seed, args.rate,
-                               args.engine, workers=args.workers,
-                               ray_address=args.ray_address,
-                               friction_effort_share=args.friction_effort_share)
-            text.append(report(robot, f'{potential}, {cond.describe()}, {args.engine}',
-                               outcomes, time.monotonic() - t0))
+            try:
+                outcomes = run_arm(robot, cond, potential, args.cases or 20, args.seed,
+                                   args.rate, args.engine, workers=args.workers,
+                                   ray_address=args.ray_address,
+                                   friction_effort_share=args.friction_effort_share,
+                                   overrides=overrides)
+            except (cl.GainsError, sh.ShapingError) as exc:
+                parser.error(f'--param: {exc}')
+            label = ', '.join([potential, cond.describe(), args.engine]
+                              + [f'{k} {v}' for k, v in overrides.items()])
+            text.append(report(robot, label, outcomes, time.monotonic() - t0))
             print(text[-1], flush=True)
             rows.append(table_row(robot, cond, outcomes))
             print(rows[-1], flush=True)

@@ -86,8 +86,8 @@ def linearized_spectral_radius(model: RobotModel, q_goal_rad: Sequence[float], g
     K_q of :func:`joint_stiffness`, slopes k_p (quadratic) or k_p lambda (log-cosh). Of the
     extensions (``shaping``) only the goal-configuration term without a dead zone adds
     stiffness there (:func:`configuration_stiffness`; q* = the goal), and the inertial damping
-    raises the damping (:func:`damping_at`); the others are zero near the goal. See
-    :func:`spectral_radius`.
+    raises the damping (:func:`damping_at`), and the settling damping adds ``alpha M``
+    (:func:`damping_matrix`); the others are zero near the goal. See :func:`spectral_radius`.
     """
     _, _, J = model.kinematics(list(q_goal_rad))
     task = cl.Task(task)
@@ -99,9 +99,13 @@ def linearized_spectral_radius(model: RobotModel, q_goal_rad: Sequence[float], g
     K = joint_stiffness(rows, slope, task)
     if shaping is not None and shaping.configuration_on:
         K = K + np.diag(configuration_stiffness(shaping))
-    D = (damping_at(gains.kv, shaping.inertial_damping, shaping.inertial_damping_rate_per_s, M)
-         if shaping is not None else np.asarray(gains.kv))
-    return spectral_radius(M, K, np.diag(D), delay_ticks, dt_s)
+    if shaping is None:
+        D = np.diag(np.asarray(gains.kv, dtype=float))
+    else:
+        D = damping_matrix(gains.kv, shaping.inertial_damping,
+                           shaping.inertial_damping_rate_per_s, M,
+                           shaping.settling_damping_rate_per_s)
+    return spectral_radius(M, K, D, delay_ticks, dt_s)
 
 
 def time_constant_s(rho: float, dt_s: float = 1e-3) -> float:
@@ -142,6 +146,59 @@ def damping_at(kv: np.ndarray, inertial: Optional[np.ndarray], rate_per_s: float
     return np.maximum(kv, np.minimum(own, rate_per_s * seen_inertia(M)))
 
 
+def damping_matrix(kv: np.ndarray, inertial: Optional[np.ndarray], rate_per_s: float,
+                   M: np.ndarray, settling_per_s: float = 0.0) -> np.ndarray:
+    """
+    Return the linear damping matrix near the goal (N m s/rad): :func:`damping_at` + alpha M.
+
+    ``diag(damping_at(...)) + settling_per_s M``: the joint damping and the settling damping
+    ``alpha M(q)`` (docs/lyapunov.md, section 11), which acts in full near the goal.
+    """
+    D = np.diag(damping_at(kv, inertial, rate_per_s, M))
+    return D + settling_per_s * M if settling_per_s > 0.0 else D
+
+
+def slowest_decay_per_s(M: np.ndarray, K: np.ndarray, D: np.ndarray) -> float:
+    """
+    Return the decay rate (1/s) of the slowest mode of M qddot = -K q - D qdot (continuous).
+
+    The smallest ``-Re(s)`` over the eigenvalues ``s`` of the loop; a mode without stiffness
+    (``s`` = 0: a redundant arm's free self-motion, which moves no task coordinate) is left
+    out.
+    """
+    n = M.shape[0]
+    Minv = np.linalg.inv(M)
+    A = np.block([[np.zeros((n, n)), np.eye(n)], [-Minv @ K, -Minv @ D]])
+    s = np.linalg.eigvals(A)
+    size = np.abs(s)
+    moving = size > 1e-9 * max(float(size.max()), 1.0)
+    return float(np.min(-s.real[moving])) if moving.any() else 0.0
+
+
+def settling_rate(configs, slope: np.ndarray, kv: np.ndarray, extra: np.ndarray,
+                  rates_per_s: Sequence[float], near_best: float,
+                  task: cl.Task = cl.Task.POSE, inertial: Optional[np.ndarray] = None,
+                  rate_per_s: float = 0.0) -> tuple[float, float, float]:
+    """
+    Choose alpha of the settling damping ``alpha M`` among ``rates_per_s`` (1/s).
+
+    For each alpha, the median over the configurations of the slowest mode's decay rate
+    (:func:`slowest_decay_per_s`, the loop linearised at each as a goal: the joint stiffness of
+    the tanh slopes plus ``extra``, the damping of :func:`damping_matrix`). Returns
+    ``(alpha, decay at 0, decay at alpha)``: the smallest alpha whose median decay is at least
+    ``near_best`` x the best (more damping than that slows the creep of a joint a friction
+    holds, for nothing).
+    """
+    decay = np.zeros(len(rates_per_s))
+    for i, alpha in enumerate(rates_per_s):
+        decay[i] = np.median([
+            slowest_decay_per_s(M, joint_stiffness(rows, slope, task) + np.diag(extra),
+                                damping_matrix(kv, inertial, rate_per_s, M, alpha))
+            for _, rows, M in configs])
+    best = int(np.flatnonzero(decay >= near_best * decay.max())[0])
+    return float(rates_per_s[best]), float(decay[0]), float(decay[best])
+
+
 def median_damping_ratio(configs, slope: np.ndarray, kv: np.ndarray,
                          extra: np.ndarray, task: cl.Task = cl.Task.POSE,
                          inertial: Optional[np.ndarray] = None,
@@ -155,12 +212,13 @@ def median_damping_ratio(configs, slope: np.ndarray, kv: np.ndarray,
 
 
 def worst_rho(configs, kp, kv, lam, extra, delays, dt_s, task=cl.Task.POSE,
-              inertial: Optional[np.ndarray] = None, rate_per_s: float = 0.0) -> dict:
+              inertial: Optional[np.ndarray] = None, rate_per_s: float = 0.0,
+              settling_per_s: float = 0.0) -> dict:
     """
     Worst spectral radius per potential over the configurations, with the margins.
 
     DELAY_MARGIN more ticks of delay than asked for, and GAIN_MARGIN x the gains; the damping
-    at each configuration is :func:`damping_at`'s.
+    at each configuration is :func:`damping_matrix`'s (with the settling damping).
     """
     cases = margin_cases(delays)
     worst = {}
@@ -168,7 +226,7 @@ def worst_rho(configs, kp, kv, lam, extra, delays, dt_s, task=cl.Task.POSE,
         rho = 0.0
         for _, rows, M in configs:
             K = joint_stiffness(rows, slope, task) + np.diag(extra)
-            D = np.diag(damping_at(kv, inertial, rate_per_s, M))
+            D = damping_matrix(kv, inertial, rate_per_s, M, settling_per_s)
             for scale, d in cases:
                 rho = max(rho, spectral_radius(M, scale * K, scale * D, d, dt_s))
         worst[potential] = rho
@@ -243,7 +301,8 @@ def cruising_speed(push_nm: np.ndarray, kv: np.ndarray, damping_speed_rad_s: np.
 def time_to_goal_s(cruise_rad_s: np.ndarray, configs, kp: np.ndarray, kv: np.ndarray,
                    lam: np.ndarray, extra: np.ndarray, dt_s: float,
                    move_rad: float = 1.0, task: cl.Task = cl.Task.POSE,
-                   inertial: Optional[np.ndarray] = None, rate_per_s: float = 0.0) -> float:
+                   inertial: Optional[np.ndarray] = None, rate_per_s: float = 0.0,
+                   settling_per_s: float = 0.0) -> float:
     """
     Return the expected time to a goal ``move_rad`` away in every joint (s), roughly.
 
@@ -251,10 +310,12 @@ def time_to_goal_s(cruise_rad_s: np.ndarray, configs, kp: np.ndarray, kv: np.nda
     median over its configurations, with the damping there), plus the linearised
     tanh loop's settling, ln(1000) time constants of its slowest mode (an error 1000 x
     smaller: a 0.5 rad error down to ~0.5 mrad), at the median of the representative
-    configurations, nominal gains (the damping of :func:`damping_at`) and one tick of delay.
+    configurations, nominal gains (the damping of :func:`damping_matrix`) and one tick of
+    delay.
     """
     rhos = sorted(spectral_radius(M, joint_stiffness(rows, kp * lam, task) + np.diag(extra),
-                                  np.diag(damping_at(kv, inertial, rate_per_s, M)), 1, dt_s)
+                                  damping_matrix(kv, inertial, rate_per_s, M, settling_per_s),
+                                  1, dt_s)
                   for _, rows, M in configs)
     settle = np.log(1000.0) * time_constant_s(rhos[len(rhos) // 2], dt_s)
     return float(move_rad / np.min(cruise_rad_s) + settle)

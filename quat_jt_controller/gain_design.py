@@ -31,7 +31,7 @@ command line in ``gain_cli``. ROS-free. ``python -m quat_jt_controller.gain_desi
 (``ros2 run quat_jt_controller design_gains`` under colcon) writes a parameter file in the format
 of config/*_controller.yaml.
 """
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from math import isfinite, pi, sqrt
 import sys
 from typing import Optional, Sequence
@@ -42,8 +42,8 @@ from quat_jt_controller import control_law as cl
 from quat_jt_controller import parameter_table as table
 from quat_jt_controller.gain_analysis import (
     checked_delays, configuration_stiffness, cruising_speed, damping_at, joint_spectral_radius,
-    joint_stiffness, largest_stable_damping, median_damping_ratio, QO, seen_inertia, sigma_min,
-    time_to_goal_s, worst_rho)
+    joint_stiffness, largest_stable_damping, median_damping_ratio, QO, seen_inertia,
+    settling_rate, sigma_min, time_to_goal_s, worst_rho)
 from quat_jt_controller.model import RobotModel
 from quat_jt_controller.shaping import (
     DEFAULT_SPEED_CAP_RAD_S, FADE_TOP_FRACTION, FULL_TURN_RAD, Shaping)
@@ -109,6 +109,10 @@ SHRINK = 0.8  # gains are scaled by this until the sampled loop is stable
 # The damping acts on qdot - g_v qdot*_d of a streamed goal: all of it (an exogenous input to
 # the loop, which changes none of its gains; docs/lyapunov.md, section 7)
 GOAL_VELOCITY_GAIN = 1.0
+# alpha of the settling damping alpha M(q) near the goal: chosen on this grid (1/s), the
+# smallest whose slowest mode decays at least SETTLING_NEAR_BEST x as fast as the best's
+SETTLING_RATES_PER_S = tuple(0.25 * i for i in range(81))
+SETTLING_NEAR_BEST = 0.98
 # Of the preferred posture against the distance to the measured joints, in the choice of a
 # redundant arm's q* (inverse_kinematics.posture): nearest first, the posture breaks near-ties
 POSTURE_WEIGHT = 0.1
@@ -551,6 +555,12 @@ def design(model: RobotModel, task: cl.Task, rate_hz: float = 1000.0,
     guide_r = guide.round(3)
     inertial = (1.0 + 1e-3) * _inertial_damping(configs, np.array(kp_r) * np.array(lam_r),
                                                 guide_r / GUIDE_RAMP_RAD, task)
+    inertial = np.array([_round_up(v) for v in inertial])
+    # The settling damping alpha M near the goal: the alpha that makes the slowest coupled
+    # mode decay (nearly) fastest, at the median configuration (docs/gain_design.md)
+    settling, decay_before, decay_after = settling_rate(
+        configs, np.array(kp_r) * np.array(lam_r), np.array(kv_r), guide_r / GUIDE_RAMP_RAD,
+        SETTLING_RATES_PER_S, SETTLING_NEAR_BEST, task, inertial, float(f'{beta:.4g}'))
     shaping = Shaping.create(
         n, joint_limit_margin=margin, joint_limit_gain=limit_gain.round(3).tolist(),
         friction_compensation=friction.tolist(), friction_velocity=FRICTION_VELOCITY_RAD_S,
@@ -560,8 +570,9 @@ def design(model: RobotModel, task: cl.Task, rate_hz: float = 1000.0,
         friction_position_band=FRICTION_POSITION_BAND_M,
         configuration_gain=guide_r.tolist(), configuration_radius=GUIDE_RADIUS_RAD,
         configuration_ramp=GUIDE_RAMP_RAD, damping_speed=damping_speed.round(3).tolist(),
-        inertial_damping=[_round_up(v) for v in inertial],
+        inertial_damping=inertial.tolist(),
         inertial_damping_rate=float(f'{beta:.4g}'),
+        settling_damping_rate=settling,
         goal_velocity_gain=GOAL_VELOCITY_GAIN,
         preferred_configuration=(model.middle_of_ranges() if preferred_configuration_rad is None
                                  else preferred_configuration_rad),
@@ -574,7 +585,12 @@ def design(model: RobotModel, task: cl.Task, rate_hz: float = 1000.0,
                                         damping_at(kv, inertial, beta, M))
                          for _, _, M in configs], axis=0)
     final = worst_rho(configs, np.array(kp_r), np.array(kv_r), np.array(lam_r), extra,
-                      delays, dt_s, task, inertial, beta)
+                      delays, dt_s, task, inertial, beta, settling)
+    if max(final.values()) >= 1.0:  # alpha M tipped the sampled loop over: none, then
+        settling, decay_after = 0.0, decay_before
+        shaping = replace(shaping, settling_damping_rate_per_s=0.0)
+        final = worst_rho(configs, np.array(kp_r), np.array(kv_r), np.array(lam_r), extra,
+                          delays, dt_s, task, inertial, beta)
     ratios = {'quadratic': median_damping_ratio(configs, np.array(kp_r), np.array(kv_r), extra,
                                                 task, inertial, beta),
               'tanh': median_damping_ratio(configs, np.array(kp_r) * np.array(lam_r),
@@ -597,7 +613,9 @@ def design(model: RobotModel, task: cl.Task, rate_hz: float = 1000.0,
         'typical_speed_rad_s': typical,
         'time_to_goal_s': time_to_goal_s(typical, configs, np.array(kp_r),
                                          np.array(kv_r), np.array(lam_r), extra, dt_s,
-                                         task=task, inertial=inertial, rate_per_s=beta),
+                                         task=task, inertial=inertial, rate_per_s=beta,
+                                         settling_per_s=settling),
+        'settling_decay_per_s': (decay_before, decay_after),
         'friction_effort_share': friction_effort_share,
     }
     return Design(task, model.joint_names, model.base_link, model.tip_link, rate_hz, kp_r,

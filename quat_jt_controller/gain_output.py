@@ -121,6 +121,10 @@ def to_yaml(d: Design, potential: str = 'tanh', command: str = '',
         'worst spectral '
         f'radius {rho["tanh"]:.6f} (tanh), {rho["quadratic"]:.6f} (quadratic) < 1; median '
         f'damping ratios tanh {_fmt(zeta["tanh"])}, quadratic {_fmt(zeta["quadratic"])};',
+        f'  settling damping {s.settling_damping_rate_per_s:g} M(q) near the goal: the '
+        'slowest mode of the tanh loop decays at '
+        f'{f["settling_decay_per_s"][1]:.3g} 1/s, {f["settling_decay_per_s"][0]:.3g} without '
+        '(median over the configurations);',
         f'  cruising speeds far from the goal {_fmt(f["terminal_speed_rad_s"])} rad/s where '
         'K_v alone damps (the fastest; velocity limits '
         f'{_fmt(f["velocity_limits_rad_s"])}, aimed at '
@@ -164,6 +168,8 @@ def to_yaml(d: Design, potential: str = 'tanh', command: str = '',
                             'arm is heavy',
         'inertial_damping_rate': '1/s, ... at most this x 1 / (M(q)^-1)_jj: what the sampled '
                                  'loop tolerates',
+        'settling_damping_rate': '1/s, alpha of -alpha M(q) qdot near the goal: the slowest '
+                                 'coupled mode decays fastest (0 = off)',
         'goal_velocity_gain': "damping towards a streamed goal's velocity (0 = off)",
         'preferred_configuration': "rad, the posture a redundant arm's q* leans to",
         'posture_weight': 'of that posture against the distance to the arm (no effect without '

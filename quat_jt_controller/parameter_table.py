@@ -198,6 +198,14 @@ SHAPING = (
          'for the rate and delays designed for; the default is for 1 kHz and up to 2 ticks of '
          'delay, checked with 3). Live.', bounds=(1.0, 1e6),
          field='inertial_damping_rate_per_s'),
+    Spec('settling_damping_rate', Kind.DOUBLE, 0.0,
+         'alpha (1/s): near the goal, the damping torque -psi alpha M(q) qdot on top of the '
+         "joint damping, M(q) the whole mass matrix: it damps the arm's coupled modes, which "
+         'a damping per joint leaves underdamped, so the final approach settles instead of '
+         'swinging about the goal. psi is 1 where every task row is within the linear range '
+         'of its tanh (|lambda_i y_i| <= 1) and fades to 0 at twice that (docs/lyapunov.md, '
+         'section 11). 0 = off. Live.', bounds=(0.0, 1e3),
+         field='settling_damping_rate_per_s'),
     Spec('goal_velocity_gain', Kind.DOUBLE, 0.0,
          'g_v in [0, 1]: for a stream of stamped goals on ~/target_pose, the joint damping '
          'acts on qdot - g_v qdot*_d, qdot*_d the velocity of the goal configuration (the '

@@ -426,6 +426,14 @@ class Regulator:
                         (v + self._guard[j] if v < -self._guard[j] else 0.0))
                 if over != 0.0 and caps[j] > d:  # the speed guard, docs/lyapunov.md s. 6
                     tau[j] -= (caps[j] - d) * over
+        if shaping.settling_damping_rate_per_s > 0.0:  # docs/lyapunov.md, section 11
+            psi = sh.settling_fade(y, gains.lam)
+            if psi > 0.0:
+                v = (qdot if g_v <= 0.0 else
+                     [qdot[j] - g_v * qdot_goal[j] for j in range(n)])
+                k = psi * shaping.settling_damping_rate_per_s
+                for j, m_v in enumerate(self.model.inertial_torque(q, v)):  # M(q) v
+                    tau[j] -= k * m_v
         if shaping.friction_on:
             phi = sh.fade(y, shaping, self.task is cl.Task.POSITION)
             if phi > 0.0:  # else the compensation is zero (near the goal)

@@ -125,6 +125,8 @@ class Shaping:
     # beta I_j(q))) (docs/lyapunov.md, section 10; empty or zeros: k_v alone)
     inertial_damping: tuple[float, ...] = ()
     inertial_damping_rate_per_s: float = _default('inertial_damping_rate')
+    # alpha (1/s): -psi alpha M(q) qdot near the goal (docs/lyapunov.md, section 11; 0 = off)
+    settling_damping_rate_per_s: float = _default('settling_damping_rate')
     # g_v: the joint damping acts on qdot - g_v qdot*_d of a streamed goal; 0 = off
     goal_velocity_gain: float = _default('goal_velocity_gain')
     # a_max per joint, N m: the most the friction estimate may learn at rest (0 = no learning)
@@ -307,6 +309,28 @@ def fade(y_tilde: Sequence[float], shaping: Shaping, position_only: bool = False
         p = sqrt(y_tilde[0] ** 2 + y_tilde[1] ** 2 + y_tilde[2] ** 2)
         r = max(r, p / shaping.friction_position_band_m)
     x = 2.0 * r - 1.0
+    if x <= 0.0:
+        return 0.0
+    if x >= 1.0:
+        return 1.0
+    return x * x * (3.0 - 2.0 * x)
+
+
+def settling_fade(y_tilde: Sequence[float], lam: Sequence[float]) -> float:
+    """
+    psi(y_tilde) of the settling damping: 1 near the goal, 0 far from it, C1 in between.
+
+    ``r = max_i |lambda_i y_i|`` over the task rows (Eq. 31's argument of tanh); psi is 1 for
+    ``r <= 1`` (every row within the linear range of its tanh, where the loop's linearisation
+    at the goal holds), 0 for ``r >= 2`` and the cubic smoothstep in between (docs/lyapunov.md,
+    section 11).
+    """
+    r = 0.0
+    for y, k in zip(y_tilde, lam):
+        x = abs(y * k)
+        if x > r:
+            r = x
+    x = 2.0 - r
     if x <= 0.0:
         return 0.0
     if x >= 1.0:
@@ -566,6 +590,9 @@ def describe(shaping: Shaping) -> str:
         parts.append(f'damping at least min(c sqrt(M_jj(q)), beta I_j(q)), c '
                      f'{list(shaping.inertial_damping)}, beta '
                      f'{shaping.inertial_damping_rate_per_s:g} 1/s')
+    if shaping.settling_damping_rate_per_s > 0.0:
+        parts.append(f'settling damping {shaping.settling_damping_rate_per_s:g} M(q) qdot near '
+                     f'the goal')
     if shaping.goal_velocity_gain > 0.0:
         parts.append(f'damping towards a streamed goal velocity, gain '
                      f'{shaping.goal_velocity_gain:g}')

@@ -97,3 +97,21 @@ def test_an_arm_from_its_urdf_runs_the_same_serial_or_parallel(tmp_path, name):
         assert np.isfinite(a.q_final).all() and a.speed_ratio >= 0.0
     row = rx.table_row(robot, cond, runs[0])
     assert row.startswith(f'| small | {cond.describe()} | ') and '/2 |' in row
+
+
+@pytest.mark.e2e
+def test_an_arm_from_its_urdf_takes_parameter_overrides(tmp_path, capsys):
+    """``--param`` replaces a parameter of the design (it was silently ignored for an arm)."""
+    pytest.importorskip('mujoco')
+    path = tmp_path / 'arm.urdf'
+    path.write_text(small_arm_urdf(('revolute',) * 4))
+    robot = _short(rx.arm_robot('small', str(path), None, None, cl.Task.ORIENTATION))
+    cond = rx.condition('ideal')
+    runs = [rx.run_arm(robot, cond, 'tanh', 1, seed=1, progress=None, workers=1,
+                       overrides=overrides)
+            for overrides in (None, {'kv': [50.0] * 4})]
+    assert not np.array_equal(runs[0][0].q_final, runs[1][0].q_final)
+    with pytest.raises(SystemExit):
+        rx.main(['--urdf', str(path), '--task', 'orientation', '--cases', '1', '--workers',
+                 '1', '--param', 'settling_damping_rate:=-1'])
+    assert 'settling_damping_rate must be in [0, 1000], got -1.0' in capsys.readouterr().err

@@ -470,6 +470,43 @@ def test_the_inertial_damping_damps_the_heavy_arm_within_what_the_light_one_tole
                   <= xarm7.figures['terminal_speed_rad_s'] * (1.0 + 1e-6))
 
 
+def test_the_design_damps_the_slowest_coupled_mode(designs):
+    """
+    docs/lyapunov.md, section 11: alpha M near the goal, the smallest alpha nearly the best.
+
+    Two joints whose diagonal damping leaves their coupled slow mode underdamped get an alpha
+    > 0 that makes it decay faster; one joint already overdamped gets none (more damping would
+    slow it). The Panda's design takes an alpha, and its sampled loop is checked with it.
+    """
+    rates = gd.SETTLING_RATES_PER_S
+    coupled = np.array([[2.0, 1.2], [1.2, 1.0]])  # heavy, coupled inertia
+    rows = np.eye(2)  # a 2-row task, one row per joint (no Q on the position task)
+    configs = [(None, rows, coupled)]
+    alpha, before, after = ga.settling_rate(configs, np.array([40.0, 40.0]),
+                                            np.array([2.0, 2.0]), np.zeros(2), rates,
+                                            gd.SETTLING_NEAR_BEST, cl.Task.POSITION)
+    assert alpha > 0.0 and after > 1.5 * before
+    K = np.diag([40.0, 40.0])
+    D = np.diag([2.0, 2.0])
+    assert ga.slowest_decay_per_s(coupled, K, D + alpha * coupled) == pytest.approx(after)
+    assert max(ga.slowest_decay_per_s(coupled, K, D + a * coupled)
+               for a in rates) <= after / gd.SETTLING_NEAR_BEST + 1e-9
+    overdamped = [(None, np.eye(1), np.array([[1.0]]))]
+    alpha, before, after = ga.settling_rate(overdamped, np.array([1.0]), np.array([10.0]),
+                                            np.zeros(1), rates, gd.SETTLING_NEAR_BEST,
+                                            cl.Task.POSITION)
+    assert alpha == 0.0 and after == before
+    model, d = designs['panda']
+    alpha = d.shaping.settling_damping_rate_per_s
+    before, after = d.figures['settling_decay_per_s']
+    assert alpha > 0.0 and after > before
+    assert max(d.figures['spectral_radius'].values()) < 1.0
+    q = model.middle_of_ranges()  # the tick's check with it, at a goal, one tick of delay
+    assert ga.linearized_spectral_radius(model, q, d.gains('tanh'), 1, 1.0 / d.rate_hz,
+                                         task=d.task, shaping=d.shaping) < 1.0
+    assert 'settling damping' in go.to_yaml(d)
+
+
 def test_the_default_inertial_damping_rate_is_the_designs_at_1_khz():
     """parameter_table's default beta is what design_gains writes at 1 kHz, delays 1 and 2."""
     from quat_jt_controller import parameter_table as table

@@ -66,6 +66,34 @@ def test_lyapunov_never_increases_with_every_term_on(potential):
     assert traj.lyapunov[-1] < 1e-3 * traj.lyapunov[0]
 
 
+@pytest.mark.parametrize('potential', ['quadratic', 'tanh'])
+def test_lyapunov_never_increases_with_the_settling_damping(potential):
+    """
+    docs/lyapunov.md, section 11: -psi(y) alpha M(q) qdot is a dissipation, psi included.
+
+    From far (psi = 0) into the linear range of the tanh (psi = 1): V never increases, with a
+    settling damping strong enough that the opposite sign would feed the loop.
+    """
+    model = wrist_model()
+    gains = cl.Gains.create(potential, (8.0, 8.0, 8.0), (0.3, 0.3, 0.3), (4.0, 4.0, 4.0), ORI,
+                            3)
+    q_goal = (0.5, 1.2, -0.4)
+    _, R = model.forward_kinematics(list(q_goal))
+    values = dict(EVERYTHING, settling_damping_rate=40.0, inertial_damping=(0.0, 0.0, 0.0),
+                  damping_speed=(0.0, 0.0, 0.0))
+    loop = ClosedLoop(model, gains, ORI, quat.from_rotation_matrix(R),
+                      shaping=sh.Shaping.create(3, **values), q_star=q_goal)
+    q0 = (2.5, 0.4, 1.4)
+    traj = loop.run(q0, 3.0, dt_s=5e-4, qdot0=(1.0, -1.0, 1.0))
+    dV = np.diff(traj.lyapunov)
+    assert dV.max() <= 1e-9 * traj.lyapunov[0], f'V increased by {dV.max()}'
+    psi = [sh.settling_fade(loop.regulator.update(q.tolist(), [0.0] * 3).y_tilde, gains.lam)
+           for q in traj.q_rad[::100]]
+    assert psi[0] == 0.0 and psi[-1] == 1.0  # from far into the linear range
+    assert any(0.0 < p < 1.0 for p in psi)  # through the fade
+    assert traj.lyapunov[-1] < 1e-3 * traj.lyapunov[0]
+
+
 def test_lyapunov_never_increases_through_the_speed_guard():
     """
     Started above 0.8 of the wrist's velocity limits, the speed guard damps the excess.

@@ -232,6 +232,59 @@ def test_the_inertial_damping_follows_the_joints_inertia_within_the_sampled_cap(
             sh.Shaping.create(model.n, **values)
 
 
+@pytest.mark.parametrize('seed', range(3))
+def test_the_settling_damping_is_alpha_m_qdot_near_the_goal_and_nothing_far(seed):
+    """
+    docs/lyapunov.md, section 11: ``-psi alpha M(q) qdot``, psi from max_i |lambda_i y_i|.
+
+    psi = 1 within the linear range of every tanh (r <= 1), 0 from r = 2, smooth between; it
+    damps ``qdot - g_v qdot*_d`` of a streamed goal, as K_v does.
+    """
+    model = xarm6_model()
+    rng = np.random.default_rng(seed)
+    gains = cl.Gains.create('tanh', [50.0] * 3 + [2.0] * 3, [0.5] * 6, [20.0] * 3 + [4.0] * 3,
+                            POSE, 6)
+    unlimited = [math.inf] * model.n
+    q_goal = random_q(model, rng)
+    goal = Regulator(model, POSE, gains).pose(q_goal.tolist())
+    alpha = 3.0
+    plain = Regulator(model, POSE, gains, unlimited, goal)
+    reg = Regulator(model, POSE, gains, unlimited, goal,
+                    sh.Shaping.create(model.n, settling_damping_rate=alpha))
+    seen = set()
+    direction = rng.normal(size=model.n)
+    for step in np.geomspace(1e-4, 0.5, 40):  # from psi = 1 to psi = 0
+        q = (q_goal + step * direction).tolist()
+        qdot = rng.normal(size=model.n).tolist()
+        y = plain.update(q, qdot).y_tilde
+        r = max(abs(yi * li) for yi, li in zip(y, gains.lam))
+        psi = sh.settling_fade(y, gains.lam)
+        assert psi == (1.0 if r <= 1.0 else 0.0 if r >= 2.0 else pytest.approx(
+            (2.0 - r) ** 2 * (3.0 - 2.0 * (2.0 - r))))
+        seen.add(0.0 if psi == 0.0 else 1.0 if psi == 1.0 else 0.5)
+        M = model.mass_matrix(q)  # by hand
+        want = np.array(plain.update(q, qdot).tau_nm) - psi * alpha * M @ np.array(qdot)
+        np.testing.assert_allclose(reg.update(q, qdot).tau_nm, want, rtol=1e-9, atol=1e-10)
+        if psi == 0.0:
+            assert reg.update(q, qdot).tau_nm == plain.update(q, qdot).tau_nm
+    assert seen == {0.0, 0.5, 1.0}, 'the cases must cover psi = 1, between and 0'
+    q = (q_goal + 0.001 * rng.normal(size=model.n)).tolist()  # psi = 1
+    qdot = rng.normal(size=model.n).tolist()
+    streamed = Regulator(model, POSE, gains, unlimited, goal,
+                         sh.Shaping.create(model.n, settling_damping_rate=alpha,
+                                           goal_velocity_gain=0.5))
+    plain_streamed = Regulator(model, POSE, gains, unlimited, goal,
+                               sh.Shaping.create(model.n, goal_velocity_gain=0.5))
+    for r in (streamed, plain_streamed):
+        r.set_goal_joint_velocity(qdot)
+    want = (np.array(plain_streamed.update(q, qdot).tau_nm)
+            - alpha * model.mass_matrix(q) @ (0.5 * np.array(qdot)))
+    np.testing.assert_allclose(streamed.update(q, qdot).tau_nm, want, rtol=1e-9, atol=1e-10)
+    for value in (-1.0, math.nan, math.inf, 2e3):
+        with pytest.raises(sh.ShapingError, match='settling_damping_rate'):
+            sh.Shaping.create(model.n, settling_damping_rate=value)
+
+
 def test_above_the_speed_guard_the_damping_rises_to_the_sampled_cap():
     """
     docs/lyapunov.md, section 6: above 0.8 v_lim a joint is damped at beta I_j(q) on the excess.
