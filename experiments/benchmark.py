@@ -28,7 +28,8 @@ beyond it is theirs.
 
 Core: ticks per second of the node's own tick, ``Regulator.update`` (kinematics, Jacobian, g(q),
 error, law, finite check, clamp), for the wrist (3-DOF, orientation task), the xArm6 (6-DOF,
-pose task) and the Panda (7-DOF, pose task, ``config/panda_controller.yaml``), in one process;
+pose task) and the Panda (7-DOF, pose task, ``config/panda_controller.yaml``; also 0.01 rad
+from its goal, with and without the settling damping, which acts only there), in one process;
 and, for the wrist, the whole tick the node calls, ``Controller.on_state`` (the state check and
 the decisions around ``Regulator.update``).
 
@@ -119,6 +120,20 @@ def core_benchmark() -> dict:
     goal7 = panda_tick.pose([0.0, -0.785, 0.0, -2.356, 0.0, 1.571, 0.785])
     panda_tick.set_goal(goal7)
     panda_tick.set_goal_configuration(goal7, [0.0, -0.785, 0.0, -2.356, 0.0, 1.571, 0.785])
+    # the same near its goal: the settling damping (psi = 1) and the friction compensation
+    # (outside its band) both act, the tick's most expensive place
+    panda_near = controller_from_package_config(
+        'panda_controller.yaml', (Path(pybullet_data.getDataPath()) / 'franka_panda'
+                                  / 'panda.urdf').read_text(), 'tanh')
+    home7 = [0.0, -0.785, 0.0, -2.356, 0.0, 1.571, 0.785]
+    panda_near.set_goal(goal7)
+    panda_near.set_goal_configuration(goal7, home7)
+    unsettled = controller_from_package_config(  # ... and without it: what the term costs
+        'panda_controller.yaml', (Path(pybullet_data.getDataPath()) / 'franka_panda'
+                                  / 'panda.urdf').read_text(), 'tanh',
+        {'settling_damping_rate': 0.0})
+    unsettled.set_goal(goal7)
+    unsettled.set_goal_configuration(goal7, home7)
     wrist = RobotModel(default_urdf_xml(), 'base_link', 'tool0')
     g3 = cl.Gains.create('tanh', paper.KP, paper.KV, paper.LAMBDA, cl.Task.ORIENTATION, 3)
     xarm = RobotModel(xarm6_urdf_xml(), 'link_base', 'link6')
@@ -135,6 +150,10 @@ def core_benchmark() -> dict:
                                        [0.1, -0.3, -0.8, 0.2, 0.9, -0.1], [0.1] * 6),
         'Panda 7-DOF pose, its config (every extension on)': core_ticks(
             panda_tick, q7, [0.1] * 7),
+        'Panda 7-DOF pose, its config, 0.01 rad from its goal': core_ticks(
+            panda_near, [v + 0.01 for v in home7], [0.1] * 7),
+        'Panda 7-DOF pose, the same without the settling damping': core_ticks(
+            unsettled, [v + 0.01 for v in home7], [0.1] * 7),
         'wrist 3-DOF orientation, the whole tick': controller_ticks(
             wrist_controller, [0.3, 0.5, -0.2], [0.1, 0.1, 0.1]),
     }
