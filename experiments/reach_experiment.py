@@ -75,6 +75,7 @@ from experiments import arms
 from experiments import runners
 import numpy as np
 from quat_jt_controller import control_law as cl
+from quat_jt_controller import parameter_table as table
 from quat_jt_controller import quaternion as quat
 from quat_jt_controller import shaping as sh
 from quat_jt_controller.controller_config import controller_from_package_config
@@ -83,6 +84,7 @@ from quat_jt_controller.inverse_kinematics import goal_configuration
 from quat_jt_controller.model import RobotModel
 from quat_jt_controller.reference_sim import ClosedLoop, run_sampled
 from quat_jt_controller.stall import StallDetector
+from quat_jt_runtime.param_table import names
 from quat_jt_runtime.resources import config_parameters, default_urdf_xml
 import yaml
 
@@ -813,6 +815,11 @@ def main(argv: Optional[list] = None) -> int:
         if not sep:
             parser.error(f'--param takes NAME:=VALUE, got {item!r}')
         overrides[name.strip()] = yaml.safe_load(value)
+    live = set(names(table.GAINS)) | set(names(table.SHAPING))
+    unknown = sorted(set(overrides) - live)
+    if unknown:
+        parser.error(f'--param: {unknown} are no live controller parameters (those are: '
+                     f'{", ".join(sorted(live))})')
     if args.urdf or args.example_robot:
         return main_arm(parser, args, overrides)
     plant = Plant(args.sim_coulomb_scale, args.sim_coulomb_effort_fraction,

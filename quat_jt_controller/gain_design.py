@@ -557,7 +557,7 @@ def design(model: RobotModel, task: cl.Task, rate_hz: float = 1000.0,
                                                 guide_r / GUIDE_RAMP_RAD, task)
     inertial = np.array([_round_up(v) for v in inertial])
     # The settling damping alpha M near the goal: the alpha that makes the slowest coupled
-    # mode decay (nearly) fastest, at the median configuration (docs/gain_design.md)
+    # mode decay (nearly) fastest, its median over the configurations (docs/gain_design.md)
     settling, decay_before, decay_after = settling_rate(
         configs, np.array(kp_r) * np.array(lam_r), np.array(kv_r), guide_r / GUIDE_RAMP_RAD,
         SETTLING_RATES_PER_S, SETTLING_NEAR_BEST, task, inertial, float(f'{beta:.4g}'))

@@ -120,7 +120,8 @@ def to_yaml(d: Design, potential: str = 'tanh', command: str = '',
         f'{_regular_note(f)}: '
         'worst spectral '
         f'radius {rho["tanh"]:.6f} (tanh), {rho["quadratic"]:.6f} (quadratic) < 1; median '
-        f'damping ratios tanh {_fmt(zeta["tanh"])}, quadratic {_fmt(zeta["quadratic"])};',
+        f'damping ratios per joint (without the settling damping) tanh {_fmt(zeta["tanh"])}, '
+        f'quadratic {_fmt(zeta["quadratic"])};',
         f'  settling damping {s.settling_damping_rate_per_s:g} M(q) near the goal: the '
         'slowest mode of the tanh loop decays at '
         f'{f["settling_decay_per_s"][1]:.3g} 1/s, {f["settling_decay_per_s"][0]:.3g} without '

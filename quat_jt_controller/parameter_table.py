@@ -124,6 +124,7 @@ GAINS = (
 # beta of the inertial damping at 1 kHz with 1 and 2 ticks of delay (3 checked): what
 # gain_design.inertial_damping_rate gives there (a test checks it)
 DEFAULT_INERTIAL_DAMPING_RATE = 222.5
+MAX_SETTLING_RATE = 40.0  # 1/s, alpha of the settling damping; design_gains' grid tops at 20
 MAX_POSTURE_WEIGHT = 100.0  # of the preferred posture against the distance to the arm
 PER_JOINT = {'size': 'n', 'bounds': (0.0, inf)}  # one finite value >= 0 per joint
 
@@ -204,7 +205,10 @@ SHAPING = (
          'a damping per joint leaves underdamped, so the final approach settles instead of '
          'swinging about the goal. psi is 1 where every task row is within the linear range '
          'of its tanh (|lambda_i y_i| <= 1) and fades to 0 at twice that (docs/lyapunov.md, '
-         'section 11). 0 = off. Live.', bounds=(0.0, 1e3),
+         'section 11). 0 = off. Live.', bounds=(0.0, MAX_SETTLING_RATE),
+         why=('alpha M alone would damp faster than a sampled loop of 100 Hz follows (at 1 '
+              'kHz with 3 ticks of delay it goes unstable near 450/s, at 100 Hz near 45/s); '
+              'design_gains checks the value it writes at the rate designed for'),
          field='settling_damping_rate_per_s'),
     Spec('goal_velocity_gain', Kind.DOUBLE, 0.0,
          'g_v in [0, 1]: for a stream of stamped goals on ~/target_pose, the joint damping '

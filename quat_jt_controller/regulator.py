@@ -205,6 +205,10 @@ class Regulator:
         self._guard = [sh.SPEED_GUARD_FRACTION * v if isfinite(v) and v > 0.0 else inf
                        for v in model.velocity_limits]
         self._caps = [0.0] * self.n  # beta I_j(q) this tick
+        self._own = [0.0] * self.n  # M_jj(q) this tick (with the inertial damping)
+        # the off-diagonal part of the settling damping's torque this tick, N m: tau_s minus
+        # -psi alpha M_jj v_j (the learning's damping leaves it out)
+        self._coupling = [0.0] * self.n
         self._fade_top = [sh.FADE_TOP_FRACTION * v for v in self._speed_cap]
         self._held = [0.0] * self.n  # how stuck each joint has stayed (learn_friction's h)
         # the learning's acceleration estimate: qdot's low-pass (rad/s) and
@@ -415,9 +419,11 @@ class Regulator:
         if g_v > 0.0:  # damping on qdot - g_v qdot*_d
             for j in range(n):
                 tau[j] += kv[j] * g_v * qdot_goal[j]
+        own = None  # M_jj(q), where the inertial damping computed it
         if shaping.inertial_damping_on:  # docs/lyapunov.md, section 10: on the same velocity
             caps = self._caps
-            for j, d in enumerate(self._inertial_damping(q, kv, shaping, caps)):
+            own = self._own
+            for j, d in enumerate(self._inertial_damping(q, kv, shaping, caps, own)):
                 if d > kv[j]:
                     tau[j] -= (d - kv[j]) * (qdot[j] - g_v * qdot_goal[j] if g_v > 0.0
                                              else qdot[j])
@@ -426,14 +432,23 @@ class Regulator:
                         (v + self._guard[j] if v < -self._guard[j] else 0.0))
                 if over != 0.0 and caps[j] > d:  # the speed guard, docs/lyapunov.md s. 6
                     tau[j] -= (caps[j] - d) * over
+        coupled = False  # the settling damping's off-diagonal part is in tau (self._coupling)
         if shaping.settling_damping_rate_per_s > 0.0:  # docs/lyapunov.md, section 11
             psi = sh.settling_fade(y, gains.lam)
             if psi > 0.0:
                 v = (qdot if g_v <= 0.0 else
                      [qdot[j] - g_v * qdot_goal[j] for j in range(n)])
                 k = psi * shaping.settling_damping_rate_per_s
-                for j, m_v in enumerate(self.model.inertial_torque(q, v)):  # M(q) v
-                    tau[j] -= k * m_v
+                m_v = self.model.inertial_torque(q, v)  # M(q) v
+                for j in range(n):
+                    tau[j] -= k * m_v[j]
+                if shaping.learning_on:  # the learning sees a joint's own damping only
+                    if own is None:
+                        own = self.model.inertias(q)[0]
+                    coupling = self._coupling
+                    for j in range(n):
+                        coupling[j] = -k * (m_v[j] - own[j] * v[j])
+                    coupled = True
         if shaping.friction_on:
             phi = sh.fade(y, shaping, self.task is cl.Task.POSITION)
             if phi > 0.0:  # else the compensation is zero (near the goal)
@@ -442,6 +457,9 @@ class Regulator:
                 if learning:  # the damping terms so far: tau = tau_p + damping
                     for j in range(n):
                         damping[j] = tau[j] - tau_p[j]
+                    if coupled:  # the other joints' share of the settling damping is no
+                        for j in range(n):  # damping of this joint: it may push either way
+                            damping[j] -= self._coupling[j]
                 creep = fade = inertial = None
                 if learning:  # the creep and fade speeds, the creep from q* if known
                     creep, fade = self._creep, self._fade
@@ -502,22 +520,40 @@ class Regulator:
 
         ``K_v``, or with ``inertial_damping`` ``max(k_v,j, min(c_j sqrt(M_jj(q)), beta
         I_j(q)))``, ``I_j(q) = 1 / (M(q)^-1)_jj`` (docs/lyapunov.md, section 10); the cubic
-        part apart.
+        part and the settling damping near the goal (section 11, which couples the joints:
+        :meth:`settling_damping` gives its diagonal) apart.
         """
         gains, shaping, _ = self._law
         if not shaping.inertial_damping_on:
             return list(gains.kv)
         return self._inertial_damping(q, gains.kv, shaping)
 
+    def settling_damping(self, q: Sequence[float], y_tilde: Sequence[float]) -> list[float]:
+        """
+        Return the diagonal of the settling damping at ``q`` (N m s/rad): ``psi alpha M_jj(q)``.
+
+        ``psi`` of ``y_tilde`` (``shaping.settling_fade``), ``alpha`` the
+        ``settling_damping_rate`` in force; zeros where it is off (docs/lyapunov.md, 11).
+        """
+        gains, shaping, _ = self._law
+        alpha = shaping.settling_damping_rate_per_s
+        psi = sh.settling_fade(y_tilde, gains.lam) if alpha > 0.0 else 0.0
+        if psi <= 0.0:
+            return list(self._zero)
+        return [psi * alpha * m for m in self.model.inertias(q)[0]]
+
     def _inertial_damping(self, q: Sequence[float], kv: Sequence[float],
                           shaping: sh.Shaping,
-                          caps_out: Optional[list[float]] = None) -> list[float]:
+                          caps_out: Optional[list[float]] = None,
+                          own_out: Optional[list[float]] = None) -> list[float]:
         """
         ``max(k_v,j, min(c_j sqrt(M_jj(q)), beta I_j(q)))`` per joint (N m s/rad).
 
-        ``caps_out``, if given, receives ``beta I_j(q)`` per joint.
+        ``caps_out``, if given, receives ``beta I_j(q)`` per joint, ``own_out`` ``M_jj(q)``.
         """
         own, seen = self.model.inertias(q)
+        if own_out is not None:
+            own_out[:] = own
         beta = shaping.inertial_damping_rate_per_s
         out = []
         for j, c in enumerate(shaping.inertial_damping):

@@ -82,6 +82,10 @@ ACCELERATION_TIME_S = 0.02
 # Above this share of its URDF velocity limit a joint's damping rises to the most the sampled
 # loop tolerates (the speed guard, with the inertial damping; docs/lyapunov.md, section 6)
 SPEED_GUARD_FRACTION = 0.8
+# A joint whose potential torque asks less than what the goal-configuration term's stiffness
+# gives at this distance from its rest (rad) learns the slower the less it asks: it sits at its
+# own equilibrium, not held away from it by a friction (learn_friction)
+LEARNING_ANGLE_RAD = 3e-3
 # The cubic damping turns linear above the URDF velocity limit, or above this without one.
 DEFAULT_SPEED_CAP_RAD_S = 2.0 * pi
 
@@ -181,6 +185,17 @@ class Shaping:
         f = self.friction_compensation_nm or (0.0,) * n
         a = self.friction_learning_limit_nm or (0.0,) * n
         return tuple((fj, aj, TORQUE_BAND_FRACTION * (fj + aj)) for fj, aj in zip(f, a))
+
+    @cached_property  # read every tick: computed once per snapshot
+    def learning_torque_band(self) -> tuple[float, ...]:
+        """
+        Return per joint ``LEARNING_ANGLE_RAD T_j / w`` (N m; 0 without the term).
+
+        What the goal-configuration term's ramp asks at that distance from ``q*``: a joint
+        whose potential torque is well below it is at its own equilibrium.
+        """
+        w = self.configuration_ramp_rad
+        return tuple(LEARNING_ANGLE_RAD * t / w for t in self.configuration_gain)
 
     @cached_property  # read every tick: computed once per snapshot
     def speed_damping_on(self) -> bool:
@@ -318,7 +333,7 @@ def fade(y_tilde: Sequence[float], shaping: Shaping, position_only: bool = False
 
 def settling_fade(y_tilde: Sequence[float], lam: Sequence[float]) -> float:
     """
-    psi(y_tilde) of the settling damping: 1 near the goal, 0 far from it, C1 in between.
+    psi(y_tilde) of the settling damping: 1 near the goal, 0 far from it, C1 in r between.
 
     ``r = max_i |lambda_i y_i|`` over the task rows (Eq. 31's argument of tanh); psi is 1 for
     ``r <= 1`` (every row within the linear range of its tanh, where the loop's linearisation
@@ -375,7 +390,9 @@ def friction_compensation(tau_potential: Sequence[float], qdot: Sequence[float],
     ``damping_nm`` None, ``w`` is 1. ``stuck_out``, if
     given, receives ``slow |t_p| w`` (how stuck, pushed and unmoved by the push each joint
     is), ``slow = max(0, 1 - |qdot| / creep)``: a joint creeping slower than its creep speed
-    still counts, the less the nearer it is to it. Both are left alone when ``phi`` is 0.
+    still counts, the less the nearer it is to it; with the goal-configuration term, times
+    ``tanh(|tau_p| / b)``, ``b`` its :attr:`Shaping.learning_torque_band` (a joint at its own
+    equilibrium is not held away from it). Both are left alone when ``phi`` is 0.
     """
     out = [0.0] * len(qdot)
     if phi <= 0.0:
@@ -383,6 +400,7 @@ def friction_compensation(tau_potential: Sequence[float], qdot: Sequence[float],
     v_eps = shaping.friction_velocity_rad_s
     v_creep = CREEP_SPEED_FACTOR * v_eps
     v_fade = FADE_SPEED_FACTOR * v_eps
+    band = shaping.learning_torque_band if stuck_out is not None else ()
     for j, (f, _, scale) in enumerate(shaping.friction_table):
         if scale <= 0.0:  # no estimate and nothing to learn
             continue
@@ -424,6 +442,8 @@ def friction_compensation(tau_potential: Sequence[float], qdot: Sequence[float],
                     w *= slow
             if stuck_out is not None:
                 stuck_out[j] = slow * abs(tp) * w
+                if band and band[j] > 0.0:  # at its own equilibrium: not held away from it
+                    stuck_out[j] *= tanh(abs(tau_potential[j]) / band[j])
             if unmet_out is not None:
                 unmet_out[j] = w
     return out

@@ -109,10 +109,11 @@ class StallDetector:
                 if isfinite(limit) and gap < near:
                     causes.append(f'{name} at {q[j]:.3f} rad is {max(gap, 0.0):.3f} rad from '
                                   f'its {side} limit {limit:g} rad')
-        if out.tau_potential_nm:
+        if out.tau_potential_nm:  # each joint's own damping, the settling damping's included
+            damping = [d + s for d, s in zip(reg.linear_damping(q),
+                                             reg.settling_damping(q, out.y_tilde))]
             causes += self._weak_push(out.tau_potential_nm,
-                                      (0.0,) * model.n if qdot is None else qdot,
-                                      reg.linear_damping(q))
+                                      (0.0,) * model.n if qdot is None else qdot, damping)
         _, _, J = model.kinematics(list(q))
         rows = reg.task.rows(np.array(J))
         self.sigma_min = model.task_sigma_min(rows, reg.task.has_position)

@@ -114,4 +114,9 @@ def test_an_arm_from_its_urdf_takes_parameter_overrides(tmp_path, capsys):
     with pytest.raises(SystemExit):
         rx.main(['--urdf', str(path), '--task', 'orientation', '--cases', '1', '--workers',
                  '1', '--param', 'settling_damping_rate:=-1'])
-    assert 'settling_damping_rate must be in [0, 1000], got -1.0' in capsys.readouterr().err
+    assert 'settling_damping_rate must be in [0, 40], got -1.0' in capsys.readouterr().err
+    with pytest.raises(SystemExit):  # a misspelt name, before any design is run
+        rx.main(['--urdf', str(path), '--task', 'orientation', '--cases', '1', '--workers',
+                 '1', '--param', 'settling_dampng_rate:=1'])
+    assert "['settling_dampng_rate'] are no live controller parameters" in (
+        capsys.readouterr().err)

@@ -505,6 +505,32 @@ def test_the_design_damps_the_slowest_coupled_mode(designs):
     assert ga.linearized_spectral_radius(model, q, d.gains('tanh'), 1, 1.0 / d.rate_hz,
                                          task=d.task, shaping=d.shaping) < 1.0
     assert 'settling damping' in go.to_yaml(d)
+    # the sampled-loop check reads alpha: 500/s of alpha M tips the delayed loop over
+    args = (configs, np.array([40.0, 40.0]), np.array([2.0, 2.0]), np.ones(2), np.zeros(2),
+            (1, 2), 1e-3, cl.Task.POSITION)
+    assert max(ga.worst_rho(*args).values()) < 1.0
+    assert max(ga.worst_rho(*args, settling_per_s=500.0).values()) > 1.0
+
+
+def test_the_design_drops_a_settling_damping_the_sampled_loop_does_not_take(monkeypatch):
+    """If the final check fails with alpha M, the design writes alpha = 0, checked without."""
+    model = wrist_model()
+    d = gd.design(model, cl.Task.ORIENTATION)
+    assert d.shaping.settling_damping_rate_per_s > 0.0
+    worst = ga.worst_rho
+
+    def fails_with_alpha(*args, settling_per_s=0.0, **kwargs):
+        if len(args) > 10:
+            settling_per_s = args[10]
+            args = args[:10]
+        rho = worst(*args, settling_per_s=settling_per_s, **kwargs)
+        return dict.fromkeys(rho, 1.0) if settling_per_s > 0.0 else rho
+    monkeypatch.setattr(gd, 'worst_rho', fails_with_alpha)
+    dropped = gd.design(model, cl.Task.ORIENTATION)
+    assert dropped.shaping.settling_damping_rate_per_s == 0.0
+    before, after = dropped.figures['settling_decay_per_s']
+    assert after == before and max(dropped.figures['spectral_radius'].values()) < 1.0
+    assert dropped.kp == d.kp and dropped.kv == d.kv  # nothing else moves
 
 
 def test_the_default_inertial_damping_rate_is_the_designs_at_1_khz():

@@ -249,6 +249,45 @@ def test_friction_learning_tells_a_stuck_joint_from_a_slow_approach_and_a_turnin
     assert learned[0] > 0.0
 
 
+def test_a_joint_at_its_own_equilibrium_learns_little():
+    """
+    Held at rest, a joint learns as fast as its potential torque says it is away from its rest.
+
+    With the goal-configuration term (gain T, ramp w), ``LEARNING_ANGLE_RAD T / w`` is what it
+    asks that far from q*. Joint 0 is pushed with 10 x that (held away from its rest by a
+    friction: it learns as before), joint 1 with a tenth of it (it sits at its own equilibrium:
+    a friction is no reason to push it, and a learned push there only makes it slip to and
+    fro): below about an eighth of the band it does not even count as held. Without the term,
+    both learn alike (the band is 0).
+    """
+    values = {'friction_learning_limit': (0.5, 0.5), 'friction_learning_time': 1.0,
+              'configuration_gain': (2.0, 2.0), 'configuration_ramp': 0.25}
+    shaping = sh.Shaping.create(2, **values)
+    band = sh.LEARNING_ANGLE_RAD * 2.0 / 0.25
+    assert shaping.learning_torque_band == pytest.approx((band, band))
+    learned, held = [0.0, 0.0], [0.0, 0.0]
+    for _ in range(500):
+        _learning_tick(shaping, learned, held, [10.0 * band, 0.1 * band], [0.0, 0.0],
+                       [0.0, 0.0])
+    free = sh.Shaping.create(2, **dict(values, configuration_gain=(0.0, 0.0)))
+    assert free.learning_torque_band == (0.0, 0.0)
+    alike, held_free = [0.0, 0.0], [0.0, 0.0]
+    for _ in range(500):
+        _learning_tick(free, alike, held_free, [10.0 * band, 0.1 * band], [0.0, 0.0],
+                       [0.0, 0.0])
+    assert alike[1] == pytest.approx(alike[0], rel=1e-3) and alike[0] > 0.1
+    assert learned[0] == pytest.approx(alike[0], rel=1e-3)  # tanh(10): as before
+    # a tenth of the band: tanh(0.1) x 4 < 1/2, never counts as held, learns nothing; half
+    # of it: held, learning at tanh(0.5) of the rate
+    assert learned[1] == 0.0
+    half, held_half = [0.0], [0.0]
+    one = sh.Shaping.create(1, **{k: v[:1] if isinstance(v, tuple) else v
+                                  for k, v in values.items()})
+    for _ in range(500):
+        _learning_tick(one, half, held_half, [0.5 * band], [0.0], [0.0])
+    assert 0.3 * learned[0] < half[0] < 0.6 * learned[0]
+
+
 def test_a_joint_the_push_accelerates_is_not_held():
     """
     What the acceleration takes (``M qddot``) is not friction: a joint it takes is not held.
