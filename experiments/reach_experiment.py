@@ -815,11 +815,14 @@ def main(argv: Optional[list] = None) -> int:
         if not sep:
             parser.error(f'--param takes NAME:=VALUE, got {item!r}')
         overrides[name.strip()] = yaml.safe_load(value)
-    live = set(names(table.GAINS)) | set(names(table.SHAPING))
-    unknown = sorted(set(overrides) - live)
+    known = set(names(table.GAINS)) | set(names(table.SHAPING))
+    if not (args.urdf or args.example_robot):  # a package config: its structure too
+        known |= set(names(table.STRUCTURE))
+    unknown = sorted(set(overrides) - known)
     if unknown:
-        parser.error(f'--param: {unknown} are no live controller parameters (those are: '
-                     f'{", ".join(sorted(live))})')
+        parser.error(f'--param: {unknown} are no controller parameters it can set here (those '
+                     f'are: {", ".join(sorted(known))}; an arm from its URDF takes its '
+                     'armature and rate from --armature and --rate)')
     if args.urdf or args.example_robot:
         return main_arm(parser, args, overrides)
     plant = Plant(args.sim_coulomb_scale, args.sim_coulomb_effort_fraction,

@@ -296,6 +296,11 @@ class RobotModel:
         tau = pin.rnea(model, data, self._set_q(q), zero, a)
         return tau.tolist() if self._identity_order else [float(tau[i]) for i in self._idx]
 
+    def own_inertias(self, q: Sequence[float]) -> list[float]:
+        """Return ``M_jj(q)`` per joint (kg m^2, armature included), in ``joint_names`` order."""
+        own = pin.crba(self.model, self.data, self._set_q(q)).diagonal().tolist()
+        return [own[i] for i in self._idx]
+
     def inertias(self, q: Sequence[float]) -> tuple[list[float], list[float]]:
         """
         Return per joint ``M_jj(q)`` and ``1 / (M(q)^-1)_jj`` (kg m^2), in ``joint_names`` order.

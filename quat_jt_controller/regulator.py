@@ -206,9 +206,6 @@ class Regulator:
                        for v in model.velocity_limits]
         self._caps = [0.0] * self.n  # beta I_j(q) this tick
         self._own = [0.0] * self.n  # M_jj(q) this tick (with the inertial damping)
-        # the off-diagonal part of the settling damping's torque this tick, N m: tau_s minus
-        # -psi alpha M_jj v_j (the learning's damping leaves it out)
-        self._coupling = [0.0] * self.n
         self._fade_top = [sh.FADE_TOP_FRACTION * v for v in self._speed_cap]
         self._held = [0.0] * self.n  # how stuck each joint has stayed (learn_friction's h)
         # the learning's acceleration estimate: qdot's low-pass (rad/s) and
@@ -432,7 +429,7 @@ class Regulator:
                         (v + self._guard[j] if v < -self._guard[j] else 0.0))
                 if over != 0.0 and caps[j] > d:  # the speed guard, docs/lyapunov.md s. 6
                     tau[j] -= (caps[j] - d) * over
-        coupled = False  # the settling damping's off-diagonal part is in tau (self._coupling)
+        settled = None  # (psi alpha, v, M(q) v) of the settling damping, if it acts
         if shaping.settling_damping_rate_per_s > 0.0:  # docs/lyapunov.md, section 11
             psi = sh.settling_fade(y, gains.lam)
             if psi > 0.0:
@@ -442,13 +439,7 @@ class Regulator:
                 m_v = self.model.inertial_torque(q, v)  # M(q) v
                 for j in range(n):
                     tau[j] -= k * m_v[j]
-                if shaping.learning_on:  # the learning sees a joint's own damping only
-                    if own is None:
-                        own = self.model.inertias(q)[0]
-                    coupling = self._coupling
-                    for j in range(n):
-                        coupling[j] = -k * (m_v[j] - own[j] * v[j])
-                    coupled = True
+                settled = (k, v, m_v)
         if shaping.friction_on:
             phi = sh.fade(y, shaping, self.task is cl.Task.POSITION)
             if phi > 0.0:  # else the compensation is zero (near the goal)
@@ -457,9 +448,12 @@ class Regulator:
                 if learning:  # the damping terms so far: tau = tau_p + damping
                     for j in range(n):
                         damping[j] = tau[j] - tau_p[j]
-                    if coupled:  # the other joints' share of the settling damping is no
-                        for j in range(n):  # damping of this joint: it may push either way
-                            damping[j] -= self._coupling[j]
+                    if settled is not None:  # the other joints' share of the settling
+                        k, v, m_v = settled  # damping is no damping of this joint: it may
+                        if own is None:  # push either way; its own, -k M_jj v_j, is
+                            own = self.model.own_inertias(q)
+                        for j in range(n):
+                            damping[j] += k * (m_v[j] - own[j] * v[j])
                 creep = fade = inertial = None
                 if learning:  # the creep and fade speeds, the creep from q* if known
                     creep, fade = self._creep, self._fade
@@ -468,7 +462,8 @@ class Regulator:
                     inertial = self.model.inertial_torque(q, self._qddot)
                 fc = sh.friction_compensation(
                     tau_p, qdot, phi, shaping, self._learned_friction_nm if learning else None,
-                    self._stuck, damping, self._unmet, creep, fade, inertial)
+                    self._stuck, damping, self._unmet, creep, fade, inertial,
+                    shaping.learning_torque_band if q_star is not None else None)
                 for j in range(n):
                     tau[j] += fc[j]
         if gains.gravity_compensation:
@@ -540,7 +535,7 @@ class Regulator:
         psi = sh.settling_fade(y_tilde, gains.lam) if alpha > 0.0 else 0.0
         if psi <= 0.0:
             return list(self._zero)
-        return [psi * alpha * m for m in self.model.inertias(q)[0]]
+        return [psi * alpha * m for m in self.model.own_inertias(q)]
 
     def _inertial_damping(self, q: Sequence[float], kv: Sequence[float],
                           shaping: sh.Shaping,

@@ -333,12 +333,12 @@ def fade(y_tilde: Sequence[float], shaping: Shaping, position_only: bool = False
 
 def settling_fade(y_tilde: Sequence[float], lam: Sequence[float]) -> float:
     """
-    psi(y_tilde) of the settling damping: 1 near the goal, 0 far from it, C1 in r between.
+    psi(y_tilde) of the settling damping: 1 near the goal, 0 far from it, smooth in between.
 
     ``r = max_i |lambda_i y_i|`` over the task rows (Eq. 31's argument of tanh); psi is 1 for
     ``r <= 1`` (every row within the linear range of its tanh, where the loop's linearisation
     at the goal holds), 0 for ``r >= 2`` and the cubic smoothstep in between (docs/lyapunov.md,
-    section 11).
+    section 11). C1 in ``r``; in ``y_tilde`` Lipschitz (through the max and abs).
     """
     r = 0.0
     for y, k in zip(y_tilde, lam):
@@ -360,7 +360,8 @@ def friction_compensation(tau_potential: Sequence[float], qdot: Sequence[float],
                           unmet_out: Optional[list[float]] = None,
                           creep_rad_s: Optional[Sequence[float]] = None,
                           fade_rad_s: Optional[Sequence[float]] = None,
-                          inertial_nm: Optional[Sequence[float]] = None) -> list[float]:
+                          inertial_nm: Optional[Sequence[float]] = None,
+                          equilibrium_band_nm: Optional[Sequence[float]] = None) -> list[float]:
     """
     tau_fc per joint: phi t_p [(f + r a) max(0, t_v t_p) + (f + a) (1 - |t_v|)], |.| <= f + a.
 
@@ -390,8 +391,9 @@ def friction_compensation(tau_potential: Sequence[float], qdot: Sequence[float],
     ``damping_nm`` None, ``w`` is 1. ``stuck_out``, if
     given, receives ``slow |t_p| w`` (how stuck, pushed and unmoved by the push each joint
     is), ``slow = max(0, 1 - |qdot| / creep)``: a joint creeping slower than its creep speed
-    still counts, the less the nearer it is to it; with the goal-configuration term, times
-    ``tanh(|tau_p| / b)``, ``b`` its :attr:`Shaping.learning_torque_band` (a joint at its own
+    still counts, the less the nearer it is to it; with ``equilibrium_band_nm`` (the
+    regulator passes :attr:`Shaping.learning_torque_band` once ``q*`` is known and the
+    goal-configuration term pulls), times ``tanh(|tau_p| / b)`` (a joint at its own
     equilibrium is not held away from it). Both are left alone when ``phi`` is 0.
     """
     out = [0.0] * len(qdot)
@@ -400,7 +402,7 @@ def friction_compensation(tau_potential: Sequence[float], qdot: Sequence[float],
     v_eps = shaping.friction_velocity_rad_s
     v_creep = CREEP_SPEED_FACTOR * v_eps
     v_fade = FADE_SPEED_FACTOR * v_eps
-    band = shaping.learning_torque_band if stuck_out is not None else ()
+    band = equilibrium_band_nm if stuck_out is not None and equilibrium_band_nm else ()
     for j, (f, _, scale) in enumerate(shaping.friction_table):
         if scale <= 0.0:  # no estimate and nothing to learn
             continue

@@ -118,5 +118,5 @@ def test_an_arm_from_its_urdf_takes_parameter_overrides(tmp_path, capsys):
     with pytest.raises(SystemExit):  # a misspelt name, before any design is run
         rx.main(['--urdf', str(path), '--task', 'orientation', '--cases', '1', '--workers',
                  '1', '--param', 'settling_dampng_rate:=1'])
-    assert "['settling_dampng_rate'] are no live controller parameters" in (
+    assert "['settling_dampng_rate'] are no controller parameters it can set here" in (
         capsys.readouterr().err)

@@ -315,8 +315,24 @@ def test_the_learning_counts_only_a_joints_own_share_of_the_settling_damping():
     assert coupling > 0.5 * abs(out.tau_potential_nm[0])  # it would take most of the push
     assert learned[0.0] > 0.2 and learned[40.0] == pytest.approx(learned[0.0], rel=1e-9)
     # the stall diagnosis reads the same diagonal
-    np.testing.assert_allclose(reg.settling_damping(q, out.y_tilde),
-                               40.0 * np.diag(model.mass_matrix(q)), rtol=1e-9)
+    M = model.mass_matrix(q)
+    np.testing.assert_allclose(reg.settling_damping(q, out.y_tilde), 40.0 * np.diag(M),
+                               rtol=1e-9)
+    # joint 1 creeping along its push, with the inertial damping on (c tiny: k_v wins): its
+    # own share, 40 M_11 qdot_1, counts as a damping, as the same k_v more would
+    creep = [0.02 * np.sign(out.tau_potential_nm[0])] + qdot[1:]
+    own = {}
+    for alpha, kv0 in ((40.0, 0.5), (0.0, 0.5 + 40.0 * M[0, 0])):
+        g = cl.Gains.create('tanh', gains.kp, [kv0] + [0.5] * 5, gains.lam, POSE, 6)
+        reg = Regulator(model, POSE, g, [math.inf] * 6, goal, sh.Shaping.create(
+            6, settling_damping_rate=alpha, friction_learning_limit=[1.0] * 6,
+            configuration_gain=[2.0] * 6, configuration_radius=0.0,
+            inertial_damping=[1e-6] * 6))
+        reg.set_goal_configuration(goal, q_goal.tolist())
+        for _ in range(600):
+            reg.update(q, creep, 1e-3)
+        own[alpha] = reg.learned_friction_nm[0]
+    assert 0.0 < own[40.0] == pytest.approx(own[0.0], rel=1e-9)
 
 
 def test_above_the_speed_guard_the_damping_rises_to_the_sampled_cap():

@@ -213,7 +213,8 @@ def _learning_tick(shaping, learned, held, tau_p, qdot, damping, phi=1.0):
     """One tick of the learning as the regulator runs it, with the damping torque given."""
     n = len(qdot)
     stuck, unmet = [0.0] * n, [0.0] * n
-    sh.friction_compensation(tau_p, qdot, phi, shaping, learned, stuck, damping, unmet)
+    sh.friction_compensation(tau_p, qdot, phi, shaping, learned, stuck, damping, unmet,
+                             equilibrium_band_nm=shaping.learning_torque_band)
     sh.learn_friction(learned, stuck, phi, shaping, 1e-3, unmet, held)
 
 
@@ -286,6 +287,10 @@ def test_a_joint_at_its_own_equilibrium_learns_little():
     for _ in range(500):
         _learning_tick(one, half, held_half, [0.5 * band], [0.0], [0.0])
     assert 0.3 * learned[0] < half[0] < 0.6 * learned[0]
+    # without q* (the regulator passes no band then) the joint learns as without the term
+    stuck = [0.0, 0.0]
+    sh.friction_compensation([0.1 * band] * 2, [0.0, 0.0], 1.0, shaping, [0.0, 0.0], stuck)
+    assert stuck[1] == pytest.approx(1.0, rel=1e-3)
 
 
 def test_a_joint_the_push_accelerates_is_not_held():

@@ -224,3 +224,27 @@ def test_near_singular_is_judged_per_unit_of_the_arms_length():
     assert np.linalg.svd(np.array(J)[:3], compute_uv=False)[-1] > SINGULAR_SIGMA_MIN
     assert det.stalled and 'near-singular' in det.status()[1]
     assert det.sigma_min < SINGULAR_SIGMA_MIN
+
+
+def test_the_settling_damping_counts_as_the_damping_of_a_slow_approach():
+    """
+    Near the goal a joint's damping includes its share of the settling damping, psi alpha M_jj.
+
+    Each joint crawls along its weak push at 0.3 tau_p / k_v: k_v alone takes less than half
+    the push, so without the settling damping the joints look held (a friction, with none
+    estimated); with alpha = 40 their own share takes the rest, and it is a slow approach.
+    """
+    q = [v + 0.05 for v in paper.Q_JOINT_DESIRED_RAD]
+    found = {}
+    for alpha in (0.0, 40.0):
+        gains = cl.Gains.create('quadratic', WEAK_KP, paper.KV, paper.LAMBDA,
+                                cl.Task.ORIENTATION, 3)
+        reg = Regulator(wrist_model(), cl.Task.ORIENTATION, gains, goal=Goal(paper.Q_DESIRED),
+                        shaping=sh.Shaping.create(3, settling_damping_rate=alpha))
+        tau_p = reg.update(q, REST).tau_potential_nm
+        qdot = [0.3 * t / kv for t, kv in zip(tau_p, paper.KV)]
+        out = reg.update(q, qdot)
+        assert sh.settling_fade(out.y_tilde, gains.lam) > 0.5
+        found[alpha] = ' '.join(stall.StallDetector(reg).diagnose(q, out, qdot))
+    assert 'likely friction' in found[0.0] and 'slow approach' not in found[0.0]
+    assert 'slow approach' in found[40.0] and 'likely friction' not in found[40.0]
