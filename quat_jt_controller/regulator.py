@@ -6,10 +6,12 @@ The control tick, written once: joint state in, clamped joint torque out (Eq. 22
 With the extensions (the :class:`~quat_jt_controller.shaping.Shaping` snapshot, ``shaping.py``,
 docs/lyapunov.md) it is
 
-    tau = J^T Q^T grad U_a - grad U_lim(q) - K_v(q) qdot + g(q) + tau_fc,  clamped
+    tau = J^T Q^T grad U_a - grad U_lim(q) - K_v(q) qdot - psi alpha M(q) qdot + g(q) + tau_fc,
+    clamped
 
 (``K_v(q)``: ``K_v`` with its cubic part and, per joint, at least ``min(c_j sqrt(M_jj(q)),
-beta I_j(q))``, docs/lyapunov.md, section 10.)
+beta I_j(q))``, docs/lyapunov.md, section 10; ``psi alpha M(q)``: the settling damping near
+the goal, section 11.)
 
 :class:`Regulator` owns the robot model, the task, the effort limits and immutable snapshots of
 the gains (:class:`~quat_jt_controller.control_law.Gains`) and of the goal (:class:`Goal`).
@@ -386,8 +388,9 @@ class Regulator:
         One control tick at the measured ``(q, qdot)``: Eq. (22) + g(q), checked and clamped.
 
         With the extensions of :attr:`shaping`: + the joint-limit, large-error and
-        goal-configuration terms of the potential, the cubic and inertial damping and the
-        speed guard (docs/lyapunov.md, sections 6 and 10), + friction compensation
+        goal-configuration terms of the potential, the cubic and inertial damping, the speed
+        guard and the settling damping (docs/lyapunov.md, sections 6, 10 and 11), + friction
+        compensation
         (``shaping.py``). Reads the law and the target once each. A goal must have been set
         (or :meth:`hold`). If the law gives a non-finite torque the command is zero and
         ``finite`` is False.

@@ -16,6 +16,8 @@ The law of Eq. (22) becomes
   leads the long way round a joint's stop instead of into it. Within the radius only the
   paper's transpose-Jacobian term acts; with radius 0 both share their minimum at ``q*``.
 * The cubic damping (section 6): ``-k_v qdot min(qdot^2, v_m^2) / v_c^2`` on top of ``K_v``.
+* The settling damping (section 11): ``-psi(y_tilde) alpha M(q) qdot`` near the goal
+  (:func:`settling_fade`), which damps the arm's coupled modes; computed in the regulator.
 * The large-error term of ``U_a`` (section 3): ``k_L B(||e||)`` with
   ``B'(s) = s^2 / sqrt(1 + delta^2 - s^2)``, so that ``Q^T grad`` keeps its size up to a few
   degrees from 180 degrees instead of fading like ``eta_e``; computed in ``control_law``.
