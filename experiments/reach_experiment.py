@@ -646,13 +646,22 @@ def condition(name: str, armature: float = 0.1, told_scale: float = 0.5,
     }[name]
 
 
+# An arm's case runs this long after its duration: its limit cycles are counted there (s)
+ARM_HOLD_S = 1.0
+
+
 def arm_robot(name: str, urdf_path: str, base_link: Optional[str], tip_link: Optional[str],
-              task: cl.Task, fraction: float = 0.8, duration_s: float = 5.0) -> Robot:
+              task: cl.Task, fraction: float = 0.8, duration_s: float = 5.0,
+              hold_s: float = ARM_HOLD_S) -> Robot:
     """
     Return the ``Robot`` of an arm from its URDF alone (``experiments.arms`` for the chain).
 
     The targets are the issue's for any arm: ||e|| < 0.01 and, for a pose task, < 1 mm; for
-    the position task < 1 mm only (no orientation is asked for). The
+    the position task < 1 mm only (no orientation is asked for), judged at ``duration_s``.
+    Each case then runs ``hold_s`` more, and its torque sign changes are counted in the last
+    second of that hold: a limit cycle goes on, while a case that came to rest just before
+    ``duration_s`` has its last flips in its approach (the stops and the speeds are checked
+    over the whole run). The
     goals' task rows of J keep sigma_min at least a quarter of its median over the arm's
     sampled configurations (a rule for any arm, where a fixed bound in mixed units is not).
     """
@@ -670,7 +679,7 @@ def arm_robot(name: str, urdf_path: str, base_link: Optional[str], tip_link: Opt
         sigmas.append(np.linalg.svd(rows, compute_uv=False)[-1])
     return Robot(name, '', '', task, fraction, duration_s,
                  0.01 if task.has_orientation else math.inf,
-                 1e-3 if task.has_position else math.inf,
+                 1e-3 if task.has_position else math.inf, hold_s=hold_s,
                  goal_sigma_min=0.25 * float(np.median(sigmas)), urdf_path=str(urdf_path),
                  base_link=base, tip_link=tip, joints=tuple(joints))
 
