@@ -113,27 +113,24 @@ def core_benchmark() -> dict:
     import pybullet_data
     from quat_jt_controller.controller_config import controller_from_package_config
 
-    panda_tick = controller_from_package_config(
-        'panda_controller.yaml', (Path(pybullet_data.getDataPath()) / 'franka_panda'
-                                  / 'panda.urdf').read_text(), 'tanh')
-    q7 = [0.3, -0.5, 0.2, -2.0, 0.1, 1.8, 0.9]
-    goal7 = panda_tick.pose([0.0, -0.785, 0.0, -2.356, 0.0, 1.571, 0.785])
-    panda_tick.set_goal(goal7)
-    panda_tick.set_goal_configuration(goal7, [0.0, -0.785, 0.0, -2.356, 0.0, 1.571, 0.785])
-    # the same near its goal: the settling damping (psi = 1) and the friction compensation
-    # (outside its band) both act, the tick's most expensive place
-    panda_near = controller_from_package_config(
-        'panda_controller.yaml', (Path(pybullet_data.getDataPath()) / 'franka_panda'
-                                  / 'panda.urdf').read_text(), 'tanh')
+    panda_urdf = (Path(pybullet_data.getDataPath()) / 'franka_panda' / 'panda.urdf').read_text()
     home7 = [0.0, -0.785, 0.0, -2.356, 0.0, 1.571, 0.785]
-    panda_near.set_goal(goal7)
-    panda_near.set_goal_configuration(goal7, home7)
-    unsettled = controller_from_package_config(  # ... and without it: what the term costs
-        'panda_controller.yaml', (Path(pybullet_data.getDataPath()) / 'franka_panda'
-                                  / 'panda.urdf').read_text(), 'tanh',
-        {'settling_damping_rate': 0.0})
-    unsettled.set_goal(goal7)
-    unsettled.set_goal_configuration(goal7, home7)
+
+    def panda_at_home(overrides=None) -> Regulator:
+        """The Panda's config regulating to its home pose, q* = home (+ ``overrides``)."""
+        reg = controller_from_package_config('panda_controller.yaml', panda_urdf, 'tanh',
+                                             overrides)
+        goal = reg.pose(home7)
+        reg.set_goal(goal)
+        reg.set_goal_configuration(goal, home7)
+        return reg
+
+    q7 = [0.3, -0.5, 0.2, -2.0, 0.1, 1.8, 0.9]
+    # also near its goal: the settling damping (psi = 1) and the friction compensation
+    # (outside its band) both act, the tick's most expensive place; and without the settling
+    # damping there: what the term costs
+    panda_tick, panda_near = panda_at_home(), panda_at_home()
+    unsettled = panda_at_home({'settling_damping_rate': 0.0})
     wrist = RobotModel(default_urdf_xml(), 'base_link', 'tool0')
     g3 = cl.Gains.create('tanh', paper.KP, paper.KV, paper.LAMBDA, cl.Task.ORIENTATION, 3)
     xarm = RobotModel(xarm6_urdf_xml(), 'link_base', 'link6')

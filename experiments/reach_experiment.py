@@ -78,7 +78,8 @@ from quat_jt_controller import control_law as cl
 from quat_jt_controller import parameter_table as table
 from quat_jt_controller import quaternion as quat
 from quat_jt_controller import shaping as sh
-from quat_jt_controller.controller_config import controller_from_package_config
+from quat_jt_controller.controller_config import (controller_from_config,
+                                                  controller_from_package_config)
 from quat_jt_controller.gain_design import CRUISE_FRACTION
 from quat_jt_controller.inverse_kinematics import goal_configuration
 from quat_jt_controller.model import RobotModel
@@ -718,11 +719,10 @@ def run_arm(robot: Robot, cond: Condition, potential: str, count: int, seed: int
     model, d = arm_design(robot, cond.told_armature, float(rate_hz), friction_effort_share)
     n = model.n
     gains, shaping = d.gains(potential), d.shaping
-    if overrides:
-        p = {**d.parameters(potential), **overrides}
-        gains = cl.Gains.create(p['potential'], p['kp'], p['kv'], p['lambda'], robot.task, n,
-                                p['gravity_compensation'], model.effort_limits)
-        shaping = sh.from_parameters(p, n)
+    if overrides:  # as a node would take the design's file with these values
+        overridden = controller_from_config(
+            {**d.structure(), **d.parameters(potential), **overrides}, robot_urdf(robot))
+        gains, shaping = overridden.gains, overridden.shaping
     sim_params = {'viscous_friction': [0.0] * n,
                   'coulomb_friction': [cond.coulomb_effort_fraction * e
                                        for e in model.effort_limits],

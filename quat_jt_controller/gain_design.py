@@ -556,11 +556,12 @@ def design(model: RobotModel, task: cl.Task, rate_hz: float = 1000.0,
     inertial = (1.0 + 1e-3) * _inertial_damping(configs, np.array(kp_r) * np.array(lam_r),
                                                 guide_r / GUIDE_RAMP_RAD, task)
     inertial = np.array([_round_up(v) for v in inertial])
+    beta_r = float(f'{beta:.4g}')  # as written
     # The settling damping alpha M near the goal: the alpha that makes the slowest coupled
     # mode decay (nearly) fastest, its median over the configurations (docs/gain_design.md)
     settling, decay_before, decay_after = settling_rate(
         configs, np.array(kp_r) * np.array(lam_r), np.array(kv_r), guide_r / GUIDE_RAMP_RAD,
-        SETTLING_RATES_PER_S, SETTLING_NEAR_BEST, task, inertial, float(f'{beta:.4g}'))
+        SETTLING_RATES_PER_S, SETTLING_NEAR_BEST, task, inertial, beta_r)
     shaping = Shaping.create(
         n, joint_limit_margin=margin, joint_limit_gain=limit_gain.round(3).tolist(),
         friction_compensation=friction.tolist(), friction_velocity=FRICTION_VELOCITY_RAD_S,
@@ -571,7 +572,7 @@ def design(model: RobotModel, task: cl.Task, rate_hz: float = 1000.0,
         configuration_gain=guide_r.tolist(), configuration_radius=GUIDE_RADIUS_RAD,
         configuration_ramp=GUIDE_RAMP_RAD, damping_speed=damping_speed.round(3).tolist(),
         inertial_damping=inertial.tolist(),
-        inertial_damping_rate=float(f'{beta:.4g}'),
+        inertial_damping_rate=beta_r,
         settling_damping_rate=settling,
         goal_velocity_gain=GOAL_VELOCITY_GAIN,
         preferred_configuration=(model.middle_of_ranges() if preferred_configuration_rad is None

@@ -155,6 +155,12 @@ def _limits(model: RobotModel, effort_limits_nm: Optional[Sequence[float]]) -> l
     return [float(v) if isfinite(v) and v > 0.0 else float('inf') for v in values]
 
 
+def _settling_gain(y_tilde: Sequence[float], gains: cl.Gains, shaping: sh.Shaping) -> float:
+    """Return ``psi(y_tilde) alpha`` of the settling damping (1/s; 0 where it is off)."""
+    alpha = shaping.settling_damping_rate_per_s
+    return alpha * sh.settling_fade(y_tilde, gains.lam) if alpha > 0.0 else 0.0
+
+
 class Regulator:
     """
     The transpose-Jacobian unit-quaternion regulator of Eq. (22) for one robot and task.
@@ -433,16 +439,13 @@ class Regulator:
                 if over != 0.0 and caps[j] > d:  # the speed guard, docs/lyapunov.md s. 6
                     tau[j] -= (caps[j] - d) * over
         settled = None  # (psi alpha, v, M(q) v) of the settling damping, if it acts
-        if shaping.settling_damping_rate_per_s > 0.0:  # docs/lyapunov.md, section 11
-            psi = sh.settling_fade(y, gains.lam)
-            if psi > 0.0:
-                v = (qdot if g_v <= 0.0 else
-                     [qdot[j] - g_v * qdot_goal[j] for j in range(n)])
-                k = psi * shaping.settling_damping_rate_per_s
-                m_v = self.model.inertial_torque(q, v)  # M(q) v
-                for j in range(n):
-                    tau[j] -= k * m_v[j]
-                settled = (k, v, m_v)
+        k = _settling_gain(y, gains, shaping)  # docs/lyapunov.md, section 11
+        if k > 0.0:
+            v = qdot if g_v <= 0.0 else [qdot[j] - g_v * qdot_goal[j] for j in range(n)]
+            m_v = self.model.inertial_torque(q, v)  # M(q) v
+            for j in range(n):
+                tau[j] -= k * m_v[j]
+            settled = (k, v, m_v)
         if shaping.friction_on:
             phi = sh.fade(y, shaping, self.task is cl.Task.POSITION)
             if phi > 0.0:  # else the compensation is zero (near the goal)
@@ -534,11 +537,10 @@ class Regulator:
         ``settling_damping_rate`` in force; zeros where it is off (docs/lyapunov.md, 11).
         """
         gains, shaping, _ = self._law
-        alpha = shaping.settling_damping_rate_per_s
-        psi = sh.settling_fade(y_tilde, gains.lam) if alpha > 0.0 else 0.0
-        if psi <= 0.0:
+        k = _settling_gain(y_tilde, gains, shaping)
+        if k <= 0.0:
             return list(self._zero)
-        return [psi * alpha * m for m in self.model.own_inertias(q)]
+        return [k * m for m in self.model.own_inertias(q)]
 
     def _inertial_damping(self, q: Sequence[float], kv: Sequence[float],
                           shaping: sh.Shaping,
