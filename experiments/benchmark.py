@@ -117,7 +117,7 @@ def core_benchmark() -> dict:
     home7 = [0.0, -0.785, 0.0, -2.356, 0.0, 1.571, 0.785]
 
     def panda_at_home(overrides=None) -> Regulator:
-        """The Panda's config regulating to its home pose, q* = home (+ ``overrides``)."""
+        """Return the Panda's config regulating to its home pose, q* = home (+ ``overrides``)."""
         reg = controller_from_package_config('panda_controller.yaml', panda_urdf, 'tanh',
                                              overrides)
         goal = reg.pose(home7)
