@@ -214,6 +214,7 @@ class Regulator:
                        for v in model.velocity_limits]
         self._caps = [0.0] * self.n  # beta I_j(q) this tick
         self._own = [0.0] * self.n  # M_jj(q) this tick (with the inertial damping)
+        self._seen = [0.0] * self.n  # ... and 1 / (M(q)^-1)_jj
         self._fade_top = [sh.FADE_TOP_FRACTION * v for v in self._speed_cap]
         self._held = [0.0] * self.n  # how stuck each joint has stayed (learn_friction's h)
         # the learning's acceleration estimate: qdot's low-pass (rad/s) and
@@ -429,7 +430,8 @@ class Regulator:
         if shaping.inertial_damping_on:  # docs/lyapunov.md, section 10: on the same velocity
             caps = self._caps
             own = self._own
-            for j, d in enumerate(self._inertial_damping(q, kv, shaping, caps, own)):
+            for j, d in enumerate(self._inertial_damping(q, kv, shaping, caps, own,
+                                                         self._seen)):
                 if d > kv[j]:
                     tau[j] -= (d - kv[j]) * (qdot[j] - g_v * qdot_goal[j] if g_v > 0.0
                                              else qdot[j])
@@ -463,6 +465,11 @@ class Regulator:
                 creep = fade = inertial = None
                 if learning:  # the creep and fade speeds, the creep from q* if known
                     creep, fade = self._creep, self._fade
+                    if dt_s > 0.0:  # their tops, lower where the push learned is large
+                        seen = (self._seen if shaping.inertial_damping_on
+                                else self.model.inertias(q)[1])
+                        sh.fade_tops(self._learned_friction_nm, seen, dt_s, self._speed_cap,
+                                     self._creep_top, self._fade_top)
                     sh.creep_speeds(q, q_star, shaping, self._creep_top, self._fade_top,
                                     creep, fade)
                     inertial = self.model.inertial_torque(q, self._qddot)
@@ -545,15 +552,19 @@ class Regulator:
     def _inertial_damping(self, q: Sequence[float], kv: Sequence[float],
                           shaping: sh.Shaping,
                           caps_out: Optional[list[float]] = None,
-                          own_out: Optional[list[float]] = None) -> list[float]:
+                          own_out: Optional[list[float]] = None,
+                          seen_out: Optional[list[float]] = None) -> list[float]:
         """
         ``max(k_v,j, min(c_j sqrt(M_jj(q)), beta I_j(q)))`` per joint (N m s/rad).
 
-        ``caps_out``, if given, receives ``beta I_j(q)`` per joint, ``own_out`` ``M_jj(q)``.
+        ``caps_out``, if given, receives ``beta I_j(q)`` per joint, ``own_out`` ``M_jj(q)``,
+        ``seen_out`` ``I_j(q) = 1 / (M(q)^-1)_jj``.
         """
         own, seen = self.model.inertias(q)
         if own_out is not None:
             own_out[:] = own
+        if seen_out is not None:
+            seen_out[:] = seen
         beta = shaping.inertial_damping_rate_per_s
         out = []
         for j, c in enumerate(shaping.inertial_damping):

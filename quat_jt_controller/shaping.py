@@ -71,6 +71,10 @@ FADE_SPEED_FACTOR = 8.0
 CREEP_GAIN = 4.0
 CREEP_TOP_FRACTION = 0.4
 FADE_TOP_FRACTION = 0.6
+# ... and lower where the push learned on a joint is large for the inertia it sees: so low
+# that one tick of that push from the fade speed stays within the limit (fade_tops), but at
+# least this share of the limit, the creep's top in proportion (docs/lyapunov.md, section 4)
+FADE_FLOOR_FRACTION = 0.2
 # The learning low-passes how held a joint is with this fraction of the learning time, and
 # learns only once the filtered value is above 1/2 (learn_friction).
 HOLD_TIME_FRACTION = 0.2
@@ -475,6 +479,35 @@ def creep_speeds(q: Sequence[float], q_star: Optional[Sequence[float]], shaping:
         creep_out[j] = c
         top = fade_top[j]
         fade_out[j] = c + extra if c + extra < top else top
+
+
+def fade_tops(learned_nm: Sequence[float], seen_inertia: Sequence[float], dt_s: float,
+              speed_cap_rad_s: Sequence[float], creep_top_out: list[float],
+              fade_top_out: list[float]) -> None:
+    """
+    Fill each joint's tops of the creep and fade speeds (rad/s) for :func:`creep_speeds`.
+
+    The fade top is ``v_lim - a_j dt / I_j``, the speed from which one tick of the learned push
+    ``a_j`` on the inertia the joint sees (``I_j = 1 / (M(q)^-1)_jj``) with nothing to take
+    it lands at the limit ``v_lim`` (``speed_cap_rad_s``), at most ``FADE_TOP_FRACTION`` and at
+    least ``FADE_FLOOR_FRACTION`` of it; the creep's top is ``CREEP_TOP_FRACTION /
+    FADE_TOP_FRACTION`` of the fade top. A joint that has learned little keeps the tops at
+    their largest; a light one that has learned much creeps and is pushed more slowly
+    (``design_gains`` holds ``a_max`` so that the floor is never needed on its sampled
+    configurations; docs/lyapunov.md, section 4).
+    """
+    share = CREEP_TOP_FRACTION / FADE_TOP_FRACTION
+    for j in range(len(fade_top_out)):
+        v_lim = speed_cap_rad_s[j]
+        top = FADE_TOP_FRACTION * v_lim
+        inertia = seen_inertia[j]
+        if inertia > 0.0:
+            room = v_lim - learned_nm[j] * dt_s / inertia
+            top = top if room > top else room
+        floor = FADE_FLOOR_FRACTION * v_lim
+        top = top if top > floor else floor
+        fade_top_out[j] = top
+        creep_top_out[j] = share * top
 
 
 def learn_friction(learned_nm: list[float], stuck: Sequence[float], phi: float,
