@@ -397,3 +397,41 @@ def test_the_learned_push_is_gone_along_a_motion_at_six_tenths_of_the_velocity_l
         qdot = (share * v_lim * push).tolist()
         extra = np.subtract(learning.update(q, qdot).tau_nm, plain.update(q, qdot).tau_nm)
         assert np.all(np.abs(extra) < 1e-6 * np.array(learned)), (share, extra)
+
+
+def test_one_tick_of_a_large_learned_push_leaves_a_light_joint_within_its_limit():
+    """
+    docs/lyapunov.md, section 4: the larger the push learned, the lower its fade starts.
+
+    The wrist's joint 3, held at rest, learns a push that changes its speed by 0.7 of its
+    velocity limit in one tick on the inertia it sees (the fade from 0.6 of the limit allowed
+    0.4). Along the push, at every speed up to the limit, one tick of what the learned push
+    adds, with no friction to take it, leaves the joint within its limit; at rest all of it
+    acts.
+    """
+    model = wrist_model()
+    dt = 1e-3
+    near = [v + 0.3 for v in paper.Q_JOINT_DESIRED_RAD]
+    seen = model.inertias(near)[1][2]
+    v_lim = model.velocity_limits[2]
+    a_max = 0.7 * v_lim * seen / dt
+    shaping = sh.Shaping.create(3, friction_learning_limit=(0.0, 0.0, a_max))
+    unclamped = [math.inf] * 3  # the push is larger than the effort limit: the law itself
+    learned, bare = (Regulator(model, ORI, paper_gains(), unclamped, Goal(paper.Q_DESIRED),
+                               shaping) for _ in range(2))
+    for _ in range(3000):
+        learned.update(near, [0.0] * 3, dt)
+    assert learned.learned_friction_nm[2] > 0.95 * a_max
+    far = [near[0], near[1], near[2] - 2.0]  # q*: creeping at the top of its creep speed
+    for reg in (learned, bare):
+        assert reg.set_goal_configuration(reg.goal, far)
+    learned.update(near, [0.0] * 3, dt)  # a tick that advances: the tops follow what is learned
+    sign = math.copysign(1.0, learned.update(near, [0.0] * 3).tau_potential_nm[2])
+    landed = []
+    for v in np.linspace(0.0, v_lim, 400):
+        qdot = [0.0, 0.0, sign * v]
+        push = learned.update(near, qdot).tau_nm[2] - bare.update(near, qdot).tau_nm[2]
+        landed.append(v + sign * push * dt / seen)
+    assert landed[0] == pytest.approx(0.7 * v_lim, rel=0.06)  # at rest: the whole push
+    assert max(landed) <= v_lim * (1.0 + 1e-9)
+    assert max(landed) > 0.95 * v_lim  # the bound is met, not undercut by far

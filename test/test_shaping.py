@@ -554,3 +554,16 @@ def test_a_joint_creeping_below_the_creep_speed_with_a_friction_keeps_learning()
     sh.friction_compensation([0.1], fast, 1.0, shaping, learned, stuck, [-0.01 * fast[0]],
                              unmet, creep, fade)
     assert stuck[0] > 0.5
+
+
+def test_the_fade_starts_where_one_tick_of_the_learned_push_lands_at_the_limit():
+    """``fade_tops``: v_lim - a dt / I, within [FADE_FLOOR, FADE_TOP] x v_lim; creep in step."""
+    v_lim, inertia, dt = [2.0, 2.0, 2.0, 2.0], [0.01, 0.01, 0.01, 0.0], 1e-3
+    # what moves the joint 0.1, 0.6 and 1.5 v_lim in one tick, and a push on no inertia
+    learned = [0.1 * 2.0 * 0.01 / dt, 0.6 * 2.0 * 0.01 / dt, 1.5 * 2.0 * 0.01 / dt, 5.0]
+    creep, fade = [0.0] * 4, [0.0] * 4
+    sh.fade_tops(learned, inertia, dt, v_lim, creep, fade)
+    assert fade == pytest.approx([sh.FADE_TOP_FRACTION * 2.0, 0.4 * 2.0,
+                                  sh.FADE_FLOOR_FRACTION * 2.0, sh.FADE_TOP_FRACTION * 2.0])
+    assert creep == pytest.approx([f * sh.CREEP_TOP_FRACTION / sh.FADE_TOP_FRACTION
+                                   for f in fade])
