@@ -80,7 +80,7 @@ from quat_jt_controller import quaternion as quat
 from quat_jt_controller import shaping as sh
 from quat_jt_controller.controller_config import (controller_from_config,
                                                   controller_from_package_config)
-from quat_jt_controller.gain_design import CRUISE_FRACTION
+from quat_jt_controller.gain_design import CRUISE_FRACTION, SPEED_MARGIN
 from quat_jt_controller.inverse_kinematics import goal_configuration
 from quat_jt_controller.model import RobotModel
 from quat_jt_controller.reference_sim import ClosedLoop, run_sampled
@@ -379,9 +379,11 @@ def report(robot: Robot, potential: str, outcomes: list, elapsed_s: float) -> st
     travel = np.array([o.travel_s for o in outcomes])
     if np.any(np.isfinite(travel) & (travel > 0.0)):  # what the velocity limits allow
         over = int(np.count_nonzero(travel > robot.duration_s))
+        ceiling = int(np.count_nonzero(travel / SPEED_MARGIN > robot.duration_s))
         cruise = int(np.count_nonzero(travel / CRUISE_FRACTION > robot.duration_s))
         lines.append(f'  the longest joint travel to q* takes more than {robot.duration_s:g} s '
-                     f'at the velocity limits in {over} cases, at the design cruise '
+                     f'at the velocity limits in {over} cases, at the design\'s speed ceiling '
+                     f'({SPEED_MARGIN:g} x the limits) in {ceiling}, at its cruise '
                      f'({CRUISE_FRACTION:g} x the limits) in {cruise}')
     if robot.hold_s > 0.0 and ok:  # after settling: the cases reached
         drift = np.array([o.final_speed_rad_s for o in outcomes if o.reached])
