@@ -382,7 +382,7 @@ def report(robot: Robot, potential: str, outcomes: list, elapsed_s: float) -> st
         ceiling = int(np.count_nonzero(travel / SPEED_MARGIN > robot.duration_s))
         cruise = int(np.count_nonzero(travel / CRUISE_FRACTION > robot.duration_s))
         lines.append(f'  the longest joint travel to q* takes more than {robot.duration_s:g} s '
-                     f'at the velocity limits in {over} cases, at the design\'s speed ceiling '
+                     f"at the velocity limits in {over} cases, at the design's speed ceiling "
                      f'({SPEED_MARGIN:g} x the limits) in {ceiling}, at its cruise '
                      f'({CRUISE_FRACTION:g} x the limits) in {cruise}')
     if robot.hold_s > 0.0 and ok:  # after settling: the cases reached
