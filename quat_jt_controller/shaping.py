@@ -67,8 +67,9 @@ FADE_SPEED_FACTOR = 8.0
 # With a goal configuration q* (the regulator), a joint's creep speed is |q - q*| x this (1/s),
 # at least the above and at most this share of its velocity limit, and its fade speed that
 # plus the width above, at most FADE_TOP_FRACTION of the limit: a joint far from q* creeps to
-# it with the time constant 1 / CREEP_GAIN instead of at a fixed crawl
-CREEP_GAIN = 4.0
+# it with the time constant 1 / CREEP_GAIN instead of at a fixed crawl (docs/reach.md, "The
+# creep's time constant", says why 1/16 s)
+CREEP_GAIN = 16.0
 CREEP_TOP_FRACTION = 0.4
 FADE_TOP_FRACTION = 0.6
 # ... and lower where the push learned on a joint is large for the inertia it sees: so low
