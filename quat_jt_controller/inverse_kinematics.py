@@ -154,6 +154,16 @@ def polish(model: RobotModel, q: Sequence[float], quat_desired: Sequence[float],
     return None
 
 
+def _onto_goal(model: RobotModel, x: np.ndarray, quat_desired: Sequence[float],
+               p_desired: Sequence[float], task: Task, lower: np.ndarray,
+               upper: np.ndarray) -> np.ndarray:
+    """Take ``x`` back onto the goal by two minimum-norm Newton steps, within the limits."""
+    for _ in range(2):
+        r, J = _pose_residual(model, x, quat_desired, p_desired, task)
+        x = np.clip(x + np.linalg.lstsq(J, r, rcond=None)[0], lower, upper)
+    return x
+
+
 POSTURE_ITERATIONS = 60  # null-space steps of posture(), at most
 POSTURE_MAX_STEP_RAD = 0.1  # the longest null-space step (any joint)
 POSTURE_HALVINGS = 12  # of a step that does not lower the posture cost, before giving up
@@ -201,10 +211,7 @@ def posture(model: RobotModel, q: Sequence[float], quat_desired: Sequence[float]
                       + POSTURE_BAND_WEIGHT * float(np.sum(depth(x) ** 2)))
 
     def onto_goal(x: np.ndarray) -> np.ndarray:
-        for _ in range(2):
-            r, J = _pose_residual(model, x, quat_desired, p_desired, task)
-            x = np.clip(x + np.linalg.lstsq(J, r, rcond=None)[0], lower, upper)
-        return x
+        return _onto_goal(model, x, quat_desired, p_desired, task, lower, upper)
 
     _, J = _pose_residual(model, q, quat_desired, p_desired, task)
     rows = J.shape[0]
@@ -233,6 +240,65 @@ def posture(model: RobotModel, q: Sequence[float], quat_desired: Sequence[float]
             break  # no step along the self-motion lowers c: a local minimum
         q, c_now = q_try, c_try
     return polish(model, q, quat_desired, p_desired, task)
+
+
+REGULAR_ITERATIONS = 30  # steps of regular_posture(), at most (each at most 0.1 rad)
+REGULAR_MARGIN = 1.01  # ... until sigma_min is this x SINGULAR_SIGMA_MIN
+SIGMA_STEP_RAD = 1e-6  # the central difference of sigma_min's gradient
+
+
+def regular_posture(model: RobotModel, q: Sequence[float], quat_desired: Sequence[float],
+                    p_desired: Sequence[float], task: Task,
+                    margin_rad: float = 0.0) -> Optional[np.ndarray]:
+    """
+    Slide a near-singular solution of a redundant arm along its self-motion until it is regular.
+
+    Steepest ascent of :func:`sigma_min` within the null space of J: its gradient by central
+    differences, projected onto the self-motion, a step at most ``POSTURE_MAX_STEP_RAD`` long
+    (any joint), taken back onto the goal, halved until ``sigma_min`` rises there within the
+    limits and out of the joint-limit bands (``margin_rad``). Returns the first configuration
+    whose ``sigma_min`` reaches ``REGULAR_MARGIN x SINGULAR_SIGMA_MIN``, polished, or None if
+    none does within ``REGULAR_ITERATIONS`` steps. :func:`posture` stops at the posture nearest
+    the measured configuration, which may lie in a near-singular stretch of the self-motion
+    that a short slide leaves (docs/lyapunov.md, section 9).
+    """
+    q = np.array(q, dtype=float)
+    lower = np.array(model.position_lower, dtype=float)
+    upper = np.array(model.position_upper, dtype=float)
+    limited = _limits(model)[2]
+
+    def in_band(x: np.ndarray) -> bool:
+        return bool(np.any(limited & ((x < lower + margin_rad) | (x > upper - margin_rad))))
+
+    target = REGULAR_MARGIN * SINGULAR_SIGMA_MIN
+    sigma = sigma_min(model, q, task)
+    eye = np.eye(q.size) * SIGMA_STEP_RAD
+    for _ in range(REGULAR_ITERATIONS):
+        if sigma >= target:
+            return polish(model, q, quat_desired, p_desired, task)
+        _, J = _pose_residual(model, q, quat_desired, p_desired, task)
+        rows = J.shape[0]
+        if rows >= J.shape[1]:
+            return None  # no self-motion to slide along
+        Z = np.linalg.svd(J)[2][rows:].T
+        gradient = np.array([sigma_min(model, q + e, task) - sigma_min(model, q - e, task)
+                             for e in eye]) / (2.0 * SIGMA_STEP_RAD)
+        step = Z @ (Z.T @ gradient)
+        largest = float(np.max(np.abs(step)))
+        if largest <= 0.0:
+            return None
+        step *= POSTURE_MAX_STEP_RAD / largest
+        for _ in range(POSTURE_HALVINGS):
+            q_try = _onto_goal(model, np.clip(q + step, lower, upper), quat_desired, p_desired,
+                               task, lower, upper)
+            sigma_try = sigma_min(model, q_try, task)
+            if sigma_try > sigma and not in_band(q_try):
+                break
+            step *= 0.5
+        else:
+            return None  # sigma_min is at a local maximum along the self-motion, or in a band
+        q, sigma = q_try, sigma_try
+    return polish(model, q, quat_desired, p_desired, task) if sigma >= target else None
 
 
 MAX_STARTS = 12  # IK starts per check: measured q, mid-range, then seeded random ones
@@ -386,6 +452,10 @@ def search_goal_configuration(model: RobotModel, q_measured: Optional[Sequence[f
             if q is None:
                 return None
             q = representative(q, q_now, lower, upper, margin_rad)  # it may have slid
+            if sigma_min(model, q, task) < SINGULAR_SIGMA_MIN:  # a short slide may leave it
+                regular = regular_posture(model, q, quat_desired, p_desired, task, margin_rad)
+                if regular is not None:
+                    q = representative(regular, q_now, lower, upper, margin_rad)
         if np.any(q < lower) or np.any(q > upper):
             return None
         sigma = sigma_min(model, q, task)

@@ -257,3 +257,44 @@ def test_an_unreachable_goal_gets_no_q_star_and_a_message_that_says_so():
     assert 'no joint configuration within the limits' in verdict, verdict
     assert 'from 4 IK starts' in verdict and 'A1' in verdict, verdict
     assert 'no goal configuration q*' in verdict, verdict
+
+
+def test_a_near_singular_posture_is_slid_along_the_self_motion_until_regular():
+    """
+    docs/lyapunov.md, section 9: q* leaves a near-singular stretch of the self-motion.
+
+    Here the Panda's posture nearest the measured q has sigma_min below SINGULAR_SIGMA_MIN;
+    along its self-motion it becomes regular within 2 rad. Before, the search passed it over
+    for a regular branch 5.6 rad away, 4.4 rad round joint 1.
+    """
+    import numpy as np
+    from quat_jt_controller.inverse_kinematics import (
+        polish, posture, POLISHED_TOLERANCE, regular_posture, search_goal_configuration,
+        sigma_min, SINGULAR_SIGMA_MIN, solve_ik)
+    model = panda_model()
+    q_now = np.array([2.11, -0.82, 1.52, -2.41, 0.06, 0.77, 0.88])
+    q_d, p_d = goal_at(model, [1.58, -0.21, 2.12, -0.79, -0.75, 2.1, 1.17])
+    margin = 0.15
+    lower, upper = np.array(model.position_lower), np.array(model.position_upper)
+    q_ik = polish(model, solve_ik(model, q_now, q_d, p_d, POSE)[0], q_d, p_d, POSE)
+    nearest = posture(model, q_ik, q_d, p_d, POSE, q_now, model.middle_of_ranges(), 0.1,
+                      margin)
+    assert sigma_min(model, nearest, POSE) < SINGULAR_SIGMA_MIN
+    regular = regular_posture(model, nearest, q_d, p_d, POSE, margin)
+    assert regular is not None and sigma_min(model, regular, POSE) >= SINGULAR_SIGMA_MIN
+    p, R = model.forward_kinematics(regular.tolist())
+    _, e = quat.orientation_error(quat.from_rotation_matrix(R), q_d)
+    assert np.linalg.norm(e) < POLISHED_TOLERANCE
+    assert np.linalg.norm(np.subtract(p, p_d)) < POLISHED_TOLERANCE
+    assert np.all(regular >= lower + margin) and np.all(regular <= upper - margin)
+    assert np.abs(regular - nearest).max() < 2.0
+    found = search_goal_configuration(model, q_now, q_d, p_d, POSE, margin,
+                                      q_preferred=model.middle_of_ranges(), posture_weight=0.1)
+    assert found.regular
+    assert np.linalg.norm(found.q_star - q_now) < 4.0  # not the branch round joint 1
+    # an arm without self-motion has nothing to slide along: its wrist singularity stays
+    xarm = xarm6_model()
+    q_x = [0.1, 0.2, -0.3, 0.4, 0.0, 0.6]
+    x_d, x_p = goal_at(xarm, q_x)
+    assert sigma_min(xarm, q_x, POSE) < SINGULAR_SIGMA_MIN
+    assert regular_posture(xarm, np.array(q_x), x_d, x_p, POSE) is None
