@@ -46,7 +46,7 @@ from quat_jt_controller.gain_analysis import (
     settling_rate, sigma_min, time_to_goal_s, worst_rho)
 from quat_jt_controller.model import RobotModel
 from quat_jt_controller.shaping import (
-    DEFAULT_SPEED_CAP_RAD_S, FADE_FLOOR_FRACTION, FULL_TURN_RAD, Shaping)
+    DEFAULT_SPEED_CAP_RAD_S, FADE_DELAY_TICKS, FADE_FLOOR_FRACTION, FULL_TURN_RAD, Shaping)
 from quat_jt_runtime.joints import check_state_rate
 from quat_jt_runtime.param_table import row
 
@@ -90,9 +90,9 @@ FRICTION_EFFORT_SHARE = 0.03
 DEFAULT_FRICTION_EFFORT_SHARE = FRICTION_EFFORT_SHARE
 FRICTION_LEARNING_TIME_S = 1.0
 # ... and on a joint without one, at most what changes its speed by this share of its limit in
-# one tick: the learned push fades out from a speed at most that much below the limit, down to
-# FADE_FLOOR_FRACTION of it where the push learned is large (shaping.fade_tops)
-TICK_SPEED_SHARE = 1.0 - FADE_FLOOR_FRACTION
+# one tick: the learned push fades out from a speed 1 + FADE_DELAY_TICKS times that much below
+# the limit, at least FADE_FLOOR_FRACTION of it (shaping.fade_tops)
+TICK_SPEED_SHARE = (1.0 - FADE_FLOOR_FRACTION) / (1.0 + FADE_DELAY_TICKS)
 # A joint that accelerates faster than this on its effort limit and the inertia it sees, with
 # no armature given, is taken for a URDF without its drive's rotor inertia (a warning)
 PLAUSIBLE_ACCELERATION_RAD_S2 = 5000.0
@@ -412,7 +412,7 @@ def design(model: RobotModel, task: cl.Task, rate_hz: float = 1000.0,
     velocity = np.where(np.isfinite(velocity) & (velocity > 0), velocity, DEFAULT_VELOCITY)
     # a joint with an estimate learns relative to it; one without, a share of its effort, at
     # most what changes its speed by TICK_SPEED_SHARE x its velocity limit in one tick on the
-    # least inertia it sees: the learned push fades out from a speed that much below the limit
+    # least inertia it sees: the learned push fades out from a speed far enough below the limit
     # (docs/lyapunov.md, section 4, says what this bounds and what it does not)
     per_tick = TICK_SPEED_SHARE * velocity * inertia / dt_s
     learning = np.where(friction > 0.0, friction_learning * friction,

@@ -35,6 +35,9 @@ from quat_jt_controller.model import RobotModel
 
 Vector3 = tuple[float, float, float]
 MAX_LEARNING_STEP_S = 0.01  # a longer gap between ticks advances the friction learning by this
+# The period the fade tops assume (shaping.fade_tops) is the longest recent time step (at most
+# the above), kept x this per tick: a burst of close states does not shorten it at once
+TICK_MEMORY = 0.999
 
 
 @dataclass(frozen=True)
@@ -215,6 +218,7 @@ class Regulator:
         self._caps = [0.0] * self.n  # beta I_j(q) this tick
         self._own = [0.0] * self.n  # M_jj(q) this tick (with the inertial damping)
         self._seen = [0.0] * self.n  # ... and 1 / (M(q)^-1)_jj
+        self._tick_s = 0.0  # the period the fade tops assume (s; TICK_MEMORY)
         self._fade_top = [sh.FADE_TOP_FRACTION * v for v in self._speed_cap]
         self._held = [0.0] * self.n  # how stuck each joint has stayed (learn_friction's h)
         # the learning's acceleration estimate: qdot's low-pass (rad/s) and
@@ -411,6 +415,9 @@ class Regulator:
         qdot_goal = self._goal_joint_velocity
         if dt_s > 0.0 and shaping.learning_on:  # the learning's acceleration estimate
             self._track_acceleration(qdot, dt_s)
+            step = dt_s if dt_s < MAX_LEARNING_STEP_S else MAX_LEARNING_STEP_S
+            kept = self._tick_s * TICK_MEMORY  # ... and the period its fade tops assume
+            self._tick_s = step if step > kept else kept
         y, eta_e, rows, p, R = self.error(q, goal)
         n = self.n
         tau_p = cl.potential_torque(rows, y, eta_e, gains, shaping.large_error_gain, self.task)
@@ -465,11 +472,11 @@ class Regulator:
                 creep = fade = inertial = None
                 if learning:  # the creep and fade speeds, the creep from q* if known
                     creep, fade = self._creep, self._fade
-                    if dt_s > 0.0:  # their tops, lower where the push learned is large
+                    if self._tick_s > 0.0:  # their tops, lower where much is learned
                         seen = (self._seen if shaping.inertial_damping_on
                                 else self.model.inertias(q)[1])
-                        sh.fade_tops(self._learned_friction_nm, seen, dt_s, self._speed_cap,
-                                     self._creep_top, self._fade_top)
+                        sh.fade_tops(self._learned_friction_nm, seen, self._tick_s,
+                                     self._speed_cap, self._creep_top, self._fade_top)
                     sh.creep_speeds(q, q_star, shaping, self._creep_top, self._fade_top,
                                     creep, fade)
                     inertial = self.model.inertial_torque(q, self._qddot)

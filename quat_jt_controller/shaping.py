@@ -73,9 +73,11 @@ CREEP_GAIN = 16.0
 CREEP_TOP_FRACTION = 0.4
 FADE_TOP_FRACTION = 0.6
 # ... and lower where the push learned on a joint is large for the inertia it sees: so low
-# that one tick of that push from the fade speed stays within the limit (fade_tops), but at
-# least this share of the limit, the creep's top in proportion (docs/lyapunov.md, section 4)
+# that the push, acting 1 + FADE_DELAY_TICKS ticks before the fade sees the speed it gave,
+# stays within the limit (fade_tops), but at least this share of the limit, the creep's top
+# in proportion (docs/lyapunov.md, section 4)
 FADE_FLOOR_FRACTION = 0.2
+FADE_DELAY_TICKS = 1  # the nodes' loop acts on a state one tick old
 # The learning low-passes how held a joint is with this fraction of the learning time, and
 # learns only once the filtered value is above 1/2 (learn_friction).
 HOLD_TIME_FRACTION = 0.2
@@ -482,30 +484,35 @@ def creep_speeds(q: Sequence[float], q_star: Optional[Sequence[float]], shaping:
         fade_out[j] = c + extra if c + extra < top else top
 
 
-def fade_tops(learned_nm: Sequence[float], seen_inertia: Sequence[float], dt_s: float,
+def fade_tops(learned_nm: Sequence[float], seen_inertia: Sequence[float], tick_s: float,
               speed_cap_rad_s: Sequence[float], creep_top_out: list[float],
               fade_top_out: list[float]) -> None:
     """
     Fill each joint's tops of the creep and fade speeds (rad/s) for :func:`creep_speeds`.
 
-    The fade top is ``v_lim - a_j dt / I_j``, the speed from which one tick of the learned push
-    ``a_j`` on the inertia the joint sees (``I_j = 1 / (M(q)^-1)_jj``) with nothing to take
-    it lands at the limit ``v_lim`` (``speed_cap_rad_s``), at most ``FADE_TOP_FRACTION`` and at
-    least ``FADE_FLOOR_FRACTION`` of it; the creep's top is ``CREEP_TOP_FRACTION /
-    FADE_TOP_FRACTION`` of the fade top. A joint that has learned little keeps the tops at
-    their largest; a light one that has learned much creeps and is pushed more slowly
-    (``design_gains`` holds ``a_max`` so that the floor is never needed on its sampled
-    configurations; docs/lyapunov.md, section 4).
+    The fade top is ``v_lim - (1 + FADE_DELAY_TICKS) a_j dt / I_j``: from it, the learned
+    push ``a_j`` on the inertia the joint sees (``I_j = 1 / (M(q)^-1)_jj``), with nothing to
+    take it, acting for a tick and for the tick of delay before the fade sees the speed it
+    gave, lands at the limit ``v_lim`` (``speed_cap_rad_s``). It is at most
+    ``FADE_TOP_FRACTION`` and at least ``FADE_FLOOR_FRACTION`` of the limit (the floor, not
+    the bound, where ``a_j`` is larger than ``design_gains`` lets it be, or ``I_j`` is not
+    positive and finite); the creep's top is ``CREEP_TOP_FRACTION / FADE_TOP_FRACTION`` of it.
+    ``tick_s`` is the control period ``dt``. A joint that has learned little keeps the tops at
+    their largest; one that has learned much for its inertia creeps and is pushed more slowly
+    (docs/lyapunov.md, section 4).
     """
     share = CREEP_TOP_FRACTION / FADE_TOP_FRACTION
+    ticks = 1.0 + FADE_DELAY_TICKS
     for j in range(len(fade_top_out)):
         v_lim = speed_cap_rad_s[j]
+        floor = FADE_FLOOR_FRACTION * v_lim
         top = FADE_TOP_FRACTION * v_lim
         inertia = seen_inertia[j]
-        if inertia > 0.0:
-            room = v_lim - learned_nm[j] * dt_s / inertia
+        if inertia > 0.0 and isfinite(inertia):
+            room = v_lim - ticks * learned_nm[j] * tick_s / inertia
             top = top if room > top else room
-        floor = FADE_FLOOR_FRACTION * v_lim
+        else:  # no inertia to bound it by: the least
+            top = floor
         top = top if top > floor else floor
         fade_top_out[j] = top
         creep_top_out[j] = share * top

@@ -556,14 +556,16 @@ def test_a_joint_creeping_below_the_creep_speed_with_a_friction_keeps_learning()
     assert stuck[0] > 0.5
 
 
-def test_the_fade_starts_where_one_tick_of_the_learned_push_lands_at_the_limit():
-    """``fade_tops``: v_lim - a dt / I, within [FADE_FLOOR, FADE_TOP] x v_lim; creep in step."""
-    v_lim, inertia, dt = [2.0, 2.0, 2.0, 2.0], [0.01, 0.01, 0.01, 0.0], 1e-3
-    # what moves the joint 0.1, 0.6 and 1.5 v_lim in one tick, and a push on no inertia
-    learned = [0.1 * 2.0 * 0.01 / dt, 0.6 * 2.0 * 0.01 / dt, 1.5 * 2.0 * 0.01 / dt, 5.0]
-    creep, fade = [0.0] * 4, [0.0] * 4
+def test_the_fade_starts_where_the_learned_push_and_its_delay_land_at_the_limit():
+    """``fade_tops``: v_lim - 2 a dt / I, within [FADE_FLOOR, FADE_TOP] x v_lim; creep in step."""
+    assert sh.FADE_DELAY_TICKS == 1
+    v_lim, dt = [2.0] * 5, 1e-3
+    inertia = [0.01, 0.01, 0.01, 0.0, math.nan]
+    # what moves the joint 0.1, 0.3 and 0.6 v_lim in one tick, and pushes on no inertia
+    learned = [0.1 * 2.0 * 0.01 / dt, 0.3 * 2.0 * 0.01 / dt, 0.6 * 2.0 * 0.01 / dt, 5.0, 5.0]
+    creep, fade = [0.0] * 5, [0.0] * 5
     sh.fade_tops(learned, inertia, dt, v_lim, creep, fade)
-    assert fade == pytest.approx([sh.FADE_TOP_FRACTION * 2.0, 0.4 * 2.0,
-                                  sh.FADE_FLOOR_FRACTION * 2.0, sh.FADE_TOP_FRACTION * 2.0])
+    floor = sh.FADE_FLOOR_FRACTION * 2.0
+    assert fade == pytest.approx([sh.FADE_TOP_FRACTION * 2.0, 0.4 * 2.0, floor, floor, floor])
     assert creep == pytest.approx([f * sh.CREEP_TOP_FRACTION / sh.FADE_TOP_FRACTION
                                    for f in fade])
