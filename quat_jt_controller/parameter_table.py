@@ -162,7 +162,8 @@ SHAPING = (
          field='friction_learning_time_s'),
     Spec('friction_velocity', Kind.DOUBLE, 0.05,
          'v_eps (rad/s) of the velocity part, f tanh(qdot / v_eps); the learning creeps a held '
-         'joint at 2 v_eps or more and fades its learned push out over 6 v_eps. Live.',
+         'joint at 2 v_eps or more (less on a light joint that has learned much) and fades its '
+         'learned push out over 6 v_eps. Live.',
          bounds=(1e-4, 10.0), field='friction_velocity_rad_s'),
     Spec('friction_error_band', Kind.DOUBLE, 0.004,
          '||e|| below which the friction compensation fades out (it is off below half of '

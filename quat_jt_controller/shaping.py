@@ -467,9 +467,11 @@ def creep_speeds(q: Sequence[float], q_star: Optional[Sequence[float]], shaping:
     Fill each joint's creep and fade speeds (rad/s) for :func:`friction_compensation`.
 
     The creep speed is ``CREEP_GAIN |q - q*|`` (0 with no ``q*``), at least
-    ``CREEP_SPEED_FACTOR v_eps`` and at most ``creep_top`` (``CREEP_TOP_FRACTION`` of the
-    velocity limit); the fade speed is ``(FADE_SPEED_FACTOR - CREEP_SPEED_FACTOR) v_eps``
-    above it, at most ``fade_top`` (``FADE_TOP_FRACTION`` of the limit, above the creep's top).
+    ``CREEP_SPEED_FACTOR v_eps`` and at most ``creep_top`` (at most ``CREEP_TOP_FRACTION`` of
+    the velocity limit, lower where :func:`fade_tops` lowers it: then it may be below
+    ``CREEP_SPEED_FACTOR v_eps``); the fade speed is ``(FADE_SPEED_FACTOR -
+    CREEP_SPEED_FACTOR) v_eps`` above it, at most ``fade_top`` (at most ``FADE_TOP_FRACTION``
+    of the limit, above the creep's top).
     """
     v_eps = shaping.friction_velocity_rad_s
     v0 = CREEP_SPEED_FACTOR * v_eps

@@ -418,7 +418,7 @@ def test_a_learned_push_and_its_tick_of_delay_leave_a_light_joint_within_its_lim
     seen = model.inertias(near)[1][2]
     v_lim = model.velocity_limits[2]
     a_max = TICK_SPEED_SHARE * v_lim * seen / dt
-    extra = dict(inertial_damping=(1e-3,) * 3, inertial_damping_rate=100.0) if inertial else {}
+    extra = {'inertial_damping': (1e-3,) * 3, 'inertial_damping_rate': 100.0} if inertial else {}
     shaping = sh.Shaping.create(3, friction_learning_limit=(0.0, 0.0, a_max), **extra)
     unclamped = [math.inf] * 3  # the push is larger than the effort limit: the law itself
     learned, bare = (Regulator(model, ORI, paper_gains(), unclamped, Goal(paper.Q_DESIRED),
