@@ -1,5 +1,5 @@
 """
-A learned friction push released with nothing to take it: how fast does each joint get?
+The peak speed of each joint when a learned friction push is released with nothing to take it.
 
 The worst case the friction learning must survive (docs/lyapunov.md, section 4): an arm held
 still away from its goal (an obstacle, a hand, a brake) learns the most it may, then is let
