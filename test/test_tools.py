@@ -148,6 +148,23 @@ def test_friction_trace_shows_a_steady_torque_at_rest(tmp_path):
     assert (tmp_path / 'trace.png').stat().st_size > 10_000
 
 
+def test_release_check_keeps_a_released_learned_push_within_the_velocity_limits():
+    """
+    The xArm7's light joint7, released after learning the most it may: within its limit.
+
+    With the loop's one tick of delay (docs/lyapunov.md, section 4); every joint has learned
+    its limit, so the check is not vacuous.
+    """
+    stdout = run_tool('experiments.release_check', '--example-robot', 'xarm7', '--cases', '2')
+    lines = [line for line in stdout.splitlines() if line.startswith('case ')]
+    assert len(lines) == 2
+    for line in lines:
+        learned = line.split('learned / limit [')[1].split(']')[0].split()
+        assert all(float(v) > 0.95 for v in learned), line
+    worst = stdout.split('worst peak |qdot| / v_lim [')[1].split(']')[0].split()
+    assert len(worst) == 7 and max(float(v) for v in worst) < 1.0, stdout
+
+
 def test_design_gains_entry_point_is_installed():
     """``ros2 run quat_jt_controller design_gains`` runs the console script of setup.py."""
     script = Path(sys.executable).parent / 'design_gains'  # pip puts it next to python
