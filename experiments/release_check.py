@@ -39,7 +39,8 @@ def release(robot: rx.Robot, case: int, delay_ticks: int, seed: int = 10) -> tup
     reg = Regulator(model, robot.task, gains, goal=goal, shaping=shaping)
     if not reg.set_goal_configuration(goal, tuple(q_goal)):
         raise RuntimeError('the goal was replaced')
-    q = np.array(q_goal) - SHORT_RAD * np.sign(np.array(q_goal) - np.array(q0))
+    away = np.sign(np.array(q_goal) - np.array(q0))
+    q = np.array(q_goal) - SHORT_RAD * np.where(away == 0.0, 1.0, away)
     for _ in range(int(HOLD_S / DT_S)):
         reg.update(q.tolist(), [0.0] * model.n, DT_S)
     limit = np.array(shaping.friction_learning_limit_nm)

@@ -3,7 +3,8 @@ Inverse kinematics on the URDF model: a joint configuration within the limits th
 
 A Levenberg-Marquardt search that respects the joint limits (:func:`solve_ik`) from several
 starts (:func:`starts`), undamped Newton steps to the model's precision (:func:`polish`), and
-for a redundant arm a slide along the self-motion to the best posture (:func:`posture`).
+for a redundant arm a slide along the self-motion to the best posture (:func:`posture`), and
+on from a near-singular one until it is regular (:func:`regular_posture`).
 :func:`search_goal_configuration` puts them together to find q*, the configuration the
 goal-configuration term pulls towards (docs/lyapunov.md section 5), and
 :func:`configuration_velocity` maps a moving goal's velocity to the joints there.
@@ -244,6 +245,7 @@ def posture(model: RobotModel, q: Sequence[float], quat_desired: Sequence[float]
 
 REGULAR_ITERATIONS = 30  # steps of regular_posture(), at most (each at most 0.1 rad)
 REGULAR_MARGIN = 1.01  # ... until sigma_min is this x SINGULAR_SIGMA_MIN
+REGULAR_STALL = 1e-4  # ... and a step that raises sigma_min by less than this ends the climb
 SIGMA_STEP_RAD = 1e-6  # the central difference of sigma_min's gradient
 
 
@@ -256,9 +258,12 @@ def regular_posture(model: RobotModel, q: Sequence[float], quat_desired: Sequenc
     Steepest ascent of :func:`sigma_min` within the null space of J: its gradient by central
     differences, projected onto the self-motion, a step at most ``POSTURE_MAX_STEP_RAD`` long
     (any joint), taken back onto the goal, halved until ``sigma_min`` rises there within the
-    limits and out of the joint-limit bands (``margin_rad``). Returns the first configuration
-    whose ``sigma_min`` reaches ``REGULAR_MARGIN x SINGULAR_SIGMA_MIN``, polished, or None if
-    none does within ``REGULAR_ITERATIONS`` steps. :func:`posture` stops at the posture nearest
+    limits, still on the goal (``RESIDUAL_TOLERANCE``: a step clipped at a limit may leave it)
+    and out of the joint-limit bands (``margin_rad``). Returns the first configuration whose
+    ``sigma_min`` reaches ``REGULAR_MARGIN x SINGULAR_SIGMA_MIN``, polished and within the
+    limits, or None if none does within ``REGULAR_ITERATIONS`` steps, or a step raises
+    ``sigma_min`` by less than ``REGULAR_STALL`` (a plateau: the climb would cost the goal
+    check for nothing). :func:`posture` stops at the posture nearest
     the measured configuration, which may lie in a near-singular stretch of the self-motion
     that a short slide leaves (docs/lyapunov.md, section 9).
     """
@@ -270,12 +275,18 @@ def regular_posture(model: RobotModel, q: Sequence[float], quat_desired: Sequenc
     def in_band(x: np.ndarray) -> bool:
         return bool(np.any(limited & ((x < lower + margin_rad) | (x > upper - margin_rad))))
 
+    def done(x: np.ndarray) -> Optional[np.ndarray]:
+        x = polish(model, x, quat_desired, p_desired, task)
+        if x is None or np.any(x < lower) or np.any(x > upper):
+            return None
+        return x
+
     target = REGULAR_MARGIN * SINGULAR_SIGMA_MIN
     sigma = sigma_min(model, q, task)
     eye = np.eye(q.size) * SIGMA_STEP_RAD
     for _ in range(REGULAR_ITERATIONS):
         if sigma >= target:
-            return polish(model, q, quat_desired, p_desired, task)
+            return done(q)
         _, J = _pose_residual(model, q, quat_desired, p_desired, task)
         rows = J.shape[0]
         if rows >= J.shape[1]:
@@ -291,14 +302,19 @@ def regular_posture(model: RobotModel, q: Sequence[float], quat_desired: Sequenc
         for _ in range(POSTURE_HALVINGS):
             q_try = _onto_goal(model, np.clip(q + step, lower, upper), quat_desired, p_desired,
                                task, lower, upper)
+            residual = float(np.linalg.norm(
+                _pose_residual(model, q_try, quat_desired, p_desired, task)[0]))
             sigma_try = sigma_min(model, q_try, task)
-            if sigma_try > sigma and not in_band(q_try):
+            if (sigma_try > sigma and residual < RESIDUAL_TOLERANCE
+                    and not in_band(q_try)):
                 break
             step *= 0.5
         else:
             return None  # sigma_min is at a local maximum along the self-motion, or in a band
+        if sigma_try - sigma < REGULAR_STALL and sigma_try < target:
+            return None
         q, sigma = q_try, sigma_try
-    return polish(model, q, quat_desired, p_desired, task) if sigma >= target else None
+    return done(q) if sigma >= target else None
 
 
 MAX_STARTS = 12  # IK starts per check: measured q, mid-range, then seeded random ones
@@ -421,7 +437,8 @@ def search_goal_configuration(model: RobotModel, q_measured: Optional[Sequence[f
     A redundant arm reaches a goal along a whole self-motion: each solution is slid along it
     to its best posture (:func:`posture`: nearest ``q_measured``, then ``q_preferred``, by
     default the middle of the ranges, with ``posture_weight``, and out of the bands), so q*
-    fixes the elbow where the arm already is (docs/lyapunov.md, section 9).
+    fixes the elbow where the arm already is, and on up ``sigma_min`` if it is near-singular
+    there (:func:`regular_posture`; docs/lyapunov.md, section 9).
     """
     lower, upper, limited = _limits(model)
     lo, hi = sampling_box(model)
@@ -455,7 +472,9 @@ def search_goal_configuration(model: RobotModel, q_measured: Optional[Sequence[f
             if sigma_min(model, q, task) < SINGULAR_SIGMA_MIN:  # a short slide may leave it
                 regular = regular_posture(model, q, quat_desired, p_desired, task, margin_rad)
                 if regular is not None:
-                    q = representative(regular, q_now, lower, upper, margin_rad)
+                    regular = representative(regular, q_now, lower, upper, margin_rad)
+                    if np.all(regular >= lower) and np.all(regular <= upper):
+                        q = regular
         if np.any(q < lower) or np.any(q > upper):
             return None
         sigma = sigma_min(model, q, task)

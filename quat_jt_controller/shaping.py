@@ -499,9 +499,10 @@ def fade_tops(learned_nm: Sequence[float], seen_inertia: Sequence[float], tick_s
     ``FADE_TOP_FRACTION`` and at least ``FADE_FLOOR_FRACTION`` of the limit (the floor, not
     the bound, where ``a_j`` is larger than ``design_gains`` lets it be, or ``I_j`` is not
     positive and finite); the creep's top is ``CREEP_TOP_FRACTION / FADE_TOP_FRACTION`` of it.
-    ``tick_s`` is the control period ``dt``. A joint that has learned little keeps the tops at
-    their largest; one that has learned much for its inertia creeps and is pushed more slowly
-    (docs/lyapunov.md, section 4).
+    ``tick_s`` is the ``dt`` it assumes: the regulator passes the longest recent time between
+    states (``Regulator.update``), so a burst of close states does not raise the tops. A joint
+    that has learned little keeps the tops at their largest; one that has learned much for its
+    inertia creeps and is pushed more slowly (docs/lyapunov.md, section 4).
     """
     share = CREEP_TOP_FRACTION / FADE_TOP_FRACTION
     ticks = 1.0 + FADE_DELAY_TICKS

@@ -298,3 +298,38 @@ def test_a_near_singular_posture_is_slid_along_the_self_motion_until_regular():
     x_d, x_p = goal_at(xarm, q_x)
     assert sigma_min(xarm, q_x, POSE) < SINGULAR_SIGMA_MIN
     assert regular_posture(xarm, np.array(q_x), x_d, x_p, POSE) is None
+
+
+@pytest.mark.parametrize('task', [POSE, Task.POSITION])
+def test_the_climb_to_a_regular_posture_stays_on_the_goal_and_within_the_limits(task):
+    """
+    Near-singular Panda configurations, no band margin: what the climb returns is regular.
+
+    A step clipped at a joint limit leaves the goal; such a step is not taken, so the result
+    is on the goal, within the limits and regular, or None.
+    """
+    import numpy as np
+    from quat_jt_controller.inverse_kinematics import (
+        POLISHED_TOLERANCE, regular_posture, sigma_min, SINGULAR_SIGMA_MIN)
+    model = panda_model()
+    rng = np.random.default_rng(0)
+    lower, upper = np.array(model.position_lower), np.array(model.position_upper)
+    tried = climbed = 0
+    while tried < 20:
+        q = rng.uniform(lower, upper)
+        if sigma_min(model, q, task) >= SINGULAR_SIGMA_MIN:
+            continue
+        tried += 1
+        q_d, p_d = goal_at(model, q.tolist())
+        out = regular_posture(model, q, q_d, p_d, task)
+        if out is None:
+            continue
+        climbed += 1
+        assert np.all(out >= lower) and np.all(out <= upper)
+        assert sigma_min(model, out, task) >= SINGULAR_SIGMA_MIN
+        p, R = model.forward_kinematics(out.tolist())
+        assert np.linalg.norm(np.subtract(p, p_d)) < POLISHED_TOLERANCE
+        if task is POSE:
+            _, e = quat.orientation_error(quat.from_rotation_matrix(R), q_d)
+            assert np.linalg.norm(e) < POLISHED_TOLERANCE
+    assert climbed >= 3  # not vacuous
