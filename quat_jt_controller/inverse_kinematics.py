@@ -263,9 +263,9 @@ def regular_posture(model: RobotModel, q: Sequence[float], quat_desired: Sequenc
     ``sigma_min`` reaches ``REGULAR_MARGIN x SINGULAR_SIGMA_MIN``, polished and within the
     limits, or None if none does within ``REGULAR_ITERATIONS`` steps, or a step raises
     ``sigma_min`` by less than ``REGULAR_STALL`` (a plateau: the climb would cost the goal
-    check for nothing). :func:`posture` stops at the posture nearest
-    the measured configuration, which may lie in a near-singular stretch of the self-motion
-    that a short slide leaves (docs/lyapunov.md, section 9).
+    check for nothing). :func:`posture` stops at the posture nearest the measured
+    configuration, which may lie in a near-singular stretch of the self-motion that a short
+    slide leaves (docs/lyapunov.md, section 9).
     """
     q = np.array(q, dtype=float)
     lower = np.array(model.position_lower, dtype=float)
