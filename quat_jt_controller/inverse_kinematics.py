@@ -211,9 +211,6 @@ def posture(model: RobotModel, q: Sequence[float], quat_desired: Sequence[float]
         return 0.5 * (float(np.sum((x - q_now) ** 2)) + weight * float(np.sum((x - q_pref) ** 2))
                       + POSTURE_BAND_WEIGHT * float(np.sum(depth(x) ** 2)))
 
-    def onto_goal(x: np.ndarray) -> np.ndarray:
-        return _onto_goal(model, x, quat_desired, p_desired, task, lower, upper)
-
     _, J = _pose_residual(model, q, quat_desired, p_desired, task)
     rows = J.shape[0]
     if rows >= J.shape[1]:
@@ -232,7 +229,8 @@ def posture(model: RobotModel, q: Sequence[float], quat_desired: Sequence[float]
         if largest > POSTURE_MAX_STEP_RAD:  # the self-motion is curved: short steps
             step *= POSTURE_MAX_STEP_RAD / largest
         for _ in range(POSTURE_HALVINGS):
-            q_try = onto_goal(np.clip(q + step, lower, upper))
+            q_try = _onto_goal(model, np.clip(q + step, lower, upper), quat_desired, p_desired,
+                               task, lower, upper)
             c_try = cost(q_try)
             if c_try < c_now:
                 break

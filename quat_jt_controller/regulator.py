@@ -413,9 +413,9 @@ class Regulator:
         goal, q_star = self._target
         band = self._band_at(band, q_star)
         qdot_goal = self._goal_joint_velocity
+        step = dt_s if dt_s < MAX_LEARNING_STEP_S else MAX_LEARNING_STEP_S  # what counts
         if dt_s > 0.0 and shaping.learning_on:  # the learning's acceleration estimate
             self._track_acceleration(qdot, dt_s)
-            step = dt_s if dt_s < MAX_LEARNING_STEP_S else MAX_LEARNING_STEP_S
             kept = self._tick_s * TICK_MEMORY  # ... and the period its fade tops assume
             self._tick_s = step if step > kept else kept
         y, eta_e, rows, p, R = self.error(q, goal)
@@ -497,8 +497,7 @@ class Regulator:
             return TickOutput(list(self._zero), y, eta_e, p, R, False, False, tuple(self._zero),
                               self.task)
         if shaping.learning_on and dt_s > 0.0:  # only from a finite tick: never poisoned
-            sh.learn_friction(self._learned_friction_nm, self._stuck, phi, shaping,
-                              dt_s if dt_s < MAX_LEARNING_STEP_S else MAX_LEARNING_STEP_S,
+            sh.learn_friction(self._learned_friction_nm, self._stuck, phi, shaping, step,
                               self._unmet, self._held)
         saturated = cl.saturate(tau, self.effort_limits_nm)
         return TickOutput(tau, y, eta_e, p, R, saturated, True, tuple(tau_p), self.task)
