@@ -81,7 +81,8 @@ from quat_jt_controller import shaping as sh
 from quat_jt_controller.controller_config import (controller_from_config,
                                                   controller_from_package_config)
 from quat_jt_controller.gain_design import CRUISE_FRACTION, SPEED_MARGIN
-from quat_jt_controller.inverse_kinematics import goal_configuration
+from quat_jt_controller.goal_check import heavy_warning
+from quat_jt_controller.inverse_kinematics import goal_configuration, sampling_box
 from quat_jt_controller.model import RobotModel
 from quat_jt_controller.reference_sim import ClosedLoop, run_sampled
 from quat_jt_controller.stall import StallDetector
@@ -153,7 +154,7 @@ def load_controller(robot: Robot, potential: Optional[str] = None,
 def cases(model: RobotModel, robot: Robot, count: int, seed: int) -> list:
     """Return ``count`` seeded (start, goal) joint configurations, as the targets define them."""
     rng = np.random.default_rng(seed)
-    lower, upper = np.array(model.position_lower), np.array(model.position_upper)
+    lower, upper = sampling_box(model)  # a joint without stops: one turn
     mid, half = 0.5 * (lower + upper), 0.5 * (upper - lower)
     lo, hi = mid - robot.fraction * half, mid + robot.fraction * half
     out = []
@@ -163,6 +164,8 @@ def cases(model: RobotModel, robot: Robot, count: int, seed: int) -> list:
             _, _, J = model.kinematics(qg.tolist())
             rows = robot.task.rows(np.array(J))
             if np.linalg.svd(rows, compute_uv=False)[-1] < robot.goal_sigma_min:
+                continue
+            if heavy_warning(model, qg):  # a pose the arm cannot be sure to hold up
                 continue
             out.append((q0, qg))
             continue
@@ -672,7 +675,7 @@ def arm_robot(name: str, urdf_path: str, base_link: Optional[str], tip_link: Opt
     base, tip, joints = arms.arm_links(urdf, base_link, tip_link)
     model = RobotModel(urdf, base, tip, joints)
     rng = np.random.default_rng(0)
-    lower, upper = np.array(model.position_lower), np.array(model.position_upper)
+    lower, upper = sampling_box(model)
     mid, half = 0.5 * (lower + upper), 0.5 * (upper - lower)
     sigmas = []
     for _ in range(200):
@@ -800,6 +803,8 @@ def main(argv: Optional[list] = None) -> int:
     source.add_argument('--urdf', type=Path, help='the URDF file of the arm')
     source.add_argument('--example-robot', help='an example-robot-data arm (one of '
                         f'{", ".join(arms.EXAMPLE_ROBOTS)})')
+    arm.add_argument('--name', help="the arm's name in the table (default: the example "
+                     "robot's, or the URDF file's stem)")
     arm.add_argument('--base-link', help="default: the URDF's root link")
     arm.add_argument('--tip-link', help='default: the child of the last revolute joint of the '
                      'longest chain')
@@ -882,8 +887,8 @@ def main_arm(parser: argparse.ArgumentParser, args, overrides: dict) -> int:
                             ('--friction-effort-share', args.friction_effort_share or 0.0)):
             if not (math.isfinite(value) and value >= 0.0):
                 raise ValueError(f'{name} must be finite and >= 0, got {value}')
-        robot = arm_robot(args.example_robot or Path(path).stem, str(path), args.base_link,
-                          args.tip_link, cl.Task(args.task),
+        robot = arm_robot(args.name or args.example_robot or Path(path).stem, str(path),
+                          args.base_link, args.tip_link, cl.Task(args.task),
                           args.fraction if args.fraction is not None else 0.8,
                           args.duration if args.duration is not None else 5.0)
     except (ValueError, OSError) as exc:

@@ -51,6 +51,10 @@ from quat_jt_runtime.joints import check_state_rate
 from quat_jt_runtime.param_table import row
 
 TORQUE_SHARE = 0.8  # of what gravity and friction compensation leave; the rest: damping
+# the most of a joint's effort limit the budget reserves for gravity: an arm whose URDF needs
+# more somewhere within its limits is designed for the rest, with a warning (not refused)
+GRAVITY_RESERVE_SHARE = 0.75
+UNHELD_SHARE_MAX = 0.5  # of the survey's configurations where gravity exceeds the effort: refused
 GUIDE_OVER_TASK = 1.2  # the goal-configuration term must overcome the task term at a stop
 LIMIT_OVER_TASK = 1.5  # the limit band at the stop holds 1.5 x the task term's bound
 LAMBDA_ORIENTATION = 4.0  # tanh(4 ||e||) = 0.96 at ||e|| = 0.5 (60 degrees)
@@ -178,21 +182,21 @@ def survey(model: RobotModel, task: cl.Task, seed: int = 0) -> dict:
     Return what the rules need from the robot, measured on seeded random configurations.
 
     ``gravity_max`` and ``lever_max`` (the largest ||J_p[:, j]||, m) over SURVEY
-    configurations within the limits; ``configurations``: SAMPLES regular ones (sigma_min of
-    the task Jacobian >= REGULAR_SIGMA_MIN) within 90% of the ranges, with their task
-    Jacobians and M(q), among at most REGULAR_TRIES random ones; if fewer are found, the
-    best ones down to REGULAR_RELATIVE x the largest sigma_min (``regular_sigma_min`` the
-    threshold used); ``inertia_min`` the smallest inertia a joint sees over all of them,
-    ``1 / (M^-1)_jj`` (the others free to move; up to several times below M_jj on a coupled
-    arm).
+    configurations within the limits (``gravity``: each one's |g(q)|, SURVEY x n);
+    ``configurations``: SAMPLES regular ones (sigma_min of the task Jacobian >=
+    REGULAR_SIGMA_MIN) within 90% of the ranges, with their task Jacobians and M(q), among at
+    most REGULAR_TRIES random ones; if fewer are found, the best ones down to REGULAR_RELATIVE
+    x the largest sigma_min (``regular_sigma_min`` the threshold used); ``inertia_min`` the
+    smallest inertia a joint sees over all of them, ``1 / (M^-1)_jj`` (the others free to
+    move; up to several times below M_jj on a coupled arm).
     """
     rng = np.random.default_rng(seed)
     n = model.n
-    g_max, lever, inertia_min = np.zeros(n), np.zeros(n), np.full(n, np.inf)
+    gravity, lever, inertia_min = [], np.zeros(n), np.full(n, np.inf)
     for _ in range(SURVEY):
         q = _sample(model, rng, 1.0)
         _, _, J = model.kinematics(q.tolist())
-        g_max = np.maximum(g_max, np.abs(model.gravity(q.tolist())))
+        gravity.append(np.abs(model.gravity(q.tolist())))
         lever = np.maximum(lever, np.linalg.norm(np.array(J)[:3], axis=0))
         inertia_min = np.minimum(inertia_min, seen_inertia(model.mass_matrix(q.tolist())))
     regular, others = [], []
@@ -221,7 +225,9 @@ def survey(model: RobotModel, task: cl.Task, seed: int = 0) -> dict:
         M = model.mass_matrix(q.tolist())
         inertia_min = np.minimum(inertia_min, seen_inertia(M))
         configs.append((q, rows, M))
-    return {'gravity_max': g_max, 'lever_max': lever, 'inertia_min': inertia_min,
+    gravity = np.array(gravity)
+    return {'gravity_max': gravity.max(axis=0), 'gravity': gravity,
+            'lever_max': lever, 'inertia_min': inertia_min,
             'configurations': configs, 'regular_sigma_min': threshold}
 
 
@@ -417,20 +423,30 @@ def design(model: RobotModel, task: cl.Task, rate_hz: float = 1000.0,
     per_tick = TICK_SPEED_SHARE * velocity * inertia / dt_s
     learning = np.where(friction > 0.0, friction_learning * friction,
                         np.minimum(friction_effort_share * effort, per_tick))
-    budget = TORQUE_SHARE * (effort - data['gravity_max'] - friction - learning)
-    if np.any(budget <= 0.0):
+    unheld = (data['gravity'] > effort).mean(axis=0)
+    if np.any(unheld > UNHELD_SHARE_MAX):
+        weak = np.flatnonzero(unheld > UNHELD_SHARE_MAX)
+        raise ValueError(
+            'the arm cannot hold itself up in most of its configurations: joints '
+            f'{[model.joint_names[j] for j in weak]} need more than their effort limits '
+            f'{effort[weak].tolist()} against gravity in '
+            f'{[round(100.0 * unheld[j]) for j in weak]}% of {SURVEY} random configurations '
+            f'within the limits (up to {np.round(data["gravity_max"][weak], 3).tolist()} N m): '
+            'check the effort limits of the URDF, and that gravity is along -z of the base '
+            f'link {model.base_link!r} (give --base-link a level link)')
+    # gravity is spoken for, up to GRAVITY_RESERVE_SHARE of the effort (gravity_warnings)
+    reserve = np.minimum(data['gravity_max'], GRAVITY_RESERVE_SHARE * effort)
+    budget = TORQUE_SHARE * (effort - reserve - friction - learning)
+    if np.any(budget <= 0.0):  # only friction estimates can take the rest of the effort
         short = np.flatnonzero(budget <= 0.0)
-        held = short[data['gravity_max'][short] >= effort[short]]
-        hint = (f'; the arm cannot hold itself up everywhere within its limits '
-                f'({[model.joint_names[j] for j in held]}): check the effort limits of the URDF, '
-                f'and that gravity is along -z of the base link {model.base_link!r} (give '
-                '--base-link a level link)' if held.size else '')
         raise ValueError(f'no torque left for the potential on joints '
                          f'{[model.joint_names[j] for j in short]}: '
-                         f'effort {effort.tolist()}, gravity up to '
-                         f'{np.round(data["gravity_max"], 3).tolist()} (the largest over '
-                         f'{SURVEY} configurations within the limits), friction and its '
-                         f'learnable share {np.round(friction + learning, 3).tolist()}{hint}')
+                         f'effort {effort.tolist()}, reserved for gravity '
+                         f'{np.round(reserve, 3).tolist()} (the largest over {SURVEY} '
+                         f'configurations within the limits, at most {GRAVITY_RESERVE_SHARE:g} '
+                         'x the effort), friction and its learnable share '
+                         f'{np.round(friction + learning, 3).tolist()}: check the friction '
+                         'estimates (--friction) and the effort limits')
     # Speed rule: never ask a joint for more than its damping can hold at SPEED_MARGIN x its
     # velocity limit (holding_limit; b_max: the largest damping the sampled loop tolerates on
     # its smallest inertia, halved); K_v is raised below (holding_damping) where the cubic
@@ -532,7 +548,7 @@ def design(model: RobotModel, task: cl.Task, rate_hz: float = 1000.0,
         half = 0.5 * float(np.min((upper - lower)[limited]))
         margin = round(min(LIMIT_MARGIN_MAX_RAD, LIMIT_MARGIN_FRACTION * half), 3)
         for j in np.flatnonzero(limited):
-            k = min(LIMIT_OVER_TASK * bound[j], effort[j] - data['gravity_max'][j]) / margin
+            k = min(LIMIT_OVER_TASK * bound[j], effort[j] - reserve[j]) / margin
             while _joint_unstable(inertia[j], k, kv[j], b_max[j], delays, dt_s):
                 k *= SHRINK
             limit_gain[j] = k
@@ -608,6 +624,7 @@ def design(model: RobotModel, task: cl.Task, rate_hz: float = 1000.0,
         'cruise_fraction': cruise_fraction,
         'regular_sigma_min': data['regular_sigma_min'],
         'warnings': (friction_warnings(model, friction, learning)
+                     + gravity_warnings(model, effort, data['gravity'])
                      + inertia_warnings(model, effort, inertia)
                      + learning_warnings(model, friction, learning,
                                          friction_effort_share * effort)),
@@ -622,6 +639,33 @@ def design(model: RobotModel, task: cl.Task, rate_hz: float = 1000.0,
     }
     return Design(task, model.joint_names, model.base_link, model.tip_link, rate_hz, kp_r,
                   kv_r, lam_r, shaping, figures, model.armature)
+
+
+def gravity_warnings(model: RobotModel, effort: np.ndarray,
+                     gravity: np.ndarray) -> list[str]:
+    """
+    Warn of joints whose gravity torque takes more than GRAVITY_RESERVE_SHARE of their effort.
+
+    ``gravity`` is |g(q)| at the survey's configurations (SURVEY x n). The budget reserves
+    only that share for gravity, so such an arm is designed rather than refused; where a
+    joint needs more, the regulator has less than its budget, and past the effort limit the
+    clamped torque cannot hold the arm up. ``goal_check`` warns of goals there.
+    """
+    heavy = gravity > GRAVITY_RESERVE_SHARE * effort
+    over = gravity > effort
+    names = [f'{model.joint_names[j]} (up to {gravity[:, j].max():.3g} N m of its '
+             f'{effort[j]:.3g}; more than {GRAVITY_RESERVE_SHARE:g} x it in '
+             f'{100.0 * heavy[:, j].mean():.0f}% of the configurations, more than all of it in '
+             f'{100.0 * over[:, j].mean():.0f}%)'
+             for j in np.flatnonzero(heavy.any(axis=0))]
+    if not names:
+        return []
+    return [f'gravity takes more than {GRAVITY_RESERVE_SHARE:g} x the effort limit somewhere '
+            f'within the limits ({SURVEY} random configurations): {", ".join(names)}. The '
+            f'design reserves {GRAVITY_RESERVE_SHARE:g} x the effort limit for gravity; where '
+            'a joint needs more the torque saturates and the arm may sag, and the goal check '
+            "warns of such goals. Check the URDF's effort limits, and that gravity is along "
+            f'-z of the base link {model.base_link!r} (--base-link a level link)']
 
 
 def inertia_warnings(model: RobotModel, effort: np.ndarray, inertia: np.ndarray) -> list[str]:

@@ -22,6 +22,7 @@ import time
 from typing import Callable, NamedTuple, Optional, Sequence
 
 from quat_jt_controller.control_law import Task
+from quat_jt_controller.gain_design import GRAVITY_RESERVE_SHARE
 from quat_jt_controller.inverse_kinematics import configuration_velocity, MAX_STARTS
 from quat_jt_controller.inverse_kinematics import RESIDUAL_TOLERANCE, search_goal_configuration
 from quat_jt_controller.inverse_kinematics import Search, SINGULAR_SIGMA_MIN, solve_ik, starts
@@ -46,11 +47,35 @@ def unreached_warning(best_q: Sequence[float], best_residual: float, starts: int
             'assumption A1 may not hold')
 
 
+def heavy_warning(model: RobotModel, q: Sequence[float]) -> str:
+    """
+    Return a warning if gravity at ``q`` takes more than the design's reserve of an effort.
+
+    ``gain_design`` reserves ``GRAVITY_RESERVE_SHARE`` of each joint's effort limit for
+    gravity; past it the regulator has less than its budget, and past the effort limit the
+    clamped torque cannot hold the arm there at all. '' if no joint is that loaded.
+    """
+    gravity = [abs(g) for g in model.gravity(list(q))]
+    heavy = [f'{name} {g:.3g} of {e:.3g} N m' for name, g, e
+             in zip(model.joint_names, gravity, model.effort_limits)
+             if g > GRAVITY_RESERVE_SHARE * e]
+    if not heavy:
+        return ''
+    q_text = [round(float(x), 4) for x in q]
+    return (f'it is reached at q = {q_text}, where gravity takes more than '
+            f'{GRAVITY_RESERVE_SHARE:g} x the effort limit ({", ".join(heavy)}): the torque may '
+            'saturate and the arm may not hold that pose')
+
+
 def check_goal(model: RobotModel, q_measured: Optional[Sequence[float]],
                quat_desired: Sequence[float], p_desired: Sequence[float], task: Task,
                max_starts: int = MAX_STARTS, seed: int = 0) -> str:
     """
     Return a warning if the goal breaks assumption A1 or A2, or '' if it is fine.
+
+    A goal whose first regular configuration found (the measured q is the first start, so
+    near the arm) is one where gravity takes more of an effort limit than the design reserves
+    for it gets :func:`heavy_warning`.
 
     Tries the IK :func:`~quat_jt_controller.inverse_kinematics.starts` (the measured q, the
     middle of the joint ranges, then seeded random configurations within the limits) until one
@@ -67,7 +92,7 @@ def check_goal(model: RobotModel, q_measured: Optional[Sequence[float]],
         if residual < RESIDUAL_TOLERANCE:
             sigma = model.task_sigma_min(J, Task(task).has_position)
             if sigma >= SINGULAR_SIGMA_MIN:
-                return ''
+                return heavy_warning(model, q)  # '' unless gravity loads it past the reserve
             if singular is None or sigma > singular[1]:
                 singular = (q, sigma)
     if singular is not None:

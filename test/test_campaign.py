@@ -53,6 +53,20 @@ def test_the_chain_of_an_arm_is_found_from_its_urdf():
         arms.example_robot_urdf('nao')
 
 
+@pytest.mark.unit
+def test_an_arm_with_continuous_joints_gets_its_cases_within_one_turn(tmp_path):
+    """A joint without stops is drawn from one turn (its limits are infinite)."""
+    path = tmp_path / 'arm.urdf'
+    path.write_text(small_arm_urdf())  # joints 1 and 4 continuous
+    robot = rx.arm_robot('small', str(path), None, None, cl.Task.ORIENTATION)
+    model = rx.RobotModel(path.read_text(), robot.base_link, robot.tip_link, list(robot.joints))
+    assert model.continuous == (True, False, False, True, False)
+    pairs = np.array(rx.cases(model, robot, 20, seed=1))
+    assert pairs.shape == (20, 2, 5) and np.isfinite(pairs).all()
+    assert np.abs(pairs).max() <= robot.fraction * np.pi
+    assert np.abs(pairs[:, :, [0, 3]]).max() > 1.0  # spread over the turn, not stuck at 0
+
+
 def _short(robot: rx.Robot) -> rx.Robot:
     return dataclasses.replace(robot, duration_s=0.3)
 

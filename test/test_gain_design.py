@@ -197,6 +197,24 @@ def test_the_learnable_friction_comes_out_of_the_budget():
         gd.design(model, cl.Task.ORIENTATION, friction_nm=friction, friction_learning=-1.0)
 
 
+def test_an_arm_that_cannot_hold_itself_everywhere_is_designed_with_a_warning():
+    """Gravity past the effort limit in some configurations: warned, not refused."""
+    model = xarm6_model()  # joint2 needs up to 25.3 N m against gravity within its limits
+    stock = gd.design(model, cl.Task.POSE)
+    assert not [w for w in stock.figures['warnings'] if w.startswith('gravity')]
+    weak = gd.design(model, cl.Task.POSE, effort_limits_nm=[50.0, 20.0, 32.0, 32.0, 32.0, 20.0])
+    warned = [w for w in weak.figures['warnings'] if w.startswith('gravity takes more')]
+    assert len(warned) == 1 and 'joint2 (up to 25.3 N m of its 20;' in warned[0], warned
+    assert 'joint1' not in warned[0] and 'joint3' not in warned[0]
+    # only the reserve, 0.75 x 20 N m, is spoken for: the budget is what is left of the rest
+    assert 0.0 < weak.figures['budget_nm'][1] <= gd.TORQUE_SHARE * (
+        20.0 * (1.0 - gd.GRAVITY_RESERVE_SHARE))
+    np.testing.assert_allclose(weak.figures['budget_nm'][2:], stock.figures['budget_nm'][2:])
+    with pytest.raises(ValueError, match=r'cannot hold itself up in most of its configurations: '
+                       r"joints \['joint2'\] need more"):
+        gd.design(model, cl.Task.POSE, effort_limits_nm=[50.0, 5.0, 32.0, 32.0, 32.0, 20.0])
+
+
 def test_the_simulator_config_is_what_the_tool_writes(tmp_path):
     """config/panda_sim.yaml comes from the same command as the controller's, for its joints."""
     out, sim_out = tmp_path / 'c.yaml', tmp_path / 's.yaml'
@@ -279,11 +297,11 @@ def run_main(argv, capsys) -> tuple[int, list[str]]:
      'in (0, 1]'),
     (['--task', 'velocity'], 2, "argument --task: invalid choice: 'velocity'"),
     (['--task', 'position'], 1, 'the position task Jacobian is singular'),
-    (['--effort-limits', '0.1', '0.1', '0.1'], 1, 'no design: no torque left for the '
-     "potential on joints ['joint2']"),
-    (['--effort-limits', '0.1', '0.1', '0.1'], 1, 'the arm cannot hold itself up everywhere '
-     "within its limits (['joint2']): check the effort limits of the URDF, and that gravity is "
-     'along -z of the base link'),
+    (['--effort-limits', '0.1', '0.1', '0.1'], 1, 'no design: the arm cannot hold itself up '
+     "in most of its configurations: joints ['joint2'] need more than their effort limits"),
+    (['--effort-limits', '0.1', '0.1', '0.1'], 1, 'check the effort limits of the URDF, and '
+     'that gravity is along -z of the base link'),
+    (['--friction', '40', '1', '1'], 1, "no torque left for the potential on joints ['joint1']"),
     (['--out', 'no/such/folder/x.yaml'], 1, 'cannot write no/such/folder/x.yaml: No such file'),
 ])
 def test_a_bad_input_is_one_line_naming_it(argv, status, words, capsys, monkeypatch):

@@ -9,7 +9,7 @@ from quat_jt_controller.control_law import Task
 from quat_jt_controller.goal_check import check_goal
 from quat_jt_controller.inverse_kinematics import sigma_min, solve_ik
 from quat_jt_controller.model import RobotModel, SINGULAR_SIGMA_MIN
-from robots import Q_DESIRED, small_arm_urdf, wrist_model, xarm6_model
+from robots import Q_DESIRED, small_arm_urdf, wrist_model, xarm6_model, XARM6_URDF
 
 pytestmark = pytest.mark.unit
 
@@ -56,6 +56,22 @@ def test_xarm_goal_outside_the_workspace_breaks_a1():
     assert 'A1' in warning, warning
 
 
+def test_a_goal_where_gravity_takes_most_of_an_effort_limit_is_warned_of():
+    """The design reserves 0.75 x the effort for gravity: a goal past it is named."""
+    urdf = XARM6_URDF.read_text()
+    joint2 = urdf.index('<limit effort="50.0" lower="-2.059"')
+    weak = RobotModel(urdf[:joint2] + urdf[joint2:].replace('effort="50.0"', 'effort="12.0"', 1),
+                      'link_base', 'link6')
+    assert weak.effort_limits[1] == 12.0
+    light, heavy = [0.0, -0.5, -1.0, 0.0, 1.5, 0.0], [0.0, 1.0, -1.0, 0.0, 1.0, 0.0]
+    assert abs(weak.gravity(light)[1]) < 9.0 < abs(weak.gravity(heavy)[1])  # 0.75 x 12 N m
+    assert check_goal(weak, light, *goal_at(weak, light), POSE) == ''
+    warning = check_goal(weak, heavy, *goal_at(weak, heavy), POSE)
+    assert re.search(r'gravity takes more than 0.75 x the effort limit \(joint2 16.5 of 12 N m\)',
+                     warning), warning
+    assert check_goal(xarm6_model(), heavy, *goal_at(weak, heavy), POSE) == ''
+
+
 def scaled_small_arm(scale):
     """Return the small arm of the tests, each joint origin ``scale`` x as far from its parent."""
     def origin(match):
@@ -90,8 +106,8 @@ def test_the_near_singular_test_is_the_same_for_an_arm_of_any_size(task):
             raw[scale] = np.linalg.svd(np.array(J)[:3], compute_uv=False)[-1]
             scaled[scale] = sigma_min(model, q, task)
             p, R = model.forward_kinematics(q)
-            verdicts.add(check_goal(model, [0.0, 0.5, 0.5, 0.0, 0.0],
-                                    quat.from_rotation_matrix(R), p, task) != '')
+            verdicts.add('singular' in check_goal(model, [0.0, 0.5, 0.5, 0.0, 0.0],
+                                                  quat.from_rotation_matrix(R), p, task))
         assert raw[10.0] == pytest.approx(100.0 * raw[0.1])
         assert scaled[10.0] == pytest.approx(scaled[0.1]) == pytest.approx(scaled[1.0])
         assert (scaled[1.0] < SINGULAR_SIGMA_MIN) == singular
