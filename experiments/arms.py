@@ -11,9 +11,8 @@ from importlib import metadata
 import os
 from pathlib import Path
 from typing import Optional
-import xml.etree.ElementTree as ET
 
-from quat_jt_runtime.joints import MOVABLE_TYPES
+from quat_jt_runtime.joints import chain_joints, default_links
 
 # name -> the URDF's path under example-robot-data's robots/ directory
 EXAMPLE_ROBOTS = {
@@ -27,7 +26,6 @@ EXAMPLE_ROBOTS = {
     'z1': 'z1_description/urdf/z1.urdf',
     'xarm7': 'xarm_description/urdf/xarm7.urdf',
 }
-ROTATING = ('revolute', 'continuous')
 
 
 def example_robot_roots() -> list:
@@ -54,55 +52,6 @@ def example_robot_urdf(name: str) -> Path:
     raise ValueError(f'example robot {name!r}: {EXAMPLE_ROBOTS[name]} not found '
                      + (f'under {[str(r) for r in roots]}' if roots else
                         '(example-robot-data is not installed: pip install example-robot-data)'))
-
-
-def _joints(urdf_xml: str) -> list:
-    root = ET.fromstring(urdf_xml)
-    return [(j.get('name'), j.get('type'), j.find('parent').get('link'),
-             j.find('child').get('link')) for j in root.findall('joint')]
-
-
-def default_links(urdf_xml: str) -> tuple:
-    """
-    Return ``(base_link, tip_link)``: the root link, and the end of the longest rotating chain.
-
-    The tip is the child link of the last revolute or continuous joint on the path from the root
-    with the most such joints (the first in document order on a tie): a gripper's prismatic
-    fingers do not count, a revolute gripper jaw does (give the tip link then).
-    """
-    joints = _joints(urdf_xml)
-    children = {c for _, _, _, c in joints}
-    links = [ln.get('name') for ln in ET.fromstring(urdf_xml).findall('link')]
-    roots = [ln for ln in links if ln not in children]
-    if len(roots) != 1:
-        raise ValueError(f'the URDF has {len(roots)} root links {roots}; give --base-link')
-    by_parent: dict = {}
-    for name, kind, parent, child in joints:
-        by_parent.setdefault(parent, []).append((kind, child))
-    best = (0, roots[0])
-    stack = [(roots[0], 0, roots[0])]
-    while stack:
-        link, count, tip = stack.pop(0)
-        if count > best[0]:
-            best = (count, tip)
-        for kind, child in by_parent.get(link, []):
-            rotating = kind in ROTATING
-            stack.append((child, count + rotating, child if rotating else tip))
-    return roots[0], best[1]
-
-
-def chain_joints(urdf_xml: str, base_link: str, tip_link: str) -> list:
-    """Return the movable joints from ``base_link`` to ``tip_link``, base first."""
-    by_child = {c: (name, kind, parent) for name, kind, parent, c in _joints(urdf_xml)}
-    out = []
-    link = tip_link
-    while link != base_link:
-        if link not in by_child:
-            raise ValueError(f'link {tip_link!r} is not below link {base_link!r}')
-        name, kind, link = by_child[link]
-        if kind in MOVABLE_TYPES:
-            out.append(name)
-    return out[::-1]
 
 
 def arm_links(urdf_xml: str, base_link: Optional[str] = None,

@@ -17,7 +17,8 @@ from quat_jt_controller.gain_design import (
     CRUISE_FRACTION, DEFAULT_FRICTION_EFFORT_SHARE, design, FRICTION_LEARNING)
 from quat_jt_controller.gain_output import ENGINES, sim_yaml, to_yaml
 from quat_jt_controller.model import ModelError, RobotModel
-from quat_jt_runtime.joints import check_state_rate, STATE_RATE_RANGE_HZ
+from quat_jt_runtime.joints import chain_joints, check_state_rate, default_links
+from quat_jt_runtime.joints import STATE_RATE_RANGE_HZ
 
 
 class _Parser(argparse.ArgumentParser):
@@ -98,6 +99,28 @@ def _public_argv(argv: Sequence[str]) -> list[str]:
     return [a.replace(folder, '<pybullet_data>') if folder else a for a in argv]
 
 
+def _default_chain(parser: argparse.ArgumentParser, args: argparse.Namespace, urdf: str) -> None:
+    """Fill in the links and joints not given from the URDF's tree, and say what was chosen."""
+    chosen = []
+    try:
+        if args.base_link is None or args.tip_link is None:
+            base, tip = default_links(urdf)
+            if args.base_link is None:
+                args.base_link = base
+                chosen.append(f"--base-link {base} (the URDF's root link)")
+            if args.tip_link is None:
+                args.tip_link = tip
+                chosen.append(f'--tip-link {tip} (the end of its longest chain of revolute '
+                              'joints)')
+        if args.joints is None:
+            args.joints = chain_joints(urdf, args.base_link, args.tip_link)
+            chosen.append(f'--joints {" ".join(args.joints)} (the movable joints between them)')
+    except ValueError as exc:
+        parser.error(f'{exc} (--urdf {args.urdf})')
+    if chosen:
+        print(f'design_gains: {"; ".join(chosen)}', file=sys.stderr)
+
+
 def main(argv: Optional[list] = None) -> int:
     """
     ``ros2 run quat_jt_controller design_gains`` / ``python -m ...gain_design``.
@@ -113,11 +136,16 @@ def main(argv: Optional[list] = None) -> int:
         prog='design_gains', description='Compute K_p, K_v, Lambda and the '
         'extensions of the regulator from the robot (docs/gain_design.md).')
     parser.add_argument('--urdf', type=Path, help='URDF file (default: the bundled wrist)')
-    parser.add_argument('--base-link', default='base_link',
-                        help='the frame of the goals (default: base_link, the wrist)')
-    parser.add_argument('--tip-link', default='tool0',
-                        help='the link whose pose is regulated (default: tool0, the wrist)')
-    parser.add_argument('--joints', nargs='+', help='controlled joints (default: all movable)')
+    parser.add_argument('--base-link',
+                        help="the frame of the goals (default: the URDF's root link; base_link "
+                             'for the wrist)')
+    parser.add_argument('--tip-link',
+                        help='the link whose pose is regulated (default: the child link of '
+                             'the last revolute or continuous joint of the longest chain of '
+                             'them; tool0 for the wrist)')
+    parser.add_argument('--joints', nargs='+',
+                        help='controlled joints (default: the movable joints from the base '
+                             'link to the tip link)')
     parser.add_argument('--task', choices=[t.value for t in cl.Task], default='orientation',
                         help="'orientation' (y = e, Eqs. 37/38), 'pose' (y = [p_d - p; e], "
                              "Eqs. 24/32) or 'position' (y = p_d - p: any reachable point, e.g. "
@@ -188,6 +216,10 @@ def main(argv: Optional[list] = None) -> int:
     if root != 'robot':
         parser.error(f'--urdf {args.urdf}: not a URDF (its root element is <{root}>, not '
                      '<robot>)')
+    if args.urdf is None:  # the bundled wrist
+        args.base_link, args.tip_link = args.base_link or 'base_link', args.tip_link or 'tool0'
+    else:
+        _default_chain(parser, args, urdf)
     try:
         model = RobotModel(urdf, args.base_link, args.tip_link, args.joints)
     except ModelError as exc:

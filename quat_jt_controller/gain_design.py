@@ -109,6 +109,7 @@ REGULAR_SIGMA_MIN = 0.1
 # radians), the best ones are taken, down to REGULAR_RELATIVE x the largest sigma_min found.
 REGULAR_TRIES = 2000
 REGULAR_RELATIVE = 0.5
+MASSLESS_KG_M2 = 1e-9  # the smallest eigenvalue of M(q) at or below this: M is singular
 SINGULAR_EVERYWHERE = 1e-6  # the largest sigma_min below this: the task is out of reach
 SHRINK = 0.8  # gains are scaled by this until the sampled loop is stable
 # The damping acts on qdot - g_v qdot*_d of a streamed goal: all of it (an exogenous input to
@@ -177,6 +178,18 @@ def _sample(model: RobotModel, rng: np.random.Generator, fraction: float) -> np.
     return rng.uniform(mid - fraction * half, mid + fraction * half)
 
 
+def _mass_matrix(model: RobotModel, q: np.ndarray) -> np.ndarray:
+    """M(q), or ValueError naming the joints that move no inertia (M singular)."""
+    M = np.array(model.mass_matrix(q.tolist()))
+    if np.linalg.eigvalsh(M)[0] > MASSLESS_KG_M2:
+        return M
+    light = [model.joint_names[j] for j in np.flatnonzero(np.diag(M) <= MASSLESS_KG_M2)]
+    raise ValueError(f'M(q) is singular at q = {np.round(q, 3).tolist()}: joints '
+                     f'{light or list(model.joint_names)} move no inertia there (links without '
+                     "<inertial> in the URDF?); give the drives' rotor inertia (--armature) or "
+                     'leave such joints out (--joints)')
+
+
 def survey(model: RobotModel, task: cl.Task, seed: int = 0) -> dict:
     """
     Return what the rules need from the robot, measured on seeded random configurations.
@@ -198,7 +211,7 @@ def survey(model: RobotModel, task: cl.Task, seed: int = 0) -> dict:
         _, _, J = model.kinematics(q.tolist())
         gravity.append(np.abs(model.gravity(q.tolist())))
         lever = np.maximum(lever, np.linalg.norm(np.array(J)[:3], axis=0))
-        inertia_min = np.minimum(inertia_min, seen_inertia(model.mass_matrix(q.tolist())))
+        inertia_min = np.minimum(inertia_min, seen_inertia(_mass_matrix(model, q)))
     regular, others = [], []
     for _ in range(REGULAR_TRIES):
         q = _sample(model, rng, 0.9)
@@ -222,7 +235,7 @@ def survey(model: RobotModel, task: cl.Task, seed: int = 0) -> dict:
         regular += [c for c in others if c[0] >= threshold][:SAMPLES - len(regular)]
     configs = []
     for _, q, rows in regular:
-        M = model.mass_matrix(q.tolist())
+        M = _mass_matrix(model, q)
         inertia_min = np.minimum(inertia_min, seen_inertia(M))
         configs.append((q, rows, M))
     gravity = np.array(gravity)

@@ -10,6 +10,7 @@ from typing import Optional, Sequence
 from xml.etree import ElementTree
 
 MOVABLE_TYPES = ('revolute', 'continuous', 'prismatic')
+ROTATING_TYPES = ('revolute', 'continuous')
 
 
 def movable_joints(urdf_xml: str) -> list[str]:
@@ -66,6 +67,73 @@ def select_joints(requested: Optional[Sequence[str]], movable: Sequence[str],
     if not names:
         raise error('no joints selected')
     return names
+
+
+def _parsed(urdf_xml: str) -> ElementTree.Element:
+    try:
+        return ElementTree.fromstring(urdf_xml)
+    except ElementTree.ParseError as exc:
+        raise ValueError(f'the URDF is not valid XML: {exc}') from exc
+
+
+def _joint_rows(root: ElementTree.Element) -> list[tuple[str, str, str, str]]:
+    """(name, type, parent link, child link) of each joint of a parsed URDF."""
+    return [(j.get('name'), j.get('type'), j.find('parent').get('link'),
+             j.find('child').get('link')) for j in root.findall('joint')]
+
+
+def default_links(urdf_xml: str) -> tuple[str, str]:
+    """
+    Return ``(base_link, tip_link)``: the root link, and the end of the longest rotating chain.
+
+    The tip is the child link of the last revolute or continuous joint on the path from the
+    root with the most such joints (the first in document order on a tie): a gripper's
+    prismatic fingers do not count, a revolute gripper jaw does (give the tip link then).
+    Raises ValueError if the URDF has no single root link.
+    """
+    root = _parsed(urdf_xml)
+    joints = _joint_rows(root)
+    children = {c for _, _, _, c in joints}
+    roots = [ln.get('name') for ln in root.findall('link') if ln.get('name') not in children]
+    if len(roots) != 1:
+        raise ValueError(f'the URDF has {len(roots)} root links {roots}; give the base link')
+    by_parent: dict[str, list[tuple[str, str]]] = {}
+    for _, kind, parent, child in joints:
+        by_parent.setdefault(parent, []).append((kind, child))
+    best = (0, roots[0])
+    queue = [(roots[0], 0, roots[0])]
+    while queue:
+        link, count, tip = queue.pop(0)
+        if count > best[0]:
+            best = (count, tip)
+        for kind, child in by_parent.get(link, []):
+            rotating = kind in ROTATING_TYPES
+            queue.append((child, count + rotating, child if rotating else tip))
+    return roots[0], best[1]
+
+
+def chain_joints(urdf_xml: str, base_link: str, tip_link: str) -> list[str]:
+    """
+    Return the movable joints from ``base_link`` to ``tip_link``, base first.
+
+    Raises ValueError if either is not a link of the URDF, or ``tip_link`` is not below
+    ``base_link``.
+    """
+    root = _parsed(urdf_xml)
+    links = {ln.get('name') for ln in root.findall('link')}
+    for name in (base_link, tip_link):
+        if name not in links:
+            raise ValueError(f'link {name!r} is not in the URDF')
+    by_child = {c: (name, kind, parent) for name, kind, parent, c in _joint_rows(root)}
+    out = []
+    link = tip_link
+    while link != base_link:
+        if link not in by_child:
+            raise ValueError(f'link {tip_link!r} is not below link {base_link!r}')
+        name, kind, link = by_child[link]
+        if kind in MOVABLE_TYPES:
+            out.append(name)
+    return out[::-1]
 
 
 class StateLayout:

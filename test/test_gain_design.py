@@ -22,7 +22,8 @@ from quat_jt_controller import quaternion as quat
 from quat_jt_controller import shaping as sh
 from quat_jt_controller.model import RobotModel
 from quat_jt_runtime.resources import default_urdf_xml
-from robots import PANDA_JOINTS, panda_model, PANDA_URDF, random_q, wrist_model, xarm6_model
+from robots import PANDA_JOINTS, panda_model, PANDA_URDF, random_q, small_arm_urdf
+from robots import wrist_model, xarm6_model
 import yaml
 
 pytestmark = pytest.mark.unit
@@ -277,6 +278,34 @@ def run_main(argv, capsys) -> tuple[int, list[str]]:
     except SystemExit as exc:
         status = exc.code
     return status, capsys.readouterr().err.splitlines()
+
+
+def test_a_urdf_without_links_given_gets_its_longest_chain_and_says_so(tmp_path, capsys):
+    """A whole robot's URDF: the root, the end of the longest chain, the joints between."""
+    urdf = small_arm_urdf(('revolute',) * 4).replace('</robot>', (
+        '<link name="side"/><joint name="side_joint" type="revolute"><parent link="link1"/>'
+        '<child link="side"/><axis xyz="0 0 1"/><limit lower="-1" upper="1" effort="5" '
+        'velocity="3"/></joint></robot>'))
+    path = tmp_path / 'robot.urdf'
+    path.write_text(urdf)
+    out = tmp_path / 'robot.yaml'
+    code, lines = run_main(['--urdf', str(path), '--task', 'orientation', '--out', str(out)],
+                           capsys)
+    assert code == 0, lines
+    assert lines[0] == ("design_gains: --base-link base_link (the URDF's root link); --tip-link "
+                        'tool (the end of its longest chain of revolute joints); --joints joint1 '
+                        'joint2 joint3 tool (the movable joints between them)'), lines
+    params = params_of(out.read_text())
+    assert params['joints'] == ['joint1', 'joint2', 'joint3', 'tool']  # not side_joint
+    assert (params['base_link'], params['tip_link']) == ('base_link', 'tool')
+    code, lines = run_main(['--urdf', str(path), '--tip-link', 'side', '--out', str(out)],
+                           capsys)
+    assert code == 1 and lines[-1].startswith('design_gains: error: no design: M(q) is '
+                                              'singular at q = '), lines  # a massless link
+    assert "joints ['side_joint'] move no inertia there" in lines[-1], lines
+    code, lines = run_main(['--urdf', str(path), '--base-link', 'side', '--out', str(out)],
+                           capsys)
+    assert code == 2 and "link 'tool' is not below link 'side'" in lines[0], lines
 
 
 @pytest.mark.parametrize('argv, status, words', [
