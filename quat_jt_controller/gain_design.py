@@ -55,7 +55,7 @@ TORQUE_SHARE = 0.8  # of what gravity and friction compensation leave; the rest:
 # more somewhere within its limits is designed for the rest, with a warning (not refused)
 GRAVITY_RESERVE_SHARE = 0.75
 UNHELD_SHARE_MAX = 0.5  # of the survey's configurations where gravity exceeds the effort: refused
-GUIDE_OVER_TASK = 1.2  # the goal-configuration term must overcome the task term at a stop
+GUIDE_OVER_TASK = 2.0  # the goal-configuration term must overcome the task term at a stop
 LIMIT_OVER_TASK = 1.5  # the limit band at the stop holds 1.5 x the task term's bound
 LAMBDA_ORIENTATION = 4.0  # tanh(4 ||e||) = 0.96 at ||e|| = 0.5 (60 degrees)
 POSITION_SATURATION_M = 0.1  # tanh(lambda_p 0.1 m) = 0.96

@@ -174,8 +174,9 @@ SHAPING = (
          bounds=(1e-6, 1.0), field='friction_position_band_m'),
     Spec('configuration_gain', Kind.DOUBLE_ARRAY, joint_zeros,
          'Most torque (N m) the goal-configuration term asks of each joint ({n}); it pulls '
-         'towards a goal configuration within the limits found by the goal check. Zeros = '
-         'off. Live.', default_text=JOINT_ZEROS_TEXT, **PER_JOINT),
+         'towards a goal configuration within the limits found by the goal check, fading in '
+         'over 0.1 s when that configuration is new. Zeros = off. Live.',
+         default_text=JOINT_ZEROS_TEXT, **PER_JOINT),
     Spec('configuration_radius', Kind.DOUBLE, 0.05,
          'Dead zone (rad, per joint) around the goal configuration where only the '
          "paper's term acts. Live.", bounds=(0.0, 3.2), field='configuration_radius_rad'),

@@ -38,6 +38,10 @@ MAX_LEARNING_STEP_S = 0.01  # a longer gap between ticks advances the friction l
 # The period the fade tops assume (shaping.fade_tops) is the longest recent time step (at most
 # the above), kept x this per tick: a burst of close states does not shorten it at once
 TICK_MEMORY = 0.999
+# A q* far from the last one (a step of up to T_j on every joint) fades in over this, so that a
+# heavy joint's step does not jolt a light one past its velocity limit through the coupling of
+# M(q) before the damping sees the motion (docs/lyapunov.md, section 5)
+CONFIGURATION_FADE_IN_S = 0.1
 
 
 @dataclass(frozen=True)
@@ -219,6 +223,8 @@ class Regulator:
         self._own = [0.0] * self.n  # M_jj(q) this tick (with the inertial damping)
         self._seen = [0.0] * self.n  # ... and 1 / (M(q)^-1)_jj
         self._tick_s = 0.0  # the period the fade tops assume (s; TICK_MEMORY)
+        self._lead_in = 1.0  # the share of U_c in force (CONFIGURATION_FADE_IN_S)
+        self._lead_in_q_star: Optional[tuple[float, ...]] = None  # the q* it last saw
         self._fade_top = [sh.FADE_TOP_FRACTION * v for v in self._speed_cap]
         self._held = [0.0] * self.n  # how stuck each joint has stayed (learn_friction's h)
         # the learning's acceleration estimate: qdot's low-pass (rad/s) and
@@ -361,6 +367,22 @@ class Regulator:
         self._target = Target(goal, tuple(float(x) for x in q))
         return goal
 
+    def _advance_lead_in(self, q_star: tuple[float, ...], ramp_rad: float,
+                         step_s: float) -> None:
+        """
+        Fade U_c in over CONFIGURATION_FADE_IN_S after a far new q* (ticks with a step only).
+
+        A q* further than the ramp from the last one in some joint (or the first) restarts
+        the fade from 0; one that moves less (a streamed goal's) keeps it.
+        """
+        last = self._lead_in_q_star
+        if q_star is not last:
+            if last is None or any(abs(a - b) > ramp_rad for a, b in zip(q_star, last)):
+                self._lead_in = 0.0
+            self._lead_in_q_star = q_star
+        lead_in = self._lead_in + step_s / CONFIGURATION_FADE_IN_S
+        self._lead_in = lead_in if lead_in < 1.0 else 1.0
+
     def _band_at(self, band: Optional[sh.LimitBand],
                  q_star: Optional[tuple[float, ...]]) -> Optional[sh.LimitBand]:
         """Return the band in force for the target: ``band``, ending at q* if q* is in it."""
@@ -424,7 +446,9 @@ class Regulator:
         if band is not None:
             band.add_torque(q, tau_p)
         if q_star is not None and shaping.configuration_on:
-            sh.add_configuration_torque(q, q_star, shaping, tau_p)
+            if dt_s > 0.0:
+                self._advance_lead_in(q_star, shaping.configuration_ramp_rad, step)
+            sh.add_configuration_torque(q, q_star, shaping, tau_p, self._lead_in)
         kv = gains.kv
         tau = [tau_p[j] - kv[j] * qdot[j] for j in range(n)]
         if shaping.speed_damping_on:

@@ -582,18 +582,19 @@ def learn_friction(learned_nm: list[float], stuck: Sequence[float], phi: float,
 
 
 def add_configuration_torque(q: Sequence[float], q_star: Sequence[float], shaping: Shaping,
-                             tau: list[float]) -> None:
+                             tau: list[float], share: float = 1.0) -> None:
     """
-    Add -grad U_c(q) to ``tau`` in place (docs/lyapunov.md, section 5).
+    Add -grad (share U_c)(q) to ``tau`` in place (docs/lyapunov.md, section 5).
 
     Per joint, ``x = max(0, |q - q*| - r)``; the torque is ``-sign(q - q*) T min(x / w, 1)``
-    (``r`` the radius, ``w`` the ramp).
+    (``r`` the radius, ``w`` the ramp), times ``share`` (in [0, 1]: the term fading in).
     """
     r = shaping.configuration_radius_rad
     w = shaping.configuration_ramp_rad
     for j, t in enumerate(shaping.configuration_gain):
         if t <= 0.0:
             continue
+        t *= share
         d = q[j] - q_star[j]
         x = abs(d) - r
         if x > 0.0:

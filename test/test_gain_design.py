@@ -237,8 +237,9 @@ def test_a_strong_joint_is_not_held_to_the_pace_of_the_weakest(designs):
     """
     The Panda's task bound is set by its 12 N m wrist; the 87 N m joints get a larger T_j.
 
-    Raised only as far as their budget allows, so both terms still fit in it, and still above
-    1.2 x the task bound, so the argument of docs/lyapunov.md, section 5 holds.
+    Raised only as far as their budget allows, so both terms still fit in it, and still at
+    least GUIDE_OVER_TASK x the task bound, so the argument of docs/lyapunov.md, section 5
+    holds.
     """
     model, d = designs['panda']
     f = d.figures
@@ -251,7 +252,8 @@ def test_a_strong_joint_is_not_held_to_the_pace_of_the_weakest(designs):
     # the default aims at 0.6 of the limits: the strong joints are raised less
     slower = gd.design(model, cl.Task.POSE, friction_nm=(0.09,) * 4 + (0.045,) * 3,
                        delays=(1, 2))
-    assert np.all(slower.figures['guide_nm'][strong] < guide[strong])
+    assert np.all(slower.figures['guide_nm'][strong] <= guide[strong])
+    assert np.any(slower.figures['guide_nm'][strong] < guide[strong])
     with pytest.raises(ValueError, match='cruise_fraction'):
         gd.design(model, cl.Task.POSE, cruise_fraction=1.5)
     with pytest.raises(ValueError, match='within the joint limits'):  # the node would refuse it

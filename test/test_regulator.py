@@ -7,7 +7,7 @@ from quat_jt_controller import control_law as cl
 from quat_jt_controller import paper
 from quat_jt_controller import quaternion as quat
 from quat_jt_controller import shaping as sh
-from quat_jt_controller.regulator import Goal, Regulator
+from quat_jt_controller.regulator import CONFIGURATION_FADE_IN_S, Goal, Regulator
 from robots import random_q, wrist_model, xarm6_model
 
 pytestmark = pytest.mark.unit
@@ -180,6 +180,35 @@ def test_the_goal_velocity_term_adds_k_v_g_v_qdot_star_and_nothing_else(seed):
         reg.set_goal_joint_velocity([1.0, 2.0])
     with pytest.raises(sh.ShapingError, match=r'goal_velocity_gain must be in \[0, 1\]'):
         sh.Shaping.create(3, goal_velocity_gain=1.5)
+
+
+def test_a_far_new_q_star_fades_in_and_a_near_one_keeps_its_share():
+    """docs/lyapunov.md, section 5: U_c rises over CONFIGURATION_FADE_IN_S after a far q*."""
+    model = wrist_model()
+    unlimited = [math.inf] * 3
+    shaping = sh.Shaping.create(3, configuration_gain=(2.0, 2.0, 2.0))
+    paper_law = Regulator(model, ORI, paper_gains(), unlimited, Goal(paper.Q_DESIRED))
+    q, qdot, dt = [0.3, 0.6, -0.2], [0.0, 0.0, 0.0], 1e-3
+
+    def guide(reg, dt_s=dt):  # the goal-configuration term's torque this tick
+        return (np.array(reg.update(q, qdot, dt_s).tau_nm)
+                - np.array(paper_law.update(q, qdot).tau_nm))
+
+    ideal = Regulator(model, ORI, paper_gains(), unlimited, Goal(paper.Q_DESIRED), shaping)
+    ideal.set_goal_configuration(ideal.goal, [1.3, 1.6, 0.8])  # T_j saturated on each joint
+    np.testing.assert_allclose(guide(ideal, 0.0), [2.0, 2.0, 2.0], atol=1e-12)  # no ticks
+    reg = Regulator(model, ORI, paper_gains(), unlimited, Goal(paper.Q_DESIRED), shaping)
+    reg.set_goal_configuration(reg.goal, [1.3, 1.6, 0.8])
+    share = dt / CONFIGURATION_FADE_IN_S
+    np.testing.assert_allclose(guide(reg), [2.0 * share] * 3, atol=1e-12)
+    np.testing.assert_allclose(guide(reg, 0.0), [2.0 * share] * 3, atol=1e-12)  # re-evaluated
+    for _ in range(int(round(CONFIGURATION_FADE_IN_S / dt))):
+        torque = guide(reg)
+    np.testing.assert_allclose(torque, [2.0, 2.0, 2.0], atol=1e-12)
+    reg.set_goal_configuration(reg.goal, [1.31, 1.59, 0.8])  # a streamed goal's next q*
+    np.testing.assert_allclose(guide(reg), [2.0, 2.0, 2.0], atol=1e-12)
+    reg.set_goal_configuration(reg.goal, [1.31, 1.59, 1.3])  # 0.5 rad: farther than the ramp
+    np.testing.assert_allclose(guide(reg), [2.0 * share] * 3, atol=1e-12)
 
 
 @pytest.mark.parametrize('seed', range(4))
