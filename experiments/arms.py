@@ -25,6 +25,8 @@ EXAMPLE_ROBOTS = {
     'talos_left_arm': 'talos_data/robots/talos_left_arm.urdf',
     'z1': 'z1_description/urdf/z1.urdf',
     'xarm7': 'xarm_description/urdf/xarm7.urdf',
+    'baxter': 'baxter_description/urdf/baxter.urdf',  # the whole robot: its right arm's chain
+    'kinova': 'kinova_description/robots/kinova.urdf',  # a Jaco, continuous joints
 }
 
 

@@ -2,7 +2,8 @@
 # The any-arm campaign of docs/reach.md: every arm, every condition, the same seed.
 # Usage: bash experiments/reach_campaign.sh OUT_DIR [extra reach_experiment arguments]
 # (e.g. --cases 100 --workers 8, or --ray-address auto). One log per arm in OUT_DIR; the
-# table rows are the lines that start with '|'. ARMS='ur3 wrist' runs only those arms.
+# table rows are the lines that start with '|'. ARMS='ur3 wrist' runs only those arms;
+# ARMS='kuka_iiwa baxter_right_arm kinova_j2s6s200' the more arms below.
 set -euo pipefail
 out=${1:?usage: reach_campaign.sh OUT_DIR [reach_experiment arguments]}
 shift
@@ -21,10 +22,22 @@ arms=(
   'so101|--example-robot so101 --tip-link gripper_link'
   'talos_left_arm|--example-robot talos_left_arm --tip-link arm_left_7_link'
 )
-for entry in "${arms[@]}"; do
+# More arms no one tuned on, run only when ARMS names them (docs/reach.md, "Arms no one tuned
+# on"): a URDF's root link and the end of its longest chain, as design_gains takes them.
+pybullet_data=$($python -c 'import pybullet_data; print(pybullet_data.getDataPath())' \
+  2>/dev/null || true)
+more=(
+  "kuka_iiwa|--urdf $pybullet_data/kuka_iiwa/model.urdf --name kuka_iiwa"
+  'baxter_right_arm|--example-robot baxter --name baxter_right_arm'
+  'kinova_j2s6s200|--example-robot kinova --name kinova_j2s6s200'
+)
+for entry in "${arms[@]}" "${more[@]}"; do
   name=${entry%%|*}
   if [[ -n "${ARMS:-}" && " $ARMS " != *" $name "* ]]; then
     continue
+  fi
+  if [[ -z "${ARMS:-}" && " ${more[*]} " == *"$entry"* ]]; then
+    continue  # the more arms: only by name
   fi
   # shellcheck disable=SC2086
   $python -m experiments.reach_experiment ${entry#*|} --potential tanh "$@" \
