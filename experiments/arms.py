@@ -60,6 +60,6 @@ def arm_links(urdf_xml: str, base_link: Optional[str] = None,
               tip_link: Optional[str] = None) -> tuple:
     """Return ``(base_link, tip_link, joints)``, the links defaulting as ``default_links``."""
     if base_link is None or tip_link is None:
-        base, tip = default_links(urdf_xml)
+        base, tip = default_links(urdf_xml, base_link)
         base_link, tip_link = base_link or base, tip_link or tip
     return base_link, tip_link, chain_joints(urdf_xml, base_link, tip_link)

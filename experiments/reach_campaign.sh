@@ -25,7 +25,7 @@ arms=(
 # More arms no one tuned on, run only when ARMS names them (docs/reach.md, "Arms no one tuned
 # on"): a URDF's root link and the end of its longest chain, as design_gains takes them.
 pybullet_data=$($python -c 'import pybullet_data; print(pybullet_data.getDataPath())' \
-  2>/dev/null || true)
+  2>/dev/null || echo 'no-pybullet_data')  # reach_experiment then names the missing file
 more=(
   "kuka_iiwa|--urdf $pybullet_data/kuka_iiwa/model.urdf --name kuka_iiwa"
   'baxter_right_arm|--example-robot baxter --name baxter_right_arm'

@@ -151,14 +151,25 @@ def load_controller(robot: Robot, potential: Optional[str] = None,
     return regulator.model, regulator.gains, regulator.shaping
 
 
+MAX_CASE_TRIES = 1000  # random pairs per case before the arm is said to have too few goals
+
+
 def cases(model: RobotModel, robot: Robot, count: int, seed: int) -> list:
-    """Return ``count`` seeded (start, goal) joint configurations, as the targets define them."""
+    """
+    Return ``count`` seeded (start, goal) joint configurations, as the targets define them.
+
+    For an arm from its URDF the goal's task rows keep ``goal_sigma_min``, and gravity at the
+    goal takes at most the design's reserve of each effort limit (``heavy_warning``: a pose the
+    arm may not hold up is not a target). ValueError if too few random goals qualify.
+    """
     rng = np.random.default_rng(seed)
     lower, upper = sampling_box(model)  # a joint without stops: one turn
     mid, half = 0.5 * (lower + upper), 0.5 * (upper - lower)
     lo, hi = mid - robot.fraction * half, mid + robot.fraction * half
     out = []
-    while len(out) < count:
+    for tries in range(1, MAX_CASE_TRIES * count + 1):
+        if len(out) == count:
+            break
         q0, qg = rng.uniform(lo, hi), rng.uniform(lo, hi)
         if robot.urdf_path:  # any arm: the goal's task rows away from a singularity
             _, _, J = model.kinematics(qg.tolist())
@@ -176,6 +187,9 @@ def cases(model: RobotModel, robot: Robot, count: int, seed: int) -> list:
             if np.linalg.svd(np.array(J), compute_uv=False)[-1] < robot.goal_sigma_min:
                 continue
         out.append((q0, qg))
+    if len(out) < count:
+        raise ValueError(f'{robot.name}: only {len(out)} of {tries} random goals are regular and '
+                         f'held up within the effort limits; {count} cases were asked for')
     return out
 
 

@@ -104,7 +104,7 @@ def _default_chain(parser: argparse.ArgumentParser, args: argparse.Namespace, ur
     chosen = []
     try:
         if args.base_link is None or args.tip_link is None:
-            base, tip = default_links(urdf)
+            base, tip = default_links(urdf, args.base_link)
             if args.base_link is None:
                 args.base_link = base
                 chosen.append(f"--base-link {base} (the URDF's root link)")

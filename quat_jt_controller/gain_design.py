@@ -450,7 +450,7 @@ def design(model: RobotModel, task: cl.Task, rate_hz: float = 1000.0,
     # gravity is spoken for, up to GRAVITY_RESERVE_SHARE of the effort (gravity_warnings)
     reserve = np.minimum(data['gravity_max'], GRAVITY_RESERVE_SHARE * effort)
     budget = TORQUE_SHARE * (effort - reserve - friction - learning)
-    if np.any(budget <= 0.0):  # only friction estimates can take the rest of the effort
+    if np.any(budget <= 0.0):  # friction, learned or estimated, took the rest of the effort
         short = np.flatnonzero(budget <= 0.0)
         raise ValueError(f'no torque left for the potential on joints '
                          f'{[model.joint_names[j] for j in short]}: '
@@ -459,7 +459,9 @@ def design(model: RobotModel, task: cl.Task, rate_hz: float = 1000.0,
                          f'configurations within the limits, at most {GRAVITY_RESERVE_SHARE:g} '
                          'x the effort), friction and its learnable share '
                          f'{np.round(friction + learning, 3).tolist()}: check the friction '
-                         'estimates (--friction) and the effort limits')
+                         'estimates (--friction), what may be learned on top of them '
+                         '(--friction-learning, --friction-effort-share) and the effort '
+                         'limits')
     # Speed rule: never ask a joint for more than its damping can hold at SPEED_MARGIN x its
     # velocity limit (holding_limit; b_max: the largest damping the sampled loop tolerates on
     # its smallest inertia, halved); K_v is raised below (holding_damping) where the cubic
@@ -628,6 +630,7 @@ def design(model: RobotModel, task: cl.Task, rate_hz: float = 1000.0,
                                            np.array(kv_r), extra, task, inertial, beta)}
     figures = {
         'effort_limits_nm': effort, 'gravity_max_nm': data['gravity_max'],
+        'gravity_reserve_nm': reserve,
         'friction_nm': friction, 'budget_nm': budget, 'task_bound_nm': bound,
         'guide_nm': guide, 'limit_at_stop_nm': limit_gain * margin,
         'lever_max_m': data['lever_max'], 'inertia_min': inertia,
@@ -640,7 +643,8 @@ def design(model: RobotModel, task: cl.Task, rate_hz: float = 1000.0,
                      + gravity_warnings(model, effort, data['gravity'])
                      + inertia_warnings(model, effort, inertia)
                      + learning_warnings(model, friction, learning,
-                                         friction_effort_share * effort)),
+                                         friction_effort_share * effort)
+                     + guide_warnings(model, guide, bound)),
         'speed_ceiling_rad_s': np.where(limited_speed, ceiling, np.inf),
         'typical_speed_rad_s': typical,
         'time_to_goal_s': time_to_goal_s(typical, configs, np.array(kp_r),
@@ -652,6 +656,24 @@ def design(model: RobotModel, task: cl.Task, rate_hz: float = 1000.0,
     }
     return Design(task, model.joint_names, model.base_link, model.tip_link, rate_hz, kp_r,
                   kv_r, lam_r, shaping, figures, model.armature)
+
+
+def guide_warnings(model: RobotModel, guide: np.ndarray, bound: np.ndarray) -> list[str]:
+    """
+    Warn of joints whose goal-configuration gain the sampled loop held below GUIDE_OVER_TASK.
+
+    ``T_j`` stays above the task bound (the design fails otherwise), so the term still leads
+    the joint round its stops (docs/lyapunov.md, section 5), but where the two terms pull it
+    opposite ways its net push is less than the task bound.
+    """
+    low = [f'{model.joint_names[j]} ({guide[j] / bound[j]:.2f} x)'
+           for j in range(len(guide)) if guide[j] < GUIDE_OVER_TASK * bound[j] * (1.0 - 1e-9)]
+    if not low:
+        return []
+    return [f'the goal-configuration term is held below {GUIDE_OVER_TASK:g} x the task bound on '
+            f'{", ".join(low)} to keep the sampled loop stable on the least inertia those '
+            'joints see: where it and the task term pull them opposite ways, they move slowly. '
+            'Their rotor inertia (--armature), if the URDF leaves it out, gives the loop room']
 
 
 def gravity_warnings(model: RobotModel, effort: np.ndarray,

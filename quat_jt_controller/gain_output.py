@@ -15,8 +15,9 @@ from quat_jt_controller import control_law as cl
 from quat_jt_controller import parameter_table as table
 from quat_jt_controller.gain_analysis import DELAY_MARGIN, GAIN_MARGIN, sigma_min
 from quat_jt_controller.gain_design import (
-    DAMPING_RATIO, Design, FRICTION_LEARNING_TIME_S, GUIDE_OVER_TASK, LIMIT_OVER_TASK,
-    REGULAR_SIGMA_MIN, REGULAR_TRIES, SAMPLES, SPEED_MARGIN, TICK_SPEED_SHARE, TORQUE_SHARE)
+    DAMPING_RATIO, Design, FRICTION_LEARNING_TIME_S, GRAVITY_RESERVE_SHARE, GUIDE_OVER_TASK,
+    LIMIT_OVER_TASK, REGULAR_SIGMA_MIN, REGULAR_TRIES, SAMPLES, SPEED_MARGIN, TICK_SPEED_SHARE,
+    TORQUE_SHARE)
 from quat_jt_controller.model import RobotModel
 from quat_jt_runtime.param_table import Kind, names, row, yaml_lines, yaml_value
 
@@ -43,6 +44,15 @@ def _regular_note(f: dict) -> str:
         return ''
     return (f' (sigma_min(J) >= {threshold:.3g}: none of {REGULAR_TRIES} random ones reached '
             f'{REGULAR_SIGMA_MIN:g})')
+
+
+def _reserve(f: dict) -> str:
+    """Say what is reserved for gravity where it is less than the largest |g(q)|."""
+    reserve = f.get('gravity_reserve_nm')
+    if reserve is None or np.allclose(reserve, f['gravity_max_nm']):
+        return ''
+    return (f' (reserved for gravity: at most {GRAVITY_RESERVE_SHARE:g} x the effort limit, '
+            f'{_fmt(np.round(reserve, 4))})')
 
 
 def _fmt(values) -> str:
@@ -100,7 +110,7 @@ def to_yaml(d: Design, potential: str = 'tanh', command: str = '',
         'docs/lyapunov.md). The rest is read-only.',
         'The design, per joint (N m unless said):',
         f'  effort limits {_fmt(f["effort_limits_nm"])}, largest |g(q)| '
-        f'{_fmt(np.round(f["gravity_max_nm"], 4))}, friction estimates '
+        f'{_fmt(np.round(f["gravity_max_nm"], 4))}{_reserve(f)}, friction estimates '
         f'{_fmt(f["friction_nm"])}, rotor inertia (armature, in M(q)) '
         f'{_fmt(d.armature or [0.0] * len(d.joints))} kg m^2;',
         f'  at rest the regulator may learn {f["friction_learning"]:g} x the estimates more, '
@@ -108,7 +118,8 @@ def to_yaml(d: Design, potential: str = 'tanh', command: str = '',
         'friction nobody measured; at most what changes the speed of the joint by '
         f'{TICK_SPEED_SHARE:g} x its limit in one tick), in '
         f'{FRICTION_LEARNING_TIME_S:g} s;',
-        f'  budget {TORQUE_SHARE:g} x (effort - gravity - friction - learnable friction) = '
+        f'  budget {TORQUE_SHARE:g} x (effort - gravity reserved - friction - learnable '
+        'friction) = '
         f'{_fmt(f["budget_nm"])}, of which the task potential may ask at most (a-priori '
         f'bound of the tanh law) {_fmt(f["task_bound_nm"])} and the goal-configuration term '
         f'{_fmt(f["guide_nm"])};',

@@ -58,7 +58,7 @@ def heavy_warning(model: RobotModel, q: Sequence[float]) -> str:
     gravity = [abs(g) for g in model.gravity(list(q))]
     heavy = [f'{name} {g:.3g} of {e:.3g} N m' for name, g, e
              in zip(model.joint_names, gravity, model.effort_limits)
-             if g > GRAVITY_RESERVE_SHARE * e]
+             if 0.0 < e < float('inf') and g > GRAVITY_RESERVE_SHARE * e]  # 0: no limit
     if not heavy:
         return ''
     q_text = [round(float(x), 4) for x in q]

@@ -225,6 +225,7 @@ class Regulator:
         self._tick_s = 0.0  # the period the fade tops assume (s; TICK_MEMORY)
         self._lead_in = 1.0  # the share of U_c in force (CONFIGURATION_FADE_IN_S)
         self._lead_in_q_star: Optional[tuple[float, ...]] = None  # the q* it last saw
+        self._lead_in_gains: tuple[float, ...] = ()  # ... and the T_j it last applied
         self._fade_top = [sh.FADE_TOP_FRACTION * v for v in self._speed_cap]
         self._held = [0.0] * self.n  # how stuck each joint has stayed (learn_friction's h)
         # the learning's acceleration estimate: qdot's low-pass (rad/s) and
@@ -367,20 +368,34 @@ class Regulator:
         self._target = Target(goal, tuple(float(x) for x in q))
         return goal
 
-    def _advance_lead_in(self, q_star: tuple[float, ...], ramp_rad: float,
+    def _advance_lead_in(self, q_star: Optional[tuple[float, ...]], shaping: sh.Shaping,
                          step_s: float) -> None:
         """
-        Fade U_c in over CONFIGURATION_FADE_IN_S after a far new q* (ticks with a step only).
+        Fade U_c in over CONFIGURATION_FADE_IN_S (ticks with a time step only).
 
-        A q* further than the ramp from the last one in some joint (or the first) restarts
-        the fade from 0; one that moves less (a streamed goal's) keeps it.
+        The share restarts from 0 for a q* further than the ramp from the last one in some
+        joint (or the first), and for larger gains ``T_j`` set live; a q* that moves less (a
+        streamed goal's) keeps it. While no q* is in force (a new goal's, until the goal
+        check gives it) the share falls at the rate it rises, so a q* that comes back near
+        the last one after a gap returns at the share the gap left.
         """
+        rate = step_s / CONFIGURATION_FADE_IN_S
+        if q_star is None:
+            lead_in = self._lead_in - rate
+            self._lead_in = lead_in if lead_in > 0.0 else 0.0
+            return
+        gains = shaping.configuration_gain
+        if gains != self._lead_in_gains:
+            if any(t > t_old for t, t_old in zip(gains, self._lead_in_gains)):
+                self._lead_in = 0.0
+            self._lead_in_gains = gains
         last = self._lead_in_q_star
         if q_star is not last:
+            ramp_rad = shaping.configuration_ramp_rad
             if last is None or any(abs(a - b) > ramp_rad for a, b in zip(q_star, last)):
                 self._lead_in = 0.0
             self._lead_in_q_star = q_star
-        lead_in = self._lead_in + step_s / CONFIGURATION_FADE_IN_S
+        lead_in = self._lead_in + rate
         self._lead_in = lead_in if lead_in < 1.0 else 1.0
 
     def _band_at(self, band: Optional[sh.LimitBand],
@@ -445,10 +460,11 @@ class Regulator:
         tau_p = cl.potential_torque(rows, y, eta_e, gains, shaping.large_error_gain, self.task)
         if band is not None:
             band.add_torque(q, tau_p)
-        if q_star is not None and shaping.configuration_on:
+        if shaping.configuration_on:
             if dt_s > 0.0:
-                self._advance_lead_in(q_star, shaping.configuration_ramp_rad, step)
-            sh.add_configuration_torque(q, q_star, shaping, tau_p, self._lead_in)
+                self._advance_lead_in(q_star, shaping, step)
+            if q_star is not None:
+                sh.add_configuration_torque(q, q_star, shaping, tau_p, self._lead_in)
         kv = gains.kv
         tau = [tau_p[j] - kv[j] * qdot[j] for j in range(n)]
         if shaping.speed_damping_on:

@@ -82,26 +82,34 @@ def _joint_rows(root: ElementTree.Element) -> list[tuple[str, str, str, str]]:
              j.find('child').get('link')) for j in root.findall('joint')]
 
 
-def default_links(urdf_xml: str) -> tuple[str, str]:
+def default_links(urdf_xml: str, base_link: Optional[str] = None) -> tuple[str, str]:
     """
     Return ``(base_link, tip_link)``: the root link, and the end of the longest rotating chain.
 
     The tip is the child link of the last revolute or continuous joint on the path from the
-    root with the most such joints (the first in document order on a tie): a gripper's
+    base (``base_link``, default the root link) with the most such joints; on a tie the one
+    found first breadth-first (the shallower, then the first in document order). A gripper's
     prismatic fingers do not count, a revolute gripper jaw does (give the tip link then).
-    Raises ValueError if the URDF has no single root link.
+    Raises ValueError if the URDF has no single root link (and no base is given), if the base
+    is not a link of it, or if no revolute or continuous joint lies below the base.
     """
     root = _parsed(urdf_xml)
     joints = _joint_rows(root)
-    children = {c for _, _, _, c in joints}
-    roots = [ln.get('name') for ln in root.findall('link') if ln.get('name') not in children]
-    if len(roots) != 1:
-        raise ValueError(f'the URDF has {len(roots)} root links {roots}; give the base link')
+    links = [ln.get('name') for ln in root.findall('link')]
+    if base_link is None:
+        children = {c for _, _, _, c in joints}
+        roots = [ln for ln in links if ln not in children]
+        if len(roots) != 1:
+            raise ValueError(f'the URDF has {len(roots)} root links {roots}; give the base '
+                             'link')
+        base_link = roots[0]
+    elif base_link not in links:
+        raise ValueError(f'link {base_link!r} is not in the URDF')
     by_parent: dict[str, list[tuple[str, str]]] = {}
     for _, kind, parent, child in joints:
         by_parent.setdefault(parent, []).append((kind, child))
-    best = (0, roots[0])
-    queue = [(roots[0], 0, roots[0])]
+    best = (0, base_link)
+    queue = [(base_link, 0, base_link)]
     while queue:
         link, count, tip = queue.pop(0)
         if count > best[0]:
@@ -109,7 +117,10 @@ def default_links(urdf_xml: str) -> tuple[str, str]:
         for kind, child in by_parent.get(link, []):
             rotating = kind in ROTATING_TYPES
             queue.append((child, count + rotating, child if rotating else tip))
-    return roots[0], best[1]
+    if best[0] == 0:
+        raise ValueError(f'no revolute or continuous joint below link {base_link!r}; give the '
+                         'tip link')
+    return base_link, best[1]
 
 
 def chain_joints(urdf_xml: str, base_link: str, tip_link: str) -> list[str]:

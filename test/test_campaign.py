@@ -67,6 +67,17 @@ def test_an_arm_with_continuous_joints_gets_its_cases_within_one_turn(tmp_path):
     assert np.abs(pairs[:, :, [0, 3]]).max() > 1.0  # spread over the turn, not stuck at 0
 
 
+@pytest.mark.unit
+def test_an_arm_with_too_few_goals_is_a_clear_error(tmp_path):
+    path = tmp_path / 'arm.urdf'
+    path.write_text(small_arm_urdf())
+    robot = dataclasses.replace(rx.arm_robot('small', str(path), None, None,
+                                             cl.Task.ORIENTATION), goal_sigma_min=1e9)
+    model = rx.RobotModel(path.read_text(), robot.base_link, robot.tip_link, list(robot.joints))
+    with pytest.raises(ValueError, match=r'small: only 0 of 1000 random goals are regular'):
+        rx.cases(model, robot, 1, seed=1)
+
+
 def _short(robot: rx.Robot) -> rx.Robot:
     return dataclasses.replace(robot, duration_s=0.3)
 

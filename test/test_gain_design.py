@@ -216,6 +216,14 @@ def test_an_arm_that_cannot_hold_itself_everywhere_is_designed_with_a_warning():
         gd.design(model, cl.Task.POSE, effort_limits_nm=[50.0, 5.0, 32.0, 32.0, 32.0, 20.0])
 
 
+def test_a_goal_configuration_gain_held_below_the_factor_is_named():
+    model = wrist_model()
+    bound = np.array([1.0, 1.0, 1.0])
+    assert gd.guide_warnings(model, gd.GUIDE_OVER_TASK * bound, bound) == []
+    warned = gd.guide_warnings(model, np.array([2.0, 1.5, 3.0]), bound)
+    assert len(warned) == 1 and 'on joint2 (1.50 x) to keep the sampled loop' in warned[0]
+
+
 def test_the_simulator_config_is_what_the_tool_writes(tmp_path):
     """config/panda_sim.yaml comes from the same command as the controller's, for its joints."""
     out, sim_out = tmp_path / 'c.yaml', tmp_path / 's.yaml'
@@ -305,8 +313,16 @@ def test_a_urdf_without_links_given_gets_its_longest_chain_and_says_so(tmp_path,
     assert code == 1 and lines[-1].startswith('design_gains: error: no design: M(q) is '
                                               'singular at q = '), lines  # a massless link
     assert "joints ['side_joint'] move no inertia there" in lines[-1], lines
+    code, lines = run_main(['--urdf', str(path), '--base-link', 'link2', '--out', str(out)],
+                           capsys)  # the longest chain below the base given
+    assert code == 0 and lines[0] == ('design_gains: --tip-link tool (the end of its longest '
+                                      'chain of revolute joints); --joints joint3 tool (the '
+                                      'movable joints between them)'), lines
     code, lines = run_main(['--urdf', str(path), '--base-link', 'side', '--out', str(out)],
                            capsys)
+    assert code == 2 and "no revolute or continuous joint below link 'side'" in lines[0], lines
+    code, lines = run_main(['--urdf', str(path), '--base-link', 'side', '--tip-link', 'tool',
+                            '--out', str(out)], capsys)
     assert code == 2 and "link 'tool' is not below link 'side'" in lines[0], lines
 
 

@@ -6,7 +6,7 @@ import numpy as np
 import pytest
 from quat_jt_controller import quaternion as quat
 from quat_jt_controller.control_law import Task
-from quat_jt_controller.goal_check import check_goal
+from quat_jt_controller.goal_check import check_goal, heavy_warning
 from quat_jt_controller.inverse_kinematics import sigma_min, solve_ik
 from quat_jt_controller.model import RobotModel, SINGULAR_SIGMA_MIN
 from robots import Q_DESIRED, small_arm_urdf, wrist_model, xarm6_model, XARM6_URDF
@@ -70,6 +70,9 @@ def test_a_goal_where_gravity_takes_most_of_an_effort_limit_is_warned_of():
     assert re.search(r'gravity takes more than 0.75 x the effort limit \(joint2 16.5 of 12 N m\)',
                      warning), warning
     assert check_goal(xarm6_model(), heavy, *goal_at(weak, heavy), POSE) == ''
+    no_limit = urdf[:joint2] + urdf[joint2:].replace('effort="50.0"', 'effort="0"', 1)
+    unlimited = RobotModel(no_limit, 'link_base', 'link6')
+    assert heavy_warning(unlimited, heavy) == ''  # 0: no effort limit, as the clamp has it
 
 
 def scaled_small_arm(scale):

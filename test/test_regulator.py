@@ -183,7 +183,13 @@ def test_the_goal_velocity_term_adds_k_v_g_v_qdot_star_and_nothing_else(seed):
 
 
 def test_a_far_new_q_star_fades_in_and_a_near_one_keeps_its_share():
-    """docs/lyapunov.md, section 5: U_c rises over CONFIGURATION_FADE_IN_S after a far q*."""
+    """
+    docs/lyapunov.md, section 5: U_c rises over CONFIGURATION_FADE_IN_S after a far q*.
+
+    A near q* (a streamed goal's) keeps the share; while no q* is in force it falls at the
+    rate it rises; gains raised live restart it. Evaluations without a time step (the ideal
+    loop) apply U_c whole.
+    """
     model = wrist_model()
     unlimited = [math.inf] * 3
     shaping = sh.Shaping.create(3, configuration_gain=(2.0, 2.0, 2.0))
@@ -209,6 +215,20 @@ def test_a_far_new_q_star_fades_in_and_a_near_one_keeps_its_share():
     np.testing.assert_allclose(guide(reg), [2.0, 2.0, 2.0], atol=1e-12)
     reg.set_goal_configuration(reg.goal, [1.31, 1.59, 1.3])  # 0.5 rad: farther than the ramp
     np.testing.assert_allclose(guide(reg), [2.0 * share] * 3, atol=1e-12)
+    for _ in range(9):
+        guide(reg)
+    reg.set_goal_configuration(reg.goal, [1.3, 1.6, 1.3])  # near, mid-fade: it goes on
+    np.testing.assert_allclose(guide(reg), [2.0 * 11 * share] * 3, atol=1e-12)
+    for _ in range(100):
+        guide(reg)
+    goal = Goal(paper.Q_DESIRED)  # a new goal: no q* until the goal check gives it
+    reg.set_goal(goal)
+    for _ in range(30):  # 30 ticks without q*: the share falls as it rises
+        np.testing.assert_allclose(guide(reg), [0.0, 0.0, 0.0], atol=1e-12)
+    reg.set_goal_configuration(goal, [1.3, 1.6, 1.29])  # back near the last q*
+    np.testing.assert_allclose(guide(reg), [2.0 * 71 * share] * 3, atol=1e-12)
+    reg.set_shaping(sh.Shaping.create(3, configuration_gain=(2.0, 2.0, 3.0)))  # raised live
+    np.testing.assert_allclose(guide(reg), [2.0 * share, 2.0 * share, 3.0 * share], atol=1e-12)
 
 
 @pytest.mark.parametrize('seed', range(4))
