@@ -151,7 +151,7 @@ class Controller:
         self.last_qdot: Optional[list[float]] = None
         self.last_state_ns = 0  # the last valid state (steady_ns); 0: none yet
         self.stopped = False  # commanding zeros after a state timeout
-        self._last_stamp_ns = 0
+        self._last_tick_time = (0, 0)  # (clock: 1 stamps, 2 arrival; ns) of the last state
         self._said_estimating = False
         self._no_state_warn_ns = started_ns + NO_STATE_WARN_NS  # the next warning, if none yet
         # what goes out
@@ -221,7 +221,7 @@ class Controller:
         elif self._goal_velocity_until_ns and steady_ns > self._goal_velocity_until_ns:
             self._goal_velocity_until_ns = 0  # the stream stopped: a fixed goal again
             regulator.set_goal_joint_velocity(None)
-        out = regulator.update(q, qdot, self._tick_interval_s(stamp_ns))
+        out = regulator.update(q, qdot, self._tick_interval_s(stamp_ns, steady_ns))
         self.last, self.last_q, self.last_qdot = out, q, qdot
         self.stall.feed(steady_ns * 1e-9, q, qdot, out)
         if not out.finite:
@@ -250,18 +250,22 @@ class Controller:
                 f'period at state_rate {rate:g} Hz); a driver that publishes velocities gives '
                 'better damping')
 
-    def _tick_interval_s(self, stamp_ns: int) -> float:
+    def _tick_interval_s(self, stamp_ns: int, steady_ns: int) -> float:
         """
-        Return the time since the last state's stamp (s), the tick's time step; 0 if unknown.
+        Return the time since the last state (s), the tick's time step; 0 if unknown.
 
-        0 for the first state, an unstamped one, or one not newer than the last: a tick of
-        zero length re-evaluates the law without advancing its slow state (the friction
-        learned at rest). The regulator caps long gaps.
+        From the states' stamps; for unstamped ones (a driver that sends none, with
+        ``max_state_age`` 0) from their arrival times, as the velocity estimate does. 0 for
+        the first state, one not newer than the last, or one on the other clock than the last:
+        a tick of zero length re-evaluates the law without advancing its slow state (the
+        friction learned at rest, the goal-configuration term's fade-in). The regulator caps
+        long gaps.
         """
-        last, self._last_stamp_ns = self._last_stamp_ns, stamp_ns
-        if last <= 0 or stamp_ns <= last:
+        now = (1, stamp_ns) if stamp_ns > 0 else (2, steady_ns)
+        last, self._last_tick_time = self._last_tick_time, now
+        if last[0] != now[0] or last[1] <= 0 or now[1] <= last[1]:
             return 0.0
-        return (stamp_ns - last) * 1e-9
+        return (now[1] - last[1]) * 1e-9
 
     def _published_quaternion(self, R_tip_base: Sequence[Sequence[float]]) -> quat.Quaternion:
         """Return the measured orientation in the hemisphere of the last one published."""

@@ -229,14 +229,15 @@ class StepRecorder(Regulator):
         return super().update(q, qdot, dt_s)
 
 
-def test_the_tick_interval_comes_from_the_state_stamps():
+def test_the_tick_interval_comes_from_the_state_stamps_or_else_their_arrival():
     recorder = StepRecorder()
     ctl = Controller(recorder, 0.5, 3)
     for k, stamp in enumerate((0, 5_000_000_000, 5_001_000_000, 5_001_000_000, 5_000_500_000,
-                               5_002_500_000)):
+                               5_002_500_000, 0, 0)):
         tick(ctl, (0.0, 0.5, 0.0), (k + 1) * MS, stamp_ns=stamp)
-    # unstamped, the first stamped, 1 ms, a repeat, older, then 2 ms after the last
-    assert recorder.steps == pytest.approx([0.0, 0.0, 1e-3, 0.0, 0.0, 2e-3])
+    # unstamped (the first), the first stamped, 1 ms, a repeat, older, 2 ms after the last,
+    # unstamped (another clock: no step), then 1 ms after it by arrival
+    assert recorder.steps == pytest.approx([0.0, 0.0, 1e-3, 0.0, 0.0, 2e-3, 0.0, 1e-3])
 
 
 def test_a_stamped_stream_has_a_velocity_until_it_stops():
