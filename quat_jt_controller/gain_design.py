@@ -44,16 +44,13 @@ from quat_jt_controller.gain_analysis import (
     checked_delays, configuration_stiffness, cruising_speed, damping_at, joint_spectral_radius,
     joint_stiffness, largest_stable_damping, median_damping_ratio, QO, seen_inertia,
     settling_rate, sigma_min, time_to_goal_s, worst_rho)
-from quat_jt_controller.model import RobotModel
+from quat_jt_controller.model import GRAVITY_RESERVE_SHARE, RobotModel
 from quat_jt_controller.shaping import (
     DEFAULT_SPEED_CAP_RAD_S, FADE_DELAY_TICKS, FADE_FLOOR_FRACTION, FULL_TURN_RAD, Shaping)
 from quat_jt_runtime.joints import check_state_rate
 from quat_jt_runtime.param_table import row
 
 TORQUE_SHARE = 0.8  # of what gravity and friction compensation leave; the rest: damping
-# the most of a joint's effort limit the budget reserves for gravity: an arm whose URDF needs
-# more somewhere within its limits is designed for the rest, with a warning (not refused)
-GRAVITY_RESERVE_SHARE = 0.75
 UNHELD_SHARE_MAX = 0.5  # of the survey's configurations where gravity exceeds the effort: refused
 GUIDE_OVER_TASK = 2.0  # the goal-configuration term must overcome the task term at a stop
 LIMIT_OVER_TASK = 1.5  # the limit band at the stop holds 1.5 x the task term's bound

@@ -22,11 +22,10 @@ import time
 from typing import Callable, NamedTuple, Optional, Sequence
 
 from quat_jt_controller.control_law import Task
-from quat_jt_controller.gain_design import GRAVITY_RESERVE_SHARE
 from quat_jt_controller.inverse_kinematics import configuration_velocity, MAX_STARTS
 from quat_jt_controller.inverse_kinematics import RESIDUAL_TOLERANCE, search_goal_configuration
 from quat_jt_controller.inverse_kinematics import Search, SINGULAR_SIGMA_MIN, solve_ik, starts
-from quat_jt_controller.model import RobotModel
+from quat_jt_controller.model import GRAVITY_RESERVE_SHARE, RobotModel
 from quat_jt_runtime.realtime import start_at_normal_scheduling
 
 

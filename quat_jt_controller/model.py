@@ -38,6 +38,10 @@ from quat_jt_runtime.joints import fixed_joints, movable_joints, select_joints
 # assumption A2 fails there), for the choice of q*, the goal check's verdict and the stall
 # report alike
 SINGULAR_SIGMA_MIN = 0.05
+# the most of a joint's effort limit the gain design reserves for gravity (an arm whose URDF
+# needs more somewhere within its limits is designed for the rest, with a warning), and past
+# which the goal check warns that a goal's pose may not be held up
+GRAVITY_RESERVE_SHARE = 0.75
 
 
 class ModelError(QuatJtError):
