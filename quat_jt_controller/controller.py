@@ -151,7 +151,8 @@ class Controller:
         self.last_qdot: Optional[list[float]] = None
         self.last_state_ns = 0  # the last valid state (steady_ns); 0: none yet
         self.stopped = False  # commanding zeros after a state timeout
-        self._last_tick_time = (0, 0)  # (clock: 1 stamps, 2 arrival; ns) of the last state
+        self._tick_clock = 0  # the clock of the last state's time: 1 its stamp, 2 its arrival
+        self._tick_ns = 0  # ... and that time (ns)
         self._said_estimating = False
         self._no_state_warn_ns = started_ns + NO_STATE_WARN_NS  # the next warning, if none yet
         # what goes out
@@ -261,11 +262,15 @@ class Controller:
         friction learned at rest, the goal-configuration term's fade-in). The regulator caps
         long gaps.
         """
-        now = (1, stamp_ns) if stamp_ns > 0 else (2, steady_ns)
-        last, self._last_tick_time = self._last_tick_time, now
-        if last[0] != now[0] or last[1] <= 0 or now[1] <= last[1]:
+        if stamp_ns > 0:
+            clock, now_ns = 1, stamp_ns
+        else:
+            clock, now_ns = 2, steady_ns
+        last_clock, last_ns = self._tick_clock, self._tick_ns
+        self._tick_clock, self._tick_ns = clock, now_ns
+        if clock != last_clock or last_ns <= 0 or now_ns <= last_ns:
             return 0.0
-        return (now[1] - last[1]) * 1e-9
+        return (now_ns - last_ns) * 1e-9
 
     def _published_quaternion(self, R_tip_base: Sequence[Sequence[float]]) -> quat.Quaternion:
         """Return the measured orientation in the hemisphere of the last one published."""

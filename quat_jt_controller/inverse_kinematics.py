@@ -77,6 +77,12 @@ def _limits(model: RobotModel) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     return lower, upper, np.isfinite(upper - lower) & (upper - lower < FULL_TURN_RAD)
 
 
+def _in_band(q: np.ndarray, lower: np.ndarray, upper: np.ndarray, limited: np.ndarray,
+             margin_rad: float) -> bool:
+    """Return whether a bounded joint of ``q`` lies within ``margin_rad`` of a limit."""
+    return bool(np.any(limited & ((q < lower + margin_rad) | (q > upper - margin_rad))))
+
+
 def solve_ik(model: RobotModel, q_start: Sequence[float], quat_desired: Sequence[float],
              p_desired: Sequence[float], task: Task, iterations: int = IK_ITERATIONS,
              damping: float = IK_DAMPING) -> tuple[np.ndarray, float, np.ndarray]:
@@ -266,12 +272,7 @@ def regular_posture(model: RobotModel, q: Sequence[float], quat_desired: Sequenc
     slide leaves (docs/lyapunov.md, section 9).
     """
     q = np.array(q, dtype=float)
-    lower = np.array(model.position_lower, dtype=float)
-    upper = np.array(model.position_upper, dtype=float)
-    limited = _limits(model)[2]
-
-    def in_band(x: np.ndarray) -> bool:
-        return bool(np.any(limited & ((x < lower + margin_rad) | (x > upper - margin_rad))))
+    lower, upper, limited = _limits(model)
 
     def done(x: np.ndarray) -> Optional[np.ndarray]:
         x = polish(model, x, quat_desired, p_desired, task)
@@ -304,7 +305,7 @@ def regular_posture(model: RobotModel, q: Sequence[float], quat_desired: Sequenc
                 _pose_residual(model, q_try, quat_desired, p_desired, task)[0]))
             sigma_try = sigma_min(model, q_try, task)
             if (sigma_try > sigma and residual < RESIDUAL_TOLERANCE
-                    and not in_band(q_try)):
+                    and not _in_band(q_try, lower, upper, limited, margin_rad)):
                 break
             step *= 0.5
         else:
@@ -476,7 +477,7 @@ def search_goal_configuration(model: RobotModel, q_measured: Optional[Sequence[f
         if np.any(q < lower) or np.any(q > upper):
             return None
         sigma = sigma_min(model, q, task)
-        in_band = bool(np.any(limited & ((q < lower + margin_rad) | (q > upper - margin_rad))))
+        in_band = _in_band(q, lower, upper, limited, margin_rad)
         return (sigma < SINGULAR_SIGMA_MIN, in_band, float(np.linalg.norm(q - q_now))), q, sigma
 
     count = 0

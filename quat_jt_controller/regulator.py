@@ -225,7 +225,7 @@ class Regulator:
         self._tick_s = 0.0  # the period the fade tops assume (s; TICK_MEMORY)
         self._lead_in = 1.0  # the share of U_c in force (CONFIGURATION_FADE_IN_S)
         self._lead_in_q_star: Optional[tuple[float, ...]] = None  # the q* it last saw
-        self._lead_in_gains: tuple[float, ...] = ()  # ... and the T_j it last applied
+        self._lead_in_shaping: Optional[sh.Shaping] = None  # ... and the shaping it last used
         self._fade_top = [sh.FADE_TOP_FRACTION * v for v in self._speed_cap]
         self._held = [0.0] * self.n  # how stuck each joint has stayed (learn_friction's h)
         # the learning's acceleration estimate: qdot's low-pass (rad/s) and
@@ -384,11 +384,12 @@ class Regulator:
             lead_in = self._lead_in - rate
             self._lead_in = lead_in if lead_in > 0.0 else 0.0
             return
-        gains = shaping.configuration_gain
-        if gains != self._lead_in_gains:
-            if any(t > t_old for t, t_old in zip(gains, self._lead_in_gains)):
+        before = self._lead_in_shaping
+        if shaping is not before:  # a new set of parameters (immutable): compare T_j once
+            if before is not None and any(t > t_old for t, t_old in zip(
+                    shaping.configuration_gain, before.configuration_gain)):
                 self._lead_in = 0.0
-            self._lead_in_gains = gains
+            self._lead_in_shaping = shaping
         last = self._lead_in_q_star
         if q_star is not last:
             ramp_rad = shaping.configuration_ramp_rad
