@@ -12,7 +12,7 @@ import pytest
 from quat_jt_controller.model import RobotModel
 from quat_jt_runtime.resources import default_urdf_xml
 from robots import PANDA_JOINTS, PANDA_URDF, random_q, XARM6_URDF
-from wrist_sim.simulator import ENGINES, RobotSimulator, SimulatorError
+from wrist_sim.simulator import ENGINES, repaired_inertia_note, RobotSimulator, SimulatorError
 
 pytestmark = pytest.mark.unit
 mujoco = pytest.importorskip('mujoco')
@@ -192,3 +192,35 @@ def test_bad_engines_and_values_are_refused_by_name(urdf, monkeypatch):
     monkeypatch.setitem(__import__('sys').modules, 'mujoco', None)  # not installed
     with pytest.raises(SimulatorError, match='pip install mujoco'):
         RobotSimulator(urdf, engine='mujoco')
+
+
+def with_antenna(urdf: str, inertia: str) -> str:
+    """Return the wrist with a light link welded to its base, of inertia ``inertia``."""
+    antenna = ('<link name="antenna"><inertial><origin xyz="0 0 0" rpy="0 0 0"/>'
+               f'<mass value="1e-6"/><inertia {inertia}/></inertial></link>'
+               '<joint name="antenna_joint" type="fixed"><parent link="base_link"/>'
+               '<child link="antenna"/><origin xyz="0.1 0 0" rpy="0 0 0"/></joint>')
+    return urdf.replace('</robot>', antenna + '</robot>')
+
+
+def test_a_tensor_with_a_negative_moment_is_repaired_and_named(urdf):
+    """An antenna of TIAGo: ixy larger than ixx and iyy, which MuJoCo refuses as it is."""
+    bad = ('ixx="2.371e-8" ixy="6.119e-8" ixz="1.179e-8" iyy="2.833e-8" iyz="7.74e-9" '
+           'izz="3.849e-8"')
+    xml = with_antenna(urdf, bad)
+    with pytest.raises(ValueError, match='inertia must have positive eigenvalues'):
+        mujoco.MjModel.from_xml_string(xml)  # MuJoCo alone
+    with RobotSimulator(xml, engine='mujoco') as sim:
+        assert sim.repaired_inertia_links == ('antenna',)
+        sim.step(np.array([1.0, -1.0, 0.5]))
+        assert np.all(np.isfinite(sim.q_rad)) and np.any(sim.q_rad != 0.0)
+    with RobotSimulator(urdf, engine='mujoco') as wrist:  # valid tensors: nothing to say
+        assert wrist.repaired_inertia_links == ()
+    assert repaired_inertia_note(('antenna',)).startswith(
+        'MuJoCo simulates antenna with a principal moment of inertia raised')
+    with pytest.raises(SimulatorError, match=r"link 'antenna': the inertia tensor is not "
+                                             'finite'):
+        RobotSimulator(with_antenna(urdf, bad.replace('2.371e-8', 'nan')), engine='mujoco')
+    with pytest.raises(SimulatorError, match="link 'antenna': an inertia value is not a "
+                                             'number'):
+        RobotSimulator(with_antenna(urdf, bad.replace('2.371e-8', 'heavy')), engine='mujoco')

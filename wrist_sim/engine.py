@@ -45,7 +45,8 @@ class Engine(ABC):
     ``missing_meshes``, the mesh files the URDF names that could not be found (shapes left
     out); ``enforces_velocity_limits``, whether the speed is held at the velocity limits;
     ``zero_inertia_links``, the links the engine simulates without the rotational inertia the
-    URDF gives them (none by default).
+    URDF gives them (none by default); ``repaired_inertia_links``, those it simulates with a
+    principal moment raised where the URDF's is negative (none by default).
     """
 
     name: ClassVar[str]
@@ -60,6 +61,7 @@ class Engine(ABC):
     missing_meshes: list[str]
     enforces_velocity_limits: bool
     zero_inertia_links: tuple[str, ...] = ()
+    repaired_inertia_links: tuple[str, ...] = ()
 
     @property
     def n(self) -> int:

@@ -15,7 +15,12 @@ only where the simulator's plant requires it:
   impossible inertia tensor (principal moments that break the triangle inequality, as xArm6's
   link2 and link3 in pybullet_data have) by raising its smallest moments until it is
   possible, where Pinocchio keeps the tensor and PyBullet drops the link's rotational inertia.
-  Valid tensors (the bundled wrist's, the Panda's) are untouched.
+  Valid tensors (the bundled wrist's, the Panda's) are untouched. A tensor that is not even
+  positive semi-definite (a principal moment below 0, as the antenna links of TIAGo's URDF in
+  example-robot-data have; MuJoCo refuses it) gets its negative moments raised to a
+  thousandth of its largest, about the same principal axes, before the compiler balances it;
+  those links are listed in ``repaired_inertia_links``, to be said once
+  (:func:`repaired_inertia_note`).
 
 Then, per driven joint (MuJoCo's DOF fields, set after compiling, so the URDF's ``<dynamics
 damping friction>`` are replaced by the simulator's parameters, as in the PyBullet engine):
@@ -43,6 +48,7 @@ import numpy as np
 from quat_jt_runtime.joints import movable_joints, MOVABLE_TYPES, select_joints
 from wrist_sim.engine import Engine, GRAVITY_MPS2, SimulatorError
 
+REPAIRED_MOMENT_SHARE = 1e-3  # of the largest principal moment, for a negative one
 FRICTION_IMPEDANCE = 0.9999  # MuJoCo's largest: the stiffest constraint (least creep)
 CONSTRAINT_TIME_STEPS = 2.0  # solref time constant, in steps: MuJoCo's smallest stable
 
@@ -57,17 +63,59 @@ def _import_mujoco() -> Any:
     return mujoco
 
 
-def mujoco_urdf(urdf_xml: str, driven: Sequence[str]) -> str:
-    """
-    Return the URDF as MuJoCo is to compile it (see the module docstring).
+def repaired_inertia_note(links: Sequence[str]) -> str:
+    """Say which links MuJoCo simulates with another inertia tensor than the URDF's, and why."""
+    return (f'MuJoCo simulates {", ".join(links)} with a principal moment of inertia raised to '
+            'a thousandth of the largest: the inertia tensors robot_description gives them '
+            "have a negative one, which no body has. The controller's model keeps them as "
+            'given; masses and centres of mass, hence gravity, agree')
 
-    The shapes go, the movable joints not in ``driven`` become fixed, and the compiler
-    extension asks for ``balanceinertia``. Raises SimulatorError if the text is not XML.
+
+_INERTIA_KEYS = ('ixx', 'ixy', 'ixz', 'iyy', 'iyz', 'izz')
+
+
+def _repair_inertias(root: ET.Element) -> tuple[str, ...]:
+    """Raise the negative principal moments of the links' tensors; return those links."""
+    repaired = []
+    for link in root.iter('link'):
+        inertia = link.find('inertial/inertia')
+        if inertia is None:
+            continue
+        try:
+            xx, xy, xz, yy, yz, zz = (float(inertia.get(k, 0.0)) for k in _INERTIA_KEYS)
+        except ValueError as exc:
+            raise SimulatorError(f'link {link.get("name")!r}: an inertia value is not a '
+                                 f'number ({exc})') from None
+        tensor = np.array([[xx, xy, xz], [xy, yy, yz], [xz, yz, zz]])
+        if not np.all(np.isfinite(tensor)):
+            raise SimulatorError(f'link {link.get("name")!r}: the inertia tensor is not '
+                                 f'finite ({dict(inertia.attrib)})')
+        moments, axes = np.linalg.eigh(tensor)
+        if moments[0] >= 0.0 or moments[-1] <= 0.0:
+            continue
+        moments = np.maximum(moments, REPAIRED_MOMENT_SHARE * moments[-1])
+        fixed = axes @ np.diag(moments) @ axes.T
+        for key, (i, j) in zip(_INERTIA_KEYS, ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2),
+                                               (2, 2))):
+            inertia.set(key, repr(float(fixed[i, j])))
+        repaired.append(link.get('name'))
+    return tuple(repaired)
+
+
+def mujoco_urdf(urdf_xml: str, driven: Sequence[str]) -> tuple[str, tuple[str, ...]]:
+    """
+    Return the URDF as MuJoCo is to compile it, and the links whose inertia was repaired.
+
+    See the module docstring. The shapes go, the movable joints not in ``driven`` become
+    fixed, a tensor with a negative principal moment is repaired and the compiler extension
+    asks for ``balanceinertia``. Raises SimulatorError if the text is not XML or an inertia
+    value is not a finite number.
     """
     try:
         root = ET.fromstring(urdf_xml)
     except ET.ParseError as exc:
         raise SimulatorError(f'the URDF is not valid XML: {exc}') from exc
+    repaired = _repair_inertias(root)
     for link in root.iter('link'):
         for shape in [e for e in link if e.tag in ('visual', 'collision')]:
             link.remove(shape)
@@ -83,7 +131,7 @@ def mujoco_urdf(urdf_xml: str, driven: Sequence[str]) -> str:
     compiler.set('balanceinertia', 'true')
     compiler.set('discardvisual', 'true')
     compiler.set('fusestatic', 'false')
-    return ET.tostring(root, encoding='unicode')
+    return ET.tostring(root, encoding='unicode'), repaired
 
 
 def _urdf_limits(urdf_xml: str, names: Sequence[str]) -> dict[str, tuple[float, ...]]:
@@ -118,8 +166,9 @@ class MuJoCoEngine(Engine):
         except ValueError as exc:
             raise SimulatorError(str(exc)) from exc
         names = select_joints(joint_names, movable, SimulatorError)
+        text, self.repaired_inertia_links = mujoco_urdf(urdf_xml, names)
         try:
-            model = mujoco.MjModel.from_xml_string(mujoco_urdf(urdf_xml, names))
+            model = mujoco.MjModel.from_xml_string(text)
         except ValueError as exc:  # MuJoCo's compile errors
             raise SimulatorError(f'MuJoCo cannot compile the URDF: {exc}') from exc
         self.joint_names = tuple(names)

@@ -38,7 +38,7 @@ from wrist_sim.command_gate import CommandGate, RESUMED, TRIPPED
 from wrist_sim.config import SimConfig
 from wrist_sim.parameters import armature_note, change_log, declare_live, declare_structure
 from wrist_sim.simulator import at_limit, missing_meshes_note, NoDisplayError, SimulatorError
-from wrist_sim.simulator import RobotSimulator, zero_inertia_note
+from wrist_sim.simulator import repaired_inertia_note, RobotSimulator, zero_inertia_note
 
 NODE_NAME = 'wrist_sim'
 THROTTLE_S = 1.0
@@ -83,6 +83,8 @@ class WristSimNode(Node):
             self.get_logger().warning(missing_meshes_note(self.sim.missing_meshes))
         if self.sim.zero_inertia_links:
             self.get_logger().warning(zero_inertia_note(self.sim.zero_inertia_links))
+        if self.sim.repaired_inertia_links:
+            self.get_logger().warning(repaired_inertia_note(self.sim.repaired_inertia_links))
         unsimulated = armature_note(p, self.sim.supports_armature)
         if unsimulated:
             self.get_logger().warning(unsimulated)

@@ -36,7 +36,7 @@ from wrist_sim.quiet import pybullet  # noqa: F401 - first, so PyBullet loads wi
 import pybullet_data  # noqa: I100 - after pybullet, which wrist_sim.quiet imports silenced
 from wrist_sim.engine import Engine, NoDisplayError, SimulatorError
 from wrist_sim.meshes import missing_meshes_note, PathLike, resolve_meshes
-from wrist_sim.mujoco_engine import MuJoCoEngine
+from wrist_sim.mujoco_engine import MuJoCoEngine, repaired_inertia_note
 from wrist_sim.pybullet_engine import disconnect, PyBulletEngine, take_zero_inertia_warnings
 from wrist_sim.pybullet_engine import zero_inertia_note
 
@@ -44,8 +44,9 @@ from wrist_sim.pybullet_engine import zero_inertia_note
 ENGINES = (PyBulletEngine.name, MuJoCoEngine.name)
 
 __all__ = ['at_limit', 'disconnect', 'ENGINES', 'missing_meshes_note', 'NoDisplayError',
-           'per_joint', 'resolve_meshes', 'SimState', 'SimulatorError',
-           'take_zero_inertia_warnings', 'RobotSimulator', 'zero_inertia_note']
+           'per_joint', 'repaired_inertia_note', 'resolve_meshes', 'SimState',
+           'SimulatorError', 'take_zero_inertia_warnings', 'RobotSimulator',
+           'zero_inertia_note']
 
 
 @dataclass(frozen=True)
@@ -109,7 +110,9 @@ class RobotSimulator:
         inertias). MuJoCo simulates no shapes and looks for none. The links the engine
         simulates without the rotational inertia the URDF gives them are in
         :attr:`zero_inertia_links` (PyBullet's, for a tensor that is not physical; to be said
-        once, :func:`zero_inertia_note`).
+        once, :func:`zero_inertia_note`); those it simulates with a principal moment raised
+        where the URDF's is negative in :attr:`repaired_inertia_links` (MuJoCo's;
+        :func:`repaired_inertia_note`).
     :param solver_iterations: PyBullet constraint-solver iterations (for the friction motors).
     :param enforce_velocity_limits: hold each joint's speed at its URDF velocity limit, as a
         drive's speed limit would (see the module docstring).
@@ -146,6 +149,7 @@ class RobotSimulator:
         self.enforces_velocity_limits = e.enforces_velocity_limits
         self.missing_meshes = e.missing_meshes
         self.zero_inertia_links: tuple[str, ...] = e.zero_inertia_links
+        self.repaired_inertia_links: tuple[str, ...] = e.repaired_inertia_links
         self.use_gui = bool(use_gui)
         self._q = e.q
         self._qdot = e.qdot
