@@ -88,12 +88,20 @@ def default_links(urdf_xml: str, base_link: Optional[str] = None) -> tuple[str, 
 
     The tip is the child link of the last revolute or continuous joint on the path from the
     base (``base_link``, default the root link) with the most such joints; on a tie the one
-    found first breadth-first (the shallower, then the first in document order). A gripper's
-    prismatic fingers do not count, a revolute gripper jaw does (give the tip link then).
-    Raises ValueError if the URDF has no single root link (and no base is given), if the base
-    is not a link of it, or if no revolute or continuous joint lies below the base.
+    found first breadth-first (the shallower, then the first in document order). The path
+    stops at a joint coupled to others by ``<mimic>`` (one that mimics, or one mimicked: a
+    gripper's fingers, which move together, not as the regulator's free coordinates). A
+    gripper's prismatic fingers do not count; a revolute jaw that nothing mimics does (give
+    the tip link then). Raises ValueError if the URDF has no single root link (and no base is
+    given), if the base is not a link of it, or if no revolute or continuous joint lies below
+    the base.
     """
     root = _parsed(urdf_xml)
+    coupled = set()
+    for joint in root.findall('joint'):
+        mimic = joint.find('mimic')
+        if mimic is not None:
+            coupled.update((joint.get('name'), mimic.get('joint')))
     joints = _joint_rows(root)
     links = [ln.get('name') for ln in root.findall('link')]
     if base_link is None:
@@ -106,8 +114,9 @@ def default_links(urdf_xml: str, base_link: Optional[str] = None) -> tuple[str, 
     elif base_link not in links:
         raise ValueError(f'link {base_link!r} is not in the URDF')
     by_parent: dict[str, list[tuple[str, str]]] = {}
-    for _, kind, parent, child in joints:
-        by_parent.setdefault(parent, []).append((kind, child))
+    for name, kind, parent, child in joints:
+        if name not in coupled:
+            by_parent.setdefault(parent, []).append((kind, child))
     best = (0, base_link)
     queue = [(base_link, 0, base_link)]
     while queue:

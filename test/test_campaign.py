@@ -53,6 +53,26 @@ def test_the_chain_of_an_arm_is_found_from_its_urdf():
         arms.example_robot_urdf('nao')
 
 
+def finger(name: str, parent: str, mimic: str = '') -> str:
+    """Return a revolute finger link and joint below ``parent``, mimicking ``mimic`` if given."""
+    return (f'<link name="{name}"/><joint name="{name}_joint" type="revolute"><parent '
+            f'link="{parent}"/><child link="{name}"/><axis xyz="0 1 0"/><limit lower="0" '
+            'upper="1" effort="1" velocity="1"/>'
+            + (f'<mimic joint="{mimic}" multiplier="-1"/>' if mimic else '') + '</joint>')
+
+
+@pytest.mark.unit
+def test_the_chain_stops_at_a_gripper_whose_fingers_mimic_each_other():
+    """PR2's and TIAGo Pro's grippers: two-joint fingers, coupled by <mimic>, below the arm."""
+    fingers = (finger('left', 'tool') + finger('left_tip', 'left', 'left_joint')
+               + finger('right', 'tool', 'left_joint')
+               + finger('right_tip', 'right', 'left_joint'))
+    urdf = small_arm_urdf(('revolute',) * 3).replace('</robot>', fingers + '</robot>')
+    assert arms.default_links(urdf) == ('base_link', 'tool')  # not left_tip
+    uncoupled = urdf.replace('<mimic joint="left_joint" multiplier="-1"/>', '')
+    assert arms.default_links(uncoupled) == ('base_link', 'left_tip')  # a jaw: as before
+
+
 @pytest.mark.unit
 def test_an_arm_with_continuous_joints_gets_its_cases_within_one_turn(tmp_path):
     """A joint without stops is drawn from one turn (its limits are infinite)."""
