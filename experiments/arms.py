@@ -27,6 +27,12 @@ EXAMPLE_ROBOTS = {
     'xarm7': 'xarm_description/urdf/xarm7.urdf',
     'baxter': 'baxter_description/urdf/baxter.urdf',  # the whole robot: its right arm's chain
     'kinova': 'kinova_description/robots/kinova.urdf',  # a Jaco, continuous joints
+    # whole robots: one arm's chain (give the base link above the arm)
+    'tiago': 'tiago_description/robots/tiago_no_hand.urdf',
+    'tiago_pro': 'tiago_pro_description/robots/tiago_pro.urdf',
+    'romeo': 'romeo_description/urdf/romeo_small.urdf',
+    'g1': 'g1_description/urdf/g1_29dof_rev_1_0.urdf',
+    'centauro': 'centauro_description/urdf/centauro.urdf',
 }
 
 

@@ -3,7 +3,8 @@
 # Usage: bash experiments/reach_campaign.sh OUT_DIR [extra reach_experiment arguments]
 # (e.g. --cases 100 --workers 8, or --ray-address auto). One log per arm in OUT_DIR; the
 # table rows are the lines that start with '|'. ARMS='ur3 wrist' runs only those arms;
-# ARMS='kuka_iiwa baxter_right_arm kinova_j2s6s200' the more arms below.
+# ARMS='kuka_iiwa baxter_right_arm kinova_j2s6s200' (and the others in 'more') the more arms
+# below.
 set -euo pipefail
 out=${1:?usage: reach_campaign.sh OUT_DIR [reach_experiment arguments]}
 shift
@@ -30,6 +31,13 @@ more=(
   "kuka_iiwa|--urdf $pybullet_data/kuka_iiwa/model.urdf --name kuka_iiwa"
   'baxter_right_arm|--example-robot baxter --name baxter_right_arm'
   'kinova_j2s6s200|--example-robot kinova --name kinova_j2s6s200'
+  # arms of whole robots, each from the link its arm hangs from (docs/reach.md, "A joint the
+  # arm carries")
+  'tiago_arm|--example-robot tiago --name tiago_arm --base-link torso_lift_link'
+  'tiago_pro_left_arm|--example-robot tiago_pro --name tiago_pro_left_arm --base-link torso_lift_link'
+  'romeo_left_arm|--example-robot romeo --name romeo_left_arm'
+  'g1_left_arm|--example-robot g1 --name g1_left_arm --base-link torso_link'
+  'centauro_arm1|--example-robot centauro --name centauro_arm1 --base-link torso_2'
 )
 for entry in "${arms[@]}" "${more[@]}"; do
   name=${entry%%|*}

@@ -125,6 +125,30 @@ def seen_inertia(M: np.ndarray) -> np.ndarray:
     return 1.0 / np.diag(np.linalg.inv(M))
 
 
+def carried_speed(configs, kv: np.ndarray, push_nm: np.ndarray) -> np.ndarray:
+    """
+    Return the speed per joint that the other joints' pushes give it through M(q), roughly.
+
+    Far from the goal joint k is pushed with up to ``push_nm[k]`` and reaches its own cruise
+    ``push_k / k_v,k`` in about ``tau_k = I_k / k_v,k`` (``I_k = 1 / (M^-1)_kk``, the inertia
+    it sees). Through ``M^-1`` the same push accelerates joint j by ``(M^-1)_jk push_k`` (a
+    light link keeps its place in the world while the arm under it turns), and j's own
+    damping takes such a speed away in ``tau_j``: a lag of ``tau_j`` driven for about
+    ``tau_k`` leaves j with about ``|(M^-1)_jk| push_k tau_j tau_k / (tau_j + tau_k)``. The
+    sum over ``k != j``, every sign against j, the largest over ``configs`` (rad/s). It leaves
+    out the cubic damping, which brakes more near the limit, and the goal-configuration
+    term's fade-in, so it overestimates (docs/gain_design.md says by how much).
+    """
+    out = np.zeros(len(kv))
+    for _, _, M in configs:
+        inverse = np.linalg.inv(M)
+        tau = 1.0 / (np.diag(inverse) * kv)
+        lag = tau[:, None] * tau[None, :] / (tau[:, None] + tau[None, :])
+        pushed = np.abs(inverse) * push_nm[None, :] * lag
+        out = np.maximum(out, pushed.sum(axis=1) - np.diag(pushed))
+    return out
+
+
 def sigma_min(rows: np.ndarray) -> float:
     """Return the smallest singular value of ``rows`` (a task Jacobian: 0 at a singularity)."""
     return float(np.linalg.svd(rows, compute_uv=False)[-1])

@@ -41,7 +41,8 @@ import numpy as np
 from quat_jt_controller import control_law as cl
 from quat_jt_controller import parameter_table as table
 from quat_jt_controller.gain_analysis import (
-    checked_delays, configuration_stiffness, cruising_speed, damping_at, joint_spectral_radius,
+    carried_speed, checked_delays, configuration_stiffness, cruising_speed, damping_at,
+    joint_spectral_radius,
     joint_stiffness, largest_stable_damping, median_damping_ratio, QO, seen_inertia,
     settling_rate, sigma_min, time_to_goal_s, worst_rho)
 from quat_jt_controller.model import GRAVITY_RESERVE_SHARE, RobotModel
@@ -69,6 +70,13 @@ SPEED_MARGIN = 0.8
 # ... where K_v is raised to hold it, at most to this share of b_max: near rest a light joint
 # keeps much of the delay margin its own (small) K_v leaves; the cubic part brakes the rest
 SPEED_DAMPING_SHARE = 0.75
+# The speed the other joints' pushes give a joint through M(q) (gain_analysis.carried_speed,
+# an overestimate) is held at or below this share of its velocity limit: a joint lighter than
+# the arm that carries it gets more damping (up to SPEED_DAMPING_SHARE x b_max) and, to keep
+# its pace, a larger goal-configuration gain; not more damping than its budget can push at
+# that pace
+CARRIED_SPEED_SHARE = 1.0
+CARRY_STEP = 1.02  # ... raised where that asks for this much more K_v than the joint has
 NEGLIGIBLE_CUBIC = 100.0  # a v_c this many times the velocity limit: no cubic term
 CRUISE_STEP = 1.1  # the goal-configuration gain of a joint slower than that grows by this
 DEFAULT_VELOCITY = DEFAULT_SPEED_CAP_RAD_S  # rad/s, for a joint whose URDF gives no velocity limit
@@ -321,7 +329,8 @@ def inertial_damping_rate(delays: Sequence[int], dt_s: float) -> float:
 
 def _cruising_guide(configs, kp: np.ndarray, lam: np.ndarray, bound: np.ndarray,
                     push_max: np.ndarray, cruise: np.ndarray, b_max: np.ndarray,
-                    task: cl.Task = cl.Task.POSE) -> np.ndarray:
+                    task: cl.Task = cl.Task.POSE,
+                    kv_floor: Optional[np.ndarray] = None) -> np.ndarray:
     """
     Return the goal-configuration gains T_j: GUIDE_OVER_TASK x the task bound, or more.
 
@@ -329,12 +338,14 @@ def _cruising_guide(configs, kp: np.ndarray, lam: np.ndarray, bound: np.ndarray,
     against its damping K_v (which grows with the ramp's stiffness T / w) gets a larger T, up
     to what its budget leaves, ``push_max - bound``. So a strong joint is not held to the pace
     that the task bound, set by the weakest joint, gives it (the Panda's 87 N m shoulder
-    beside its 12 N m wrist).
+    beside its 12 N m wrist). ``kv_floor``: the least K_v per joint (default none).
     """
     guide = GUIDE_OVER_TASK * bound
     ceiling = np.maximum(push_max - bound, guide)
+    floor = np.zeros(len(bound)) if kv_floor is None else kv_floor
     for _ in range(60):
-        kv = np.minimum(_damping(configs, kp, lam, guide / GUIDE_RAMP_RAD, task), b_max)
+        kv = np.minimum(np.maximum(_damping(configs, kp, lam, guide / GUIDE_RAMP_RAD, task),
+                                   floor), b_max)
         slow = ((bound + guide) / kv < cruise) & (guide < ceiling)
         if not slow.any():
             break
@@ -511,20 +522,35 @@ def design(model: RobotModel, task: cl.Task, rate_hz: float = 1000.0,
     # little or no task torque; the goal-configuration term alone holds it. Its terms are
     # sized as if the task asked of it what the orientation rows would: the weakest share.
     floor = 0.0 if task.has_orientation else float(np.min(cap))
+    # K_v per joint at least this: where the other joints' pushes would carry it too fast
+    kv_floor = np.zeros(n)
+    carry_most = SPEED_DAMPING_SHARE * b_max
+    rho = {}
     for _ in range(200):
         bound = np.maximum(task_torque_bound(lever, kp, task), floor)
         guide = np.minimum(_cruising_guide(configs, kp, lam, bound, push_max, cruise, b_max,
-                                           task),
+                                           task, kv_floor),
                            np.maximum(guide_cap, GUIDE_OVER_TASK * bound))
-        kv = np.minimum(_damping(configs, kp, lam, guide / GUIDE_RAMP_RAD, task), b_max)
+        kv = np.minimum(np.maximum(_damping(configs, kp, lam, guide / GUIDE_RAMP_RAD, task),
+                                   kv_floor), b_max)
         for j in range(n):
             while _joint_unstable(inertia[j], guide[j] / GUIDE_RAMP_RAD, kv[j], b_max[j],
                                   delays, dt_s):
                 guide[j] *= SHRINK
         extra = guide / GUIDE_RAMP_RAD
-        kv = np.minimum(_damping(configs, kp, lam, extra, task), b_max)
+        kv = np.minimum(np.maximum(_damping(configs, kp, lam, extra, task), kv_floor), b_max)
         kv = np.where(limited_speed, holding_damping(bound + guide, kv, b_max, ceiling,
                                                      velocity), kv)
+        carried = carried_speed(configs, kv, bound + guide)
+        # ... as far as the joint's push can grow with it (within push_max): the joint keeps
+        # the pace it has
+        pace = (bound + guide) / kv
+        wanted = np.minimum(np.minimum(kv * carried / (CARRIED_SPEED_SHARE * velocity),
+                                       carry_most), push_max / pace)
+        carried_fast = wanted > CARRY_STEP * np.maximum(kv, kv_floor)
+        if carried_fast.any():  # more damping there, then the gains again
+            kv_floor = np.where(carried_fast, wanted, kv_floor)
+            continue
         inertial = _inertial_damping(configs, kp * lam, extra, task)
         rho = worst_rho(configs, kp, kv, lam, extra, delays, dt_s, task, inertial, beta)
         zeta = median_damping_ratio(configs, kp * lam, kv, extra, task, inertial, beta)
@@ -633,6 +659,8 @@ def design(model: RobotModel, task: cl.Task, rate_hz: float = 1000.0,
         'lever_max_m': data['lever_max'], 'inertia_min': inertia,
         'spectral_radius': final, 'delays': tuple(delays),
         'damping_ratio': ratios, 'terminal_speed_rad_s': np.array(terminal),
+        'carried_speed_rad_s': carried_speed(configs, np.array(kv_r), bound + guide_r),
+        'damping_max_nms': b_max, 'carry_damping_nms': kv_floor,
         'velocity_limits_rad_s': velocity, 'friction_learning': friction_learning,
         'cruise_fraction': cruise_fraction,
         'regular_sigma_min': data['regular_sigma_min'],

@@ -15,9 +15,9 @@ from quat_jt_controller import control_law as cl
 from quat_jt_controller import parameter_table as table
 from quat_jt_controller.gain_analysis import DELAY_MARGIN, GAIN_MARGIN, sigma_min
 from quat_jt_controller.gain_design import (
-    DAMPING_RATIO, Design, FRICTION_LEARNING_TIME_S, GRAVITY_RESERVE_SHARE, GUIDE_OVER_TASK,
-    LIMIT_OVER_TASK, REGULAR_SIGMA_MIN, REGULAR_TRIES, SAMPLES, SPEED_MARGIN, TICK_SPEED_SHARE,
-    TORQUE_SHARE)
+    CARRIED_SPEED_SHARE, DAMPING_RATIO, Design, FRICTION_LEARNING_TIME_S, GRAVITY_RESERVE_SHARE,
+    GUIDE_OVER_TASK, LIMIT_OVER_TASK, REGULAR_SIGMA_MIN, REGULAR_TRIES, SAMPLES, SPEED_MARGIN,
+    TICK_SPEED_SHARE, TORQUE_SHARE)
 from quat_jt_controller.model import RobotModel
 from quat_jt_runtime.param_table import Kind, names, row, yaml_lines, yaml_value
 
@@ -35,6 +35,15 @@ def _saturation(lam: Sequence[float], task: cl.Task) -> str:
     if task.has_position:
         parts.append(f'{x96 / lam[0]:.2g} m')
     return 'tanh at 96% of K_p from ' + ' / '.join(parts)
+
+
+def _carried(d) -> str:
+    """Say on which joints K_v was raised so that the arm does not carry them too fast."""
+    raised = [name for name, k in zip(d.joints, d.figures['carry_damping_nms']) if k > 0.0]
+    if not raised:
+        return ''
+    return (f': K_v raised to hold that at {CARRIED_SPEED_SHARE:g} x the velocity limit on '
+            f'{", ".join(raised)}')
 
 
 def _regular_note(f: dict) -> str:
@@ -142,7 +151,9 @@ def to_yaml(d: Design, potential: str = 'tanh', command: str = '',
         f'{_fmt(f["velocity_limits_rad_s"])}, aimed at '
         f'{f["cruise_fraction"]:g} x them, at most {SPEED_MARGIN:g} x them: K_v is raised where '
         'the cubic damping cannot hold the push there), median over the configurations with '
-        f'the inertial damping {_fmt(f["typical_speed_rad_s"])} rad/s.',
+        f'the inertial damping {_fmt(f["typical_speed_rad_s"])} rad/s;',
+        "  speeds the other joints' pushes may give each joint through M(q) (an overestimate) "
+        f'{_fmt(np.round(f["carried_speed_rad_s"], 4))} rad/s{_carried(d)}.',
         f'Expected time to a goal: about {f["time_to_goal_s"]:.2g} s for a 1 rad move of every '
         'joint (the slowest median cruise, then ln(1000) time constants of the slowest linear '
         'mode).',
@@ -159,7 +170,7 @@ def to_yaml(d: Design, potential: str = 'tanh', command: str = '',
         'potential': "'tanh' (Eq. 32/38) or 'quadratic' (Eq. 24/37); one set serves both",
         'kp': f'K_p, {axes}: a-priori torque bound within the budget',
         'kv': f'K_v, N m s/rad: damping ratio {DAMPING_RATIO:.2f} (tanh), from M(q), or '
-              'more to hold the speed',
+              'more to hold the speed or where the arm would carry the joint too fast',
         'lambda': f'Lambda: {_saturation(d.lam, d.task)}',
         'gravity_compensation': '+ g(q) from the URDF',
         'joint_limit_margin': 'rad, band inside each limit (joints with less than a full turn)',
