@@ -34,7 +34,8 @@ more=(
   # arms of whole robots, each from the link its arm hangs from (docs/reach.md, "A joint the
   # arm carries")
   'tiago_arm|--example-robot tiago --name tiago_arm --base-link torso_lift_link'
-  'tiago_pro_left_arm|--example-robot tiago_pro --name tiago_pro_left_arm --base-link torso_lift_link'
+  'tiago_pro_left_arm|--example-robot tiago_pro --name tiago_pro_left_arm
+    --base-link torso_lift_link'
   'romeo_left_arm|--example-robot romeo --name romeo_left_arm'
   'g1_left_arm|--example-robot g1 --name g1_left_arm --base-link torso_link'
   'centauro_arm1|--example-robot centauro --name centauro_arm1 --base-link torso_2'

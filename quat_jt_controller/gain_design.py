@@ -73,10 +73,11 @@ SPEED_DAMPING_SHARE = 0.75
 # The speed the other joints' pushes give a joint through M(q) (gain_analysis.carried_speed,
 # an overestimate) is held at or below this share of its velocity limit: a joint lighter than
 # the arm that carries it gets more damping (up to SPEED_DAMPING_SHARE x b_max) and, to keep
-# its pace, a larger goal-configuration gain; not more damping than its budget can push at
-# that pace
+# its cruise (or its pace, if it was slower), a larger goal-configuration gain; not more
+# damping than its budget can push at that speed
 CARRIED_SPEED_SHARE = 1.0
 CARRY_STEP = 1.02  # ... raised where that asks for this much more K_v than the joint has
+CARRY_PASSES = 30  # ... in at most this many passes of the design loop
 NEGLIGIBLE_CUBIC = 100.0  # a v_c this many times the velocity limit: no cubic term
 CRUISE_STEP = 1.1  # the goal-configuration gain of a joint slower than that grows by this
 DEFAULT_VELOCITY = DEFAULT_SPEED_CAP_RAD_S  # rad/s, for a joint whose URDF gives no velocity limit
@@ -525,6 +526,7 @@ def design(model: RobotModel, task: cl.Task, rate_hz: float = 1000.0,
     # K_v per joint at least this: where the other joints' pushes would carry it too fast
     kv_floor = np.zeros(n)
     carry_most = SPEED_DAMPING_SHARE * b_max
+    pace, carry_passes = None, 0
     rho = {}
     for _ in range(200):
         bound = np.maximum(task_torque_bound(lever, kp, task), floor)
@@ -542,14 +544,17 @@ def design(model: RobotModel, task: cl.Task, rate_hz: float = 1000.0,
         kv = np.where(limited_speed, holding_damping(bound + guide, kv, b_max, ceiling,
                                                      velocity), kv)
         carried = carried_speed(configs, kv, bound + guide)
-        # ... as far as the joint's push can grow with it (within push_max): the joint keeps
-        # the pace it has
-        pace = (bound + guide) / kv
+        if pace is None:  # the cruise aimed at, or the pace of a joint slower than that
+            pace = np.minimum(np.divide(bound + guide, kv, out=np.zeros(n), where=kv > 0.0),
+                              cruise)
+        # ... as far as the joint's push can grow with it (within push_max) at that pace
         wanted = np.minimum(np.minimum(kv * carried / (CARRIED_SPEED_SHARE * velocity),
-                                       carry_most), push_max / pace)
+                                       carry_most),
+                            np.divide(push_max, pace, out=np.full(n, np.inf), where=pace > 0.0))
         carried_fast = wanted > CARRY_STEP * np.maximum(kv, kv_floor)
-        if carried_fast.any():  # more damping there, then the gains again
+        if carried_fast.any() and carry_passes < CARRY_PASSES:  # more damping, then again
             kv_floor = np.where(carried_fast, wanted, kv_floor)
+            carry_passes += 1
             continue
         inertial = _inertial_damping(configs, kp * lam, extra, task)
         rho = worst_rho(configs, kp, kv, lam, extra, delays, dt_s, task, inertial, beta)
@@ -560,6 +565,8 @@ def design(model: RobotModel, task: cl.Task, rate_hz: float = 1000.0,
         # goal-configuration stiffness: lower that joint's term, not every task row.
         own = ((zeta < DAMPING_RATIO_MIN) & (kv >= b_max * (1.0 - 1e-9))
                & (guide > GUIDE_OVER_TASK * bound * (1.0 + 1e-9)))
+        # whatever is lowered next, the carried speeds are estimated anew from no floor
+        kv_floor, pace, carry_passes = np.zeros(n), None, 0
         if max(rho.values()) < 1.0 and own.any():
             guide_cap = np.where(own, guide * SHRINK, guide_cap)
             continue

@@ -15,9 +15,9 @@ from quat_jt_controller import control_law as cl
 from quat_jt_controller import parameter_table as table
 from quat_jt_controller.gain_analysis import DELAY_MARGIN, GAIN_MARGIN, sigma_min
 from quat_jt_controller.gain_design import (
-    CARRIED_SPEED_SHARE, DAMPING_RATIO, Design, FRICTION_LEARNING_TIME_S, GRAVITY_RESERVE_SHARE,
-    GUIDE_OVER_TASK, LIMIT_OVER_TASK, REGULAR_SIGMA_MIN, REGULAR_TRIES, SAMPLES, SPEED_MARGIN,
-    TICK_SPEED_SHARE, TORQUE_SHARE)
+    CARRIED_SPEED_SHARE, CARRY_STEP, DAMPING_RATIO, Design, FRICTION_LEARNING_TIME_S,
+    GRAVITY_RESERVE_SHARE, GUIDE_OVER_TASK, LIMIT_OVER_TASK, REGULAR_SIGMA_MIN, REGULAR_TRIES,
+    SAMPLES, SPEED_MARGIN, TICK_SPEED_SHARE, TORQUE_SHARE)
 from quat_jt_controller.model import RobotModel
 from quat_jt_runtime.param_table import Kind, names, row, yaml_lines, yaml_value
 
@@ -37,13 +37,19 @@ def _saturation(lam: Sequence[float], task: cl.Task) -> str:
     return 'tanh at 96% of K_p from ' + ' / '.join(parts)
 
 
-def _carried(d) -> str:
-    """Say on which joints K_v was raised so that the arm does not carry them too fast."""
-    raised = [name for name, k in zip(d.joints, d.figures['carry_damping_nms']) if k > 0.0]
-    if not raised:
-        return ''
-    return (f': K_v raised to hold that at {CARRIED_SPEED_SHARE:g} x the velocity limit on '
-            f'{", ".join(raised)}')
+def _carried(d: Design) -> str:
+    """Say where K_v was raised so that the arm does not carry a joint too fast, and where not."""
+    f = d.figures
+    raised = [name for name, k in zip(d.joints, f['carry_damping_nms']) if k > 0.0]
+    above = [name for name, v, lim in zip(d.joints, f['carried_speed_rad_s'],
+                                          f['velocity_limits_rad_s'])
+             if v > CARRY_STEP * CARRIED_SPEED_SHARE * lim]
+    text = (f': K_v raised to bring that towards {CARRIED_SPEED_SHARE:g} x the velocity limit '
+            f'on {", ".join(raised)}' if raised else '')
+    if above:
+        text += (f'{"; " if text else ": "}still above it on {", ".join(above)} (their damping '
+                 'at the most the sampled loop allows, or no budget to push them harder)')
+    return text
 
 
 def _regular_note(f: dict) -> str:

@@ -88,13 +88,14 @@ def default_links(urdf_xml: str, base_link: Optional[str] = None) -> tuple[str, 
 
     The tip is the child link of the last revolute or continuous joint on the path from the
     base (``base_link``, default the root link) with the most such joints; on a tie the one
-    found first breadth-first (the shallower, then the first in document order). The path
-    stops at a joint coupled to others by ``<mimic>`` (one that mimics, or one mimicked: a
-    gripper's fingers, which move together, not as the regulator's free coordinates). A
-    gripper's prismatic fingers do not count; a revolute jaw that nothing mimics does (give
-    the tip link then). Raises ValueError if the URDF has no single root link (and no base is
-    given), if the base is not a link of it, or if no revolute or continuous joint lies below
-    the base.
+    found first breadth-first (the shallower, then the first in document order). A joint
+    coupled to others by ``<mimic>`` (one that mimics, or one mimicked: a gripper's fingers,
+    which move together, not as the regulator's free coordinates) does not count, so a
+    gripper of them adds nothing to the chain and the tip stays at the wrist; a linkage inside
+    an arm does not cut it short either. A gripper's prismatic fingers do not count; a
+    revolute jaw that nothing mimics does (give the tip link then). Raises ValueError if the
+    URDF has no single root link (and no base is given), if the base is not a link of it, or
+    if no revolute or continuous joint lies below the base.
     """
     root = _parsed(urdf_xml)
     coupled = set()
@@ -113,22 +114,22 @@ def default_links(urdf_xml: str, base_link: Optional[str] = None) -> tuple[str, 
         base_link = roots[0]
     elif base_link not in links:
         raise ValueError(f'link {base_link!r} is not in the URDF')
-    by_parent: dict[str, list[tuple[str, str]]] = {}
+    by_parent: dict[str, list[tuple[bool, str]]] = {}
     for name, kind, parent, child in joints:
-        if name not in coupled:
-            by_parent.setdefault(parent, []).append((kind, child))
+        counted = kind in ROTATING_TYPES and name not in coupled
+        by_parent.setdefault(parent, []).append((counted, child))
     best = (0, base_link)
     queue = [(base_link, 0, base_link)]
     while queue:
         link, count, tip = queue.pop(0)
         if count > best[0]:
             best = (count, tip)
-        for kind, child in by_parent.get(link, []):
-            rotating = kind in ROTATING_TYPES
-            queue.append((child, count + rotating, child if rotating else tip))
+        for counted, child in by_parent.get(link, []):
+            queue.append((child, count + counted, child if counted else tip))
     if best[0] == 0:
-        raise ValueError(f'no revolute or continuous joint below link {base_link!r}; give the '
-                         'tip link')
+        raise ValueError(f'no revolute or continuous joint below link {base_link!r}'
+                         + (' but those coupled by <mimic>' if coupled else '')
+                         + '; give the tip link')
     return base_link, best[1]
 
 

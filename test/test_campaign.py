@@ -71,6 +71,14 @@ def test_the_chain_stops_at_a_gripper_whose_fingers_mimic_each_other():
     assert arms.default_links(urdf) == ('base_link', 'tool')  # not left_tip
     uncoupled = urdf.replace('<mimic joint="left_joint" multiplier="-1"/>', '')
     assert arms.default_links(uncoupled) == ('base_link', 'left_tip')  # a jaw: as before
+    # a linkage in the arm (joint2 mimicked by a side link) does not cut the chain short
+    linkage = small_arm_urdf(('revolute',) * 3).replace(
+        '</robot>', finger('rod', 'link1', 'joint2') + '</robot>')
+    assert arms.default_links(linkage) == ('base_link', 'tool')
+    only_coupled = small_arm_urdf(('revolute',)).replace(
+        '</robot>', finger('rod', 'base_link', 'tool') + '</robot>')
+    with pytest.raises(ValueError, match='but those coupled by <mimic>; give the tip link'):
+        arms.default_links(only_coupled)
 
 
 @pytest.mark.unit

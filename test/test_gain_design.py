@@ -503,17 +503,29 @@ def test_a_light_wrist_does_not_collapse_the_task_gains():
 
 
 def test_the_carried_speed_is_the_lag_of_a_joint_behind_the_others_push():
-    """No coupling, no carried speed; two joints: the formula of gain_analysis, by hand."""
+    """No coupling, no carried speed; a heavy and a light joint: a lag, by hand."""
     kv, push = np.array([2.0, 0.5]), np.array([3.0, 1.0])
     diagonal = [(None, None, np.diag([1.0, 0.01]))]
     np.testing.assert_array_equal(ga.carried_speed(diagonal, kv, push), [0.0, 0.0])
-    M = np.array([[1.0, 0.05], [0.05, 0.01]])
-    inverse = np.linalg.inv(M)
-    tau = 1.0 / (np.diag(inverse) * kv)
-    lag = tau[0] * tau[1] / (tau[0] + tau[1])
-    expected = [abs(inverse[0, 1]) * push[1] * lag, abs(inverse[1, 0]) * push[0] * lag]
-    np.testing.assert_allclose(ga.carried_speed([(None, None, M), (None, None, -M)], kv, push),
-                               expected)
+
+    def by_hand(M: np.ndarray) -> np.ndarray:
+        inverse = np.linalg.inv(M)
+        tau = 1.0 / (np.diag(inverse) * kv)  # I_j / k_v,j
+        lag = tau[0] * tau[1] / (tau[0] + tau[1])
+        return np.array([abs(inverse[0, 1]) * push[1] * lag,
+                         abs(inverse[1, 0]) * push[0] * lag])
+
+    weak = np.array([[1.0, -0.03], [-0.03, 0.01]])  # a negative coupling counts as much
+    strong = np.array([[1.0, 0.09], [0.09, 0.01]])  # the light joint nearly carried whole
+    assert np.all(by_hand(strong) > by_hand(weak)) and np.all(by_hand(weak) > 0.0)
+    np.testing.assert_allclose(ga.carried_speed([(None, None, weak)], kv, push),
+                               by_hand(weak))
+    np.testing.assert_allclose(  # the largest over the configurations
+        ga.carried_speed([(None, None, weak), (None, None, strong), diagonal[0]], kv, push),
+        by_hand(strong))
+    # the light joint is the one carried: (M^-1)_10 push_0 lag = 47.4 x 3 x 3.65e-3 rad/s
+    carried = ga.carried_speed([(None, None, strong)], kv, push)
+    assert carried[1] == pytest.approx(0.519, rel=1e-3) and carried[1] > 2.0 * carried[0]
 
 
 def test_a_joint_the_arm_would_carry_past_its_limit_gets_more_damping(monkeypatch):

@@ -75,7 +75,13 @@ _INERTIA_KEYS = ('ixx', 'ixy', 'ixz', 'iyy', 'iyz', 'izz')
 
 
 def _repair_inertias(root: ET.Element) -> tuple[str, ...]:
-    """Raise the negative principal moments of the links' tensors; return those links."""
+    """
+    Raise the negative principal moments of the links' tensors; return those links.
+
+    Only a tensor with a positive moment is repaired (to a thousandth of its largest); one
+    with none (all zero: a massless link; or all negative) is left as it is, for MuJoCo to
+    take or refuse by name.
+    """
     repaired = []
     for link in root.iter('link'):
         inertia = link.find('inertial/inertia')
