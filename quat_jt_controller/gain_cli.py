@@ -114,11 +114,24 @@ def _default_chain(parser: argparse.ArgumentParser, args: argparse.Namespace, ur
                               'joints)')
         if args.joints is None:
             args.joints = chain_joints(urdf, args.base_link, args.tip_link)
-            chosen.append(f'--joints {" ".join(args.joints)} (the movable joints between them)')
+            chosen.append(f'--joints {" ".join(args.joints)} (the movable joints between them)'
+                          + _prismatic_note(urdf, args.joints))
     except ValueError as exc:
         parser.error(f'{exc} (--urdf {args.urdf})')
     if chosen:
         print(f'design_gains: {"; ".join(chosen)}', file=sys.stderr)
+
+
+def _prismatic_note(urdf: str, joints: Sequence[str]) -> str:
+    """Name the sliding joints of a default chain (a torso lift), and how to leave them out."""
+    rows = {j.get('name'): j for j in ElementTree.fromstring(urdf).findall('joint')}
+    sliding = [name for name in joints if rows[name].get('type') == 'prismatic']
+    if not sliding:
+        return ''
+    child = rows[sliding[-1]].find('child').get('link')
+    return (f'; of them {", ".join(sliding)} slide: the goal-configuration ramp '
+            '(configuration_ramp) is metres for them, and a slow lift makes a slow arm. To '
+            f'regulate the arm alone (as an arm controller does), give --base-link {child}')
 
 
 def main(argv: Optional[list] = None) -> int:

@@ -73,8 +73,8 @@ SPEED_DAMPING_SHARE = 0.75
 # The speed the other joints' pushes give a joint through M(q) (gain_analysis.carried_speed,
 # an overestimate) is held at or below this share of its velocity limit: a joint lighter than
 # the arm that carries it gets more damping (up to SPEED_DAMPING_SHARE x b_max) and, to keep
-# its cruise (or its pace, if it was slower), a larger goal-configuration gain; not more
-# damping than its budget can push at that speed
+# the linear pace push / K_v it had (near the goal K_v alone damps), a larger
+# goal-configuration gain; not more damping than its budget can push at that pace
 CARRIED_SPEED_SHARE = 1.0
 CARRY_STEP = 1.02  # ... raised where that asks for this much more K_v than the joint has
 CARRY_PASSES = 30  # ... in at most this many passes of the design loop
@@ -417,6 +417,20 @@ def design(model: RobotModel, task: cl.Task, rate_hz: float = 1000.0,
     friction = np.zeros(n) if friction_nm is None else np.array(friction_nm, dtype=float)
     if effort.size != n or friction.size != n:
         raise ValueError(f'expected {n} effort limits and friction values')
+    stuck = np.flatnonzero(np.array(model.position_upper) <= np.array(model.position_lower))
+    if stuck.size:  # revolute joints without <limit lower upper> have [0, 0]
+        raise ValueError(
+            f'joints {[model.joint_names[j] for j in stuck]} have an empty range '
+            f'({[(model.position_lower[j], model.position_upper[j]) for j in stuck]} in the '
+            'URDF: lower and upper unset are 0): they cannot move; give them their limits in '
+            "the URDF (or type 'continuous'), or leave them out (--joints)")
+    unlimited = ~np.isfinite(effort) | (effort <= 0.0)
+    if unlimited.any():  # the budget is a share of the effort limit: none, no design
+        raise ValueError(
+            f'joints {[model.joint_names[j] for j in np.flatnonzero(unlimited)]} have no '
+            f'effort limit ({effort[unlimited].tolist()} N m; 0 or absent in a URDF means none '
+            "given): the gains are sized within the drives' limits, so give them "
+            '(--effort-limits, one per joint)')
     data = survey(model, task, seed)
     configs = data['configurations']
     lever = data['lever_max'] if task.has_position else np.zeros(n)
@@ -526,11 +540,16 @@ def design(model: RobotModel, task: cl.Task, rate_hz: float = 1000.0,
     # K_v per joint at least this: where the other joints' pushes would carry it too fast
     kv_floor = np.zeros(n)
     carry_most = SPEED_DAMPING_SHARE * b_max
+    rotating = ~np.array(model.prismatic)  # a slide is not carried (docs/gain_design.md)
     pace, carry_passes = None, 0
     rho = {}
     for _ in range(200):
         bound = np.maximum(task_torque_bound(lever, kp, task), floor)
-        guide = np.minimum(_cruising_guide(configs, kp, lam, bound, push_max, cruise, b_max,
+        # a joint whose K_v the carried speed raised keeps the linear pace it had (so its
+        # approach near the goal, where K_v alone damps, is no slower), as its budget allows
+        aim = (cruise if pace is None
+               else np.where(kv_floor > 0.0, np.maximum(cruise, pace), cruise))
+        guide = np.minimum(_cruising_guide(configs, kp, lam, bound, push_max, aim, b_max,
                                            task, kv_floor),
                            np.maximum(guide_cap, GUIDE_OVER_TASK * bound))
         kv = np.minimum(np.maximum(_damping(configs, kp, lam, guide / GUIDE_RAMP_RAD, task),
@@ -544,14 +563,13 @@ def design(model: RobotModel, task: cl.Task, rate_hz: float = 1000.0,
         kv = np.where(limited_speed, holding_damping(bound + guide, kv, b_max, ceiling,
                                                      velocity), kv)
         carried = carried_speed(configs, kv, bound + guide)
-        if pace is None:  # the cruise aimed at, or the pace of a joint slower than that
-            pace = np.minimum(np.divide(bound + guide, kv, out=np.zeros(n), where=kv > 0.0),
-                              cruise)
+        if pace is None:  # the linear pace (push / K_v) before any raise
+            pace = np.divide(bound + guide, kv, out=np.zeros(n), where=kv > 0.0)
         # ... as far as the joint's push can grow with it (within push_max) at that pace
         wanted = np.minimum(np.minimum(kv * carried / (CARRIED_SPEED_SHARE * velocity),
                                        carry_most),
                             np.divide(push_max, pace, out=np.full(n, np.inf), where=pace > 0.0))
-        carried_fast = wanted > CARRY_STEP * np.maximum(kv, kv_floor)
+        carried_fast = (wanted > CARRY_STEP * np.maximum(kv, kv_floor)) & rotating
         if carried_fast.any() and carry_passes < CARRY_PASSES:  # more damping, then again
             kv_floor = np.where(carried_fast, wanted, kv_floor)
             carry_passes += 1
@@ -668,6 +686,7 @@ def design(model: RobotModel, task: cl.Task, rate_hz: float = 1000.0,
         'damping_ratio': ratios, 'terminal_speed_rad_s': np.array(terminal),
         'carried_speed_rad_s': carried_speed(configs, np.array(kv_r), bound + guide_r),
         'damping_max_nms': b_max, 'carry_damping_nms': kv_floor,
+        'prismatic': np.array(model.prismatic),
         'velocity_limits_rad_s': velocity, 'friction_learning': friction_learning,
         'cruise_fraction': cruise_fraction,
         'regular_sigma_min': data['regular_sigma_min'],

@@ -41,14 +41,19 @@ def _carried(d: Design) -> str:
     """Say where K_v was raised so that the arm does not carry a joint too fast, and where not."""
     f = d.figures
     raised = [name for name, k in zip(d.joints, f['carry_damping_nms']) if k > 0.0]
-    above = [name for name, v, lim in zip(d.joints, f['carried_speed_rad_s'],
-                                          f['velocity_limits_rad_s'])
-             if v > CARRY_STEP * CARRIED_SPEED_SHARE * lim]
+    over = [(name, sliding) for name, v, lim, sliding in zip(
+        d.joints, f['carried_speed_rad_s'], f['velocity_limits_rad_s'], f['prismatic'])
+        if v > CARRY_STEP * CARRIED_SPEED_SHARE * lim]
+    above = [name for name, sliding in over if not sliding]
+    slides = [name for name, sliding in over if sliding]
     text = (f': K_v raised to bring that towards {CARRIED_SPEED_SHARE:g} x the velocity limit '
             f'on {", ".join(raised)}' if raised else '')
     if above:
         text += (f'{"; " if text else ": "}still above it on {", ".join(above)} (their damping '
                  'at the most the sampled loop allows, or no budget to push them harder)')
+    if slides:
+        text += (f'{"; " if text else ": "}above it on {", ".join(slides)}, left as they are '
+                 '(sliding joints: docs/gain_design.md, section 3)')
     return text
 
 
@@ -159,7 +164,7 @@ def to_yaml(d: Design, potential: str = 'tanh', command: str = '',
         'the cubic damping cannot hold the push there), median over the configurations with '
         f'the inertial damping {_fmt(f["typical_speed_rad_s"])} rad/s;',
         "  speeds the other joints' pushes may give each joint through M(q) (an overestimate) "
-        f'{_fmt(np.round(f["carried_speed_rad_s"], 4))} rad/s{_carried(d)}.',
+        f'{_fmt(np.round(f["carried_speed_rad_s"], 4))} rad/s (m/s on a slide){_carried(d)}.',
         f'Expected time to a goal: about {f["time_to_goal_s"]:.2g} s for a 1 rad move of every '
         'joint (the slowest median cruise, then ln(1000) time constants of the slowest linear '
         'mode).',

@@ -92,7 +92,7 @@ class RobotModel:
         self.n = len(joint_names)
 
         joint_ids = [model.getJointId(n) for n in joint_names]
-        unbounded = []
+        unbounded, sliding = [], []
         for name, jid in zip(joint_names, joint_ids):
             joint = model.joints[jid]
             if joint.nv != 1 or joint.nq not in (1, 2):
@@ -100,6 +100,9 @@ class RobotModel:
                                  'velocities; only revolute, continuous and prismatic joints '
                                  'are supported')
             unbounded.append(joint.nq == 2)  # continuous: (cos q, sin q)
+            kind = joint.shortname()  # JointModelPX..PZ, JointModelPrismaticUnaligned
+            sliding.append(kind.startswith('JointModelP'))
+        self.prismatic: tuple[bool, ...] = tuple(sliding)
         if model.nv != self.n:
             raise ModelError(f'model has {model.nv} velocities for {self.n} joints')
         # Our joint order -> Pinocchio's configuration index and velocity index.

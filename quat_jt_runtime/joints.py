@@ -105,6 +105,9 @@ def default_links(urdf_xml: str, base_link: Optional[str] = None) -> tuple[str, 
             coupled.update((joint.get('name'), mimic.get('joint')))
     joints = _joint_rows(root)
     links = [ln.get('name') for ln in root.findall('link')]
+    if not links:
+        raise ValueError('the URDF has no <link> (an empty <robot>: a xacro file of macros '
+                         'only? give the URDF xacro expands it to)')
     if base_link is None:
         children = {c for _, _, _, c in joints}
         roots = [ln for ln in links if ln not in children]

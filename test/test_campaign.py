@@ -11,6 +11,7 @@ import sys
 from experiments import arms
 from experiments import reach_experiment as rx
 from experiments import runners
+from experiments import urdf_sweep
 import numpy as np
 import pytest
 from quat_jt_controller import control_law as cl
@@ -49,6 +50,8 @@ def test_the_chain_of_an_arm_is_found_from_its_urdf():
     assert arms.arm_links(urdf, tip_link='link2')[2] == ['joint1', 'joint2']
     with pytest.raises(ValueError, match="'base_link' is not below link 'link2'"):
         arms.chain_joints(urdf, 'link2', 'base_link')
+    with pytest.raises(ValueError, match='the URDF has no <link>'):  # UR's ur3.urdf
+        arms.default_links('<robot xmlns:xacro="http://wiki.ros.org/xacro"></robot>')
     with pytest.raises(ValueError, match="unknown example robot 'nao'"):
         arms.example_robot_urdf('nao')
 
@@ -173,3 +176,21 @@ def test_an_arm_from_its_urdf_takes_parameter_overrides(tmp_path, capsys):
                  '1', '--param', 'settling_dampng_rate:=1'])
     assert "['settling_dampng_rate'] are no controller parameters it can set here" in (
         capsys.readouterr().err)
+
+
+@pytest.mark.unit
+def test_the_urdf_sweep_tells_taken_refused_and_crashed_apart(tmp_path):
+    """design_gains and the simulator on a URDF as it comes: each outcome, and what was said."""
+    good = tmp_path / 'arm.urdf'
+    good.write_text(small_arm_urdf(('revolute',) * 4))
+    assert urdf_sweep.design_outcome(good, 120.0) == ('taken', '')
+    assert urdf_sweep.simulator_outcome(good, 'mujoco') == ('taken', '')
+    no_effort = tmp_path / 'no_effort.urdf'
+    no_effort.write_text(small_arm_urdf(('revolute',) * 4).replace('effort="10.0"', 'effort="0"'))
+    kind, said = urdf_sweep.design_outcome(no_effort, 120.0)
+    assert kind == 'refused' and "joints ['joint2'] have no effort limit" in said
+    empty = tmp_path / 'empty.urdf'
+    empty.write_text('<robot name="nothing"></robot>')
+    assert urdf_sweep.simulator_outcome(empty, 'mujoco')[0] == 'refused'
+    assert urdf_sweep.cell(('refused', 'x' * 200)).endswith('...')
+    assert urdf_sweep.cell(('crashed', 'a | b')) == 'crashed: a / b'

@@ -328,6 +328,31 @@ def test_a_urdf_without_links_given_gets_its_longest_chain_and_says_so(tmp_path,
     code, lines = run_main(['--urdf', str(path), '--base-link', 'side', '--tip-link', 'tool',
                             '--out', str(out)], capsys)
     assert code == 2 and "link 'tool' is not below link 'side'" in lines[0], lines
+    lift = tmp_path / 'lift.urdf'  # a torso lift under the arm: said, and how to leave it out
+    lift.write_text(small_arm_urdf(('prismatic', 'revolute', 'revolute', 'revolute')))
+    _, lines = run_main(['--urdf', str(lift), '--out', str(out)], capsys)
+    assert lines[0].endswith('--joints joint1 joint2 joint3 tool (the movable joints between '
+                             'them); of them joint1 slide: the goal-configuration ramp '
+                             '(configuration_ramp) is metres for them, and a slow lift makes a '
+                             'slow arm. To regulate the arm alone (as an arm controller does), '
+                             'give --base-link link1'), lines
+
+
+def test_a_urdf_without_effort_limits_or_ranges_is_refused_by_name(tmp_path, capsys):
+    """Effort 0 (none given) and a revolute joint's unset range [0, 0], as URDFs come."""
+    urdf = small_arm_urdf(('revolute',) * 4)
+    path = tmp_path / 'arm.urdf'
+    path.write_text(urdf.replace('effort="10.0"', 'effort="0"'))  # joint2's
+    code, lines = run_main(['--urdf', str(path), '--task', 'position'], capsys)
+    assert code == 1 and ("joints ['joint2'] have no effort limit ([0.0] N m; 0 or absent in "
+                          'a URDF means none given)') in lines[-1], lines
+    assert '--effort-limits' in lines[-1]
+    code, lines = run_main(['--urdf', str(path), '--task', 'position', '--effort-limits',
+                            '20', '10', '6', '5'], capsys)
+    assert code == 0, lines  # given on the command line instead
+    path.write_text(urdf.replace('lower="-2" upper="2"', 'lower="0" upper="0"', 1))
+    code, lines = run_main(['--urdf', str(path), '--task', 'position'], capsys)
+    assert code == 1 and "joints ['joint1'] have an empty range ([(0.0, 0.0)]" in lines[-1], lines
 
 
 @pytest.mark.parametrize('argv, status, words', [
@@ -543,12 +568,33 @@ def test_a_joint_the_arm_would_carry_past_its_limit_gets_more_damping(monkeypatc
     over = held.figures['carried_speed_rad_s'] > 1.05 * limits
     top = gd.SPEED_DAMPING_SHARE * held.figures['damping_max_nms']
     assert np.all(np.array(held.kv)[over] >= 0.99 * top[over]), (over, held.kv, top)
-    # the joints keep the cruise: the goal-configuration gain grows with the damping
+    # the joints keep their linear pace, push / K_v (within the 10% steps the goal-configuration
+    # gain grows by), and so the cruise: that gain grows with the damping
+    pace = {name: (d.figures['task_bound_nm'] + d.figures['guide_nm'])[raised]
+            / np.array(d.kv)[raised] for name, d in (('held', held), ('free', free))}
+    assert np.all(pace['held'] >= 0.9 * pace['free']), pace
+    assert np.all(held.figures['guide_nm'][raised] > free.figures['guide_nm'][raised])
     cruise = gd.CRUISE_FRACTION * limits[raised]
     assert np.all(held.figures['terminal_speed_rad_s'][raised] >= 0.99 * np.minimum(
         cruise, free.figures['terminal_speed_rad_s'][raised]))
     geared = gd.design(_xarm7(0.1), cl.Task.POSE)  # with the drives' inertia: nothing to hold
     assert np.all(geared.figures['carried_speed_rad_s'] <= limits)
+
+
+def test_a_sliding_joint_is_left_out_of_the_carried_speed_rule():
+    """The torso lift of TIAGo under its arm: over its limit by the estimate, its K_v as is."""
+    from robots import example_robot_data_urdf
+    urdf = example_robot_data_urdf('tiago_description/robots/tiago_no_hand.urdf').read_text()
+    joints = ['torso_lift_joint'] + [f'arm_{i}_joint' for i in range(1, 8)]
+    model = RobotModel(urdf, 'base_footprint', 'arm_7_link', joints)
+    assert model.prismatic == (True,) + (False,) * 7
+    d = gd.design(model, cl.Task.POSE)
+    assert d.figures['carried_speed_rad_s'][0] > d.figures['velocity_limits_rad_s'][0]
+    assert d.figures['carry_damping_nms'][0] == 0.0
+    header = ' '.join(line.strip('# ') for line in go.to_yaml(d).splitlines())
+    assert 'on torso_lift_joint, left as they are (sliding joints' in header
+    model.prismatic = (False,) * 8  # taken for a rotation, the lift would be damped hard
+    assert gd.design(model, cl.Task.POSE).kv[0] > 5.0 * d.kv[0]
 
 
 def test_the_inertial_damping_damps_the_heavy_arm_within_what_the_light_one_tolerates(designs):

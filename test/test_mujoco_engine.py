@@ -216,6 +216,21 @@ def test_a_tensor_with_a_negative_moment_is_repaired_and_named(urdf):
         assert np.all(np.isfinite(sim.q_rad)) and np.any(sim.q_rad != 0.0)
     with RobotSimulator(urdf, engine='mujoco') as wrist:  # valid tensors: nothing to say
         assert wrist.repaired_inertia_links == ()
+    # a rod (izz 0: the finger of finger_edu) and a point mass (iCub's l_ankle_2), both
+    # refused by MuJoCo as they come; a massless link with no tensor is left alone
+    for tensor in ('ixx="1.2e-4" ixy="0" ixz="0" iyy="1.2e-4" iyz="0" izz="0"',
+                   'ixx="0" ixy="0" ixz="1.3e-20" iyy="0" iyz="0" izz="0"',
+                   'ixx="2.7e-20" ixy="0" ixz="0" iyy="5.4e-20" iyz="0" izz="1.4e-20"'):
+        xml = with_antenna(urdf, tensor).replace('value="1e-6"', 'value="0.27"')
+        with pytest.raises(ValueError, match='inertia must have positive eigenvalues'):
+            mujoco.MjModel.from_xml_string(xml)
+        with RobotSimulator(xml, engine='mujoco') as sim:
+            assert sim.repaired_inertia_links == ('antenna',)
+    for mass in ('0', '1e-9'):  # a frame without inertia (the SO-101's gripper_frame_link)
+        massless = with_antenna(urdf, 'ixx="0" ixy="0" ixz="0" iyy="0" iyz="0" izz="0"')
+        with RobotSimulator(massless.replace('value="1e-6"', f'value="{mass}"'),
+                            engine='mujoco') as sim:
+            assert sim.repaired_inertia_links == ()
     assert repaired_inertia_note(('antenna',)).startswith(
         'MuJoCo simulates antenna with a principal moment of inertia raised')
     with pytest.raises(SimulatorError, match=r"link 'antenna': the inertia tensor is not "

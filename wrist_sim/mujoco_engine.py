@@ -17,10 +17,10 @@ only where the simulator's plant requires it:
   possible, where Pinocchio keeps the tensor and PyBullet drops the link's rotational inertia.
   Valid tensors (the bundled wrist's, the Panda's) are untouched. A tensor that is not even
   positive semi-definite (a principal moment below 0, as the antenna links of TIAGo's URDF in
-  example-robot-data have; MuJoCo refuses it) gets its negative moments raised to a
-  thousandth of its largest, about the same principal axes, before the compiler balances it;
-  those links are listed in ``repaired_inertia_links``, to be said once
-  (:func:`repaired_inertia_note`).
+  example-robot-data have; or one at 0: a rod, or a point mass; MuJoCo refuses both) gets
+  those moments raised to a thousandth of its largest (at least ``m (1 mm)^2``), about the
+  same principal axes, before the compiler balances it; those links are listed in
+  ``repaired_inertia_links``, to be said once (:func:`repaired_inertia_note`).
 
 Then, per driven joint (MuJoCo's DOF fields, set after compiling, so the URDF's ``<dynamics
 damping friction>`` are replaced by the simulator's parameters, as in the PyBullet engine):
@@ -48,7 +48,9 @@ import numpy as np
 from quat_jt_runtime.joints import movable_joints, MOVABLE_TYPES, select_joints
 from wrist_sim.engine import Engine, GRAVITY_MPS2, SimulatorError
 
-REPAIRED_MOMENT_SHARE = 1e-3  # of the largest principal moment, for a negative one
+REPAIRED_MOMENT_SHARE = 1e-3  # of the largest principal moment, for one <= 0
+POINT_MASS_RADIUS_M = 1e-3  # ... and at least m r^2: a link of mass m given no inertia
+MUJOCO_MIN_MOMENT = 1e-15  # kg m^2, mjMINVAL: MuJoCo refuses a principal moment below it
 FRICTION_IMPEDANCE = 0.9999  # MuJoCo's largest: the stiffest constraint (least creep)
 CONSTRAINT_TIME_STEPS = 2.0  # solref time constant, in steps: MuJoCo's smallest stable
 
@@ -66,9 +68,10 @@ def _import_mujoco() -> Any:
 def repaired_inertia_note(links: Sequence[str]) -> str:
     """Say which links MuJoCo simulates with another inertia tensor than the URDF's, and why."""
     return (f'MuJoCo simulates {", ".join(links)} with a principal moment of inertia raised to '
-            'a thousandth of the largest: the inertia tensors robot_description gives them '
-            "have a negative one, which no body has. The controller's model keeps them as "
-            'given; masses and centres of mass, hence gravity, agree')
+            'a thousandth of the largest (at least their mass times (1 mm)^2): the '
+            'inertia tensors robot_description gives them have one at or below 0, which '
+            "MuJoCo refuses. The controller's model keeps them as given; masses and centres "
+            'of mass, hence gravity, agree')
 
 
 _INERTIA_KEYS = ('ixx', 'ixy', 'ixz', 'iyy', 'iyz', 'izz')
@@ -76,11 +79,13 @@ _INERTIA_KEYS = ('ixx', 'ixy', 'ixz', 'iyy', 'iyz', 'izz')
 
 def _repair_inertias(root: ET.Element) -> tuple[str, ...]:
     """
-    Raise the negative principal moments of the links' tensors; return those links.
+    Raise the principal moments ~0 or below of the links' tensors; return those links.
 
-    Only a tensor with a positive moment is repaired (to a thousandth of its largest); one
-    with none (all zero: a massless link; or all negative) is left as it is, for MuJoCo to
-    take or refuse by name.
+    MuJoCo wants every moment above ``MUJOCO_MIN_MOMENT``. One at or below it is raised to a
+    thousandth of the largest, or to ``m r^2`` (``POINT_MASS_RADIUS_M``) if that is more: a
+    point mass (a link of mass m with a zero tensor) gets m (1 mm)^2. A link too light for
+    that to reach ``MUJOCO_MIN_MOMENT`` (a massless frame: the SO-101's gripper_frame_link,
+    1e-9 kg) is left as it is (MuJoCo takes it where it does not move).
     """
     repaired = []
     for link in root.iter('link'):
@@ -96,10 +101,18 @@ def _repair_inertias(root: ET.Element) -> tuple[str, ...]:
         if not np.all(np.isfinite(tensor)):
             raise SimulatorError(f'link {link.get("name")!r}: the inertia tensor is not '
                                  f'finite ({dict(inertia.attrib)})')
+        mass_node = link.find('inertial/mass')
+        try:
+            mass = float(mass_node.get('value', 0.0)) if mass_node is not None else 0.0
+        except ValueError as exc:
+            raise SimulatorError(f'link {link.get("name")!r}: the mass is not a number '
+                                 f'({exc})') from None
         moments, axes = np.linalg.eigh(tensor)
-        if moments[0] >= 0.0 or moments[-1] <= 0.0:
+        floor = max(REPAIRED_MOMENT_SHARE * moments[-1], mass * POINT_MASS_RADIUS_M ** 2)
+        if moments[0] > MUJOCO_MIN_MOMENT or floor <= MUJOCO_MIN_MOMENT:
+            continue  # fine; or (nearly) massless, which MuJoCo takes where it does not move
             continue
-        moments = np.maximum(moments, REPAIRED_MOMENT_SHARE * moments[-1])
+        moments = np.maximum(moments, floor)
         fixed = axes @ np.diag(moments) @ axes.T
         for key, (i, j) in zip(_INERTIA_KEYS, ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2),
                                                (2, 2))):
@@ -176,7 +189,10 @@ class MuJoCoEngine(Engine):
         try:
             model = mujoco.MjModel.from_xml_string(text)
         except ValueError as exc:  # MuJoCo's compile errors
-            raise SimulatorError(f'MuJoCo cannot compile the URDF: {exc}') from exc
+            hint = (' (a link without mass moved by a driven joint: drive only the joints '
+                    'that move mass, joint_names)' if 'mass and inertia of moving bodies'
+                    in str(exc) else '')
+            raise SimulatorError(f'MuJoCo cannot compile the URDF: {exc}{hint}') from exc
         self.joint_names = tuple(names)
         self.missing_meshes: list[str] = []  # no shapes: no mesh is looked for
         model.opt.timestep = float(dt_s)

@@ -161,6 +161,11 @@ class PyBulletEngine(Engine):
         names = select_joints(joint_names, movable, SimulatorError)
         self.joint_names = tuple(names)
         self._idx = [by_name[n] for n in names]
+        try:  # a URDF PyBullet loads but cannot step (TIAGo++'s, in example-robot-data)
+            c.getJointStates(self._body, self._idx)
+        except pybullet.error as exc:
+            raise SimulatorError(f'PyBullet loaded the URDF but cannot read its joints ({exc}); '
+                                 "engine 'mujoco' may simulate it") from None
         infos = [info_by_index[j] for j in self._idx]
         # URDF effort 0 (or absent) means "no limit given": no clamping.
         self.effort_limits_nm = np.array([i[10] if i[10] > 0.0 else np.inf for i in infos])
