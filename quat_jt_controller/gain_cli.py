@@ -125,13 +125,18 @@ def _default_chain(parser: argparse.ArgumentParser, args: argparse.Namespace, ur
 def _prismatic_note(urdf: str, joints: Sequence[str]) -> str:
     """Name the sliding joints of a default chain (a torso lift), and how to leave them out."""
     rows = {j.get('name'): j for j in ElementTree.fromstring(urdf).findall('joint')}
-    sliding = [name for name in joints if rows[name].get('type') == 'prismatic']
+    kinds = [rows[name].get('type') for name in joints]
+    sliding = [name for name, kind in zip(joints, kinds) if kind == 'prismatic']
     if not sliding:
         return ''
-    child = rows[sliding[-1]].find('child').get('link')
-    return (f'; of them {", ".join(sliding)} slide: the goal-configuration ramp '
-            '(configuration_ramp) is metres for them, and a slow lift makes a slow arm. To '
-            f'regulate the arm alone (as an arm controller does), give --base-link {child}')
+    text = (f'; of them {", ".join(sliding)} slide: the goal-configuration ramp '
+            '(configuration_ramp) is metres for them, and a slow lift makes a slow arm')
+    leading = len(sliding)  # slides under the whole arm (a torso lift): how to leave them out
+    if all(kind == 'prismatic' for kind in kinds[:leading]):
+        child = rows[sliding[-1]].find('child').get('link')
+        text += (f'. To regulate the arm alone (as an arm controller does), give --base-link '
+                 f'{child}')
+    return text
 
 
 def main(argv: Optional[list] = None) -> int:

@@ -422,8 +422,8 @@ def design(model: RobotModel, task: cl.Task, rate_hz: float = 1000.0,
         raise ValueError(
             f'joints {[model.joint_names[j] for j in stuck]} have an empty range '
             f'({[(model.position_lower[j], model.position_upper[j]) for j in stuck]} in the '
-            'URDF: lower and upper unset are 0): they cannot move; give them their limits in '
-            "the URDF (or type 'continuous'), or leave them out (--joints)")
+            'URDF, upper <= lower; a <limit> without lower and upper gives 0 and 0): they '
+            'cannot move; give them their limits in the URDF, or leave them out (--joints)')
     unlimited = ~np.isfinite(effort) | (effort <= 0.0)
     if unlimited.any():  # the budget is a share of the effort limit: none, no design
         raise ValueError(

@@ -226,7 +226,16 @@ def test_a_tensor_with_a_negative_moment_is_repaired_and_named(urdf):
             mujoco.MjModel.from_xml_string(xml)
         with RobotSimulator(xml, engine='mujoco') as sim:
             assert sim.repaired_inertia_links == ('antenna',)
-    for mass in ('0', '1e-9'):  # a frame without inertia (the SO-101's gripper_frame_link)
+    # no tensor on a link a driven joint moves (iCub's): MuJoCo refuses it; given m (1 mm)^2
+    point = urdf.replace('<inertia ixx="0.012" ixy="0" ixz="0" iyy="0.012" iyz="0" izz="0.02"/>',
+                         '<inertia ixx="0" ixy="0" ixz="0" iyy="0" iyz="0" izz="0"/>')
+    assert point != urdf
+    with RobotSimulator(point, engine='mujoco') as sim:
+        assert sim.repaired_inertia_links == ('link3',)
+    with RobotSimulator(point, ['joint1', 'joint2'], engine='mujoco') as sim:
+        assert sim.repaired_inertia_links == ()  # joint3 locked: link3 does not move
+    for mass in ('0', '1e-9', '0.27'):  # no tensor: a frame (the SO-101's gripper_frame_link),
+        # or a point mass (the TALOS arm's wrist_left_ft_link), both of which MuJoCo takes
         massless = with_antenna(urdf, 'ixx="0" ixy="0" ixz="0" iyy="0" iyz="0" izz="0"')
         with RobotSimulator(massless.replace('value="1e-6"', f'value="{mass}"'),
                             engine='mujoco') as sim:

@@ -15,12 +15,14 @@ only where the simulator's plant requires it:
   impossible inertia tensor (principal moments that break the triangle inequality, as xArm6's
   link2 and link3 in pybullet_data have) by raising its smallest moments until it is
   possible, where Pinocchio keeps the tensor and PyBullet drops the link's rotational inertia.
-  Valid tensors (the bundled wrist's, the Panda's) are untouched. A tensor that is not even
-  positive semi-definite (a principal moment below 0, as the antenna links of TIAGo's URDF in
-  example-robot-data have; or one at 0: a rod, or a point mass; MuJoCo refuses both) gets
-  those moments raised to a thousandth of its largest (at least ``m (1 mm)^2``), about the
-  same principal axes, before the compiler balances it; those links are listed in
-  ``repaired_inertia_links``, to be said once (:func:`repaired_inertia_note`).
+  Valid tensors (the bundled wrist's, the Panda's) are untouched. A tensor with a principal
+  moment at or below MuJoCo's 1e-15 (below 0, as the antenna links of TIAGo's URDF in
+  example-robot-data have; 0, a rod; round-off, iCub's 1e-20), or none on a link a driven
+  joint moves, gets those moments raised to a thousandth of its largest (at least
+  ``m (1 mm)^2``), about the same principal axes, before the compiler balances it; those
+  links are listed in ``repaired_inertia_links``, to be said once
+  (:func:`repaired_inertia_note`). A tensor of zeros on a link that does not move (a point
+  mass, which MuJoCo takes) is left as it is (:func:`_repair_inertias`).
 
 Then, per driven joint (MuJoCo's DOF fields, set after compiling, so the URDF's ``<dynamics
 damping friction>`` are replaced by the simulator's parameters, as in the PyBullet engine):
@@ -41,7 +43,7 @@ URDF velocity limit after the step and the position integrated with the clamped 
 are the simulator's clamp, the same for both engines. There is no window: ``use_gui`` is
 PyBullet's.
 """
-from typing import Any, Optional, Sequence
+from typing import Any, Collection, Optional, Sequence
 import xml.etree.ElementTree as ET
 
 import numpy as np
@@ -69,23 +71,24 @@ def repaired_inertia_note(links: Sequence[str]) -> str:
     """Say which links MuJoCo simulates with another inertia tensor than the URDF's, and why."""
     return (f'MuJoCo simulates {", ".join(links)} with a principal moment of inertia raised to '
             'a thousandth of the largest (at least their mass times (1 mm)^2): the '
-            'inertia tensors robot_description gives them have one at or below 0, which '
-            "MuJoCo refuses. The controller's model keeps them as given; masses and centres "
-            'of mass, hence gravity, agree')
+            'inertia tensors robot_description gives them have one at or below 1e-15 (or none '
+            "on a moving link), which MuJoCo refuses. The controller's model keeps them as "
+            'given; masses and centres of mass, hence gravity, agree')
 
 
 _INERTIA_KEYS = ('ixx', 'ixy', 'ixz', 'iyy', 'iyz', 'izz')
 
 
-def _repair_inertias(root: ET.Element) -> tuple[str, ...]:
+def _repair_inertias(root: ET.Element, moving: Collection[str] = ()) -> tuple[str, ...]:
     """
     Raise the principal moments ~0 or below of the links' tensors; return those links.
 
     MuJoCo wants every moment above ``MUJOCO_MIN_MOMENT``. One at or below it is raised to a
     thousandth of the largest, or to ``m r^2`` (``POINT_MASS_RADIUS_M``) if that is more: a
-    point mass (a link of mass m with a zero tensor) gets m (1 mm)^2. A link too light for
-    that to reach ``MUJOCO_MIN_MOMENT`` (a massless frame: the SO-101's gripper_frame_link,
-    1e-9 kg) is left as it is (MuJoCo takes it where it does not move).
+    link of mass m whose tensor is round-off (iCub's 1e-20 moments), or none on a link in
+    ``moving`` (the child of a driven joint), gets m (1 mm)^2. A tensor of zeros on a link that
+    does not move (a point mass, which MuJoCo takes: the TALOS arm's force-torque sensor), or
+    one too light for the floor to reach ``MUJOCO_MIN_MOMENT``, is left as it is.
     """
     repaired = []
     for link in root.iter('link'):
@@ -107,11 +110,12 @@ def _repair_inertias(root: ET.Element) -> tuple[str, ...]:
         except ValueError as exc:
             raise SimulatorError(f'link {link.get("name")!r}: the mass is not a number '
                                  f'({exc})') from None
+        if not tensor.any() and link.get('name') not in moving:
+            continue  # no tensor given, on a link that does not move: MuJoCo takes it
         moments, axes = np.linalg.eigh(tensor)
         floor = max(REPAIRED_MOMENT_SHARE * moments[-1], mass * POINT_MASS_RADIUS_M ** 2)
         if moments[0] > MUJOCO_MIN_MOMENT or floor <= MUJOCO_MIN_MOMENT:
             continue  # fine; or (nearly) massless, which MuJoCo takes where it does not move
-            continue
         moments = np.maximum(moments, floor)
         fixed = axes @ np.diag(moments) @ axes.T
         for key, (i, j) in zip(_INERTIA_KEYS, ((0, 0), (0, 1), (0, 2), (1, 1), (1, 2),
@@ -126,15 +130,17 @@ def mujoco_urdf(urdf_xml: str, driven: Sequence[str]) -> tuple[str, tuple[str, .
     Return the URDF as MuJoCo is to compile it, and the links whose inertia was repaired.
 
     See the module docstring. The shapes go, the movable joints not in ``driven`` become
-    fixed, a tensor with a negative principal moment is repaired and the compiler extension
-    asks for ``balanceinertia``. Raises SimulatorError if the text is not XML or an inertia
-    value is not a finite number.
+    fixed, a tensor MuJoCo would refuse is repaired (:func:`_repair_inertias`) and the compiler
+    extension asks for ``balanceinertia``. Raises SimulatorError if the text is not XML or an
+    inertia value is not a finite number.
     """
     try:
         root = ET.fromstring(urdf_xml)
     except ET.ParseError as exc:
         raise SimulatorError(f'the URDF is not valid XML: {exc}') from exc
-    repaired = _repair_inertias(root)
+    moving = {joint.find('child').get('link') for joint in root.iter('joint')
+              if joint.get('type') in MOVABLE_TYPES and joint.get('name') in driven}
+    repaired = _repair_inertias(root, moving)
     for link in root.iter('link'):
         for shape in [e for e in link if e.tag in ('visual', 'collision')]:
             link.remove(shape)
