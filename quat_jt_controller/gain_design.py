@@ -72,7 +72,7 @@ SPEED_MARGIN = 0.8
 SPEED_DAMPING_SHARE = 0.75
 # The speed the other joints' pushes give a joint through M(q) (gain_analysis.carried_speed,
 # an overestimate) is held at or below this share of its velocity limit: a joint lighter than
-# the arm that carries it gets more damping (up to SPEED_DAMPING_SHARE x b_max) and, to keep
+# the arm that carries it gets more damping (up to SPEED_DAMPING_SHARE x b_max) and, towards
 # the linear pace push / K_v it had (near the goal K_v alone damps), a larger
 # goal-configuration gain; not more damping than its budget can push at that pace
 CARRIED_SPEED_SHARE = 1.0
@@ -545,8 +545,9 @@ def design(model: RobotModel, task: cl.Task, rate_hz: float = 1000.0,
     rho = {}
     for _ in range(200):
         bound = np.maximum(task_torque_bound(lever, kp, task), floor)
-        # a joint whose K_v the carried speed raised keeps the linear pace it had (so its
-        # approach near the goal, where K_v alone damps, is no slower), as its budget allows
+        # a joint whose K_v the carried speed raised gets T_j towards the linear pace it had
+        # (its approach near the goal, at the rate T_j / (w K_v), about as fast), as its
+        # budget allows
         aim = (cruise if pace is None
                else np.where(kv_floor > 0.0, np.maximum(cruise, pace), cruise))
         guide = np.minimum(_cruising_guide(configs, kp, lam, bound, push_max, aim, b_max,
