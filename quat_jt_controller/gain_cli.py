@@ -17,7 +17,7 @@ from quat_jt_controller.gain_design import (
     CRUISE_FRACTION, DEFAULT_FRICTION_EFFORT_SHARE, design, FRICTION_LEARNING)
 from quat_jt_controller.gain_output import ENGINES, sim_yaml, to_yaml
 from quat_jt_controller.model import ModelError, RobotModel
-from quat_jt_runtime.joints import chain_joints, check_state_rate, default_links
+from quat_jt_runtime.joints import chain_joints, check_state_rate, default_links, joint_rows
 from quat_jt_runtime.joints import STATE_RATE_RANGE_HZ
 
 
@@ -124,8 +124,8 @@ def _default_chain(parser: argparse.ArgumentParser, args: argparse.Namespace, ur
 
 def _prismatic_note(urdf: str, joints: Sequence[str]) -> str:
     """Name the sliding joints of a default chain (a torso lift), and how to leave them out."""
-    rows = {j.get('name'): j for j in ElementTree.fromstring(urdf).findall('joint')}
-    kinds = [rows[name].get('type') for name in joints]
+    rows = {name: (kind, child) for name, kind, _, child in joint_rows(urdf)}
+    kinds = [rows[name][0] for name in joints]
     sliding = [name for name, kind in zip(joints, kinds) if kind == 'prismatic']
     if not sliding:
         return ''
@@ -133,7 +133,7 @@ def _prismatic_note(urdf: str, joints: Sequence[str]) -> str:
             '(configuration_ramp) is metres for them, and a slow lift makes a slow arm')
     leading = len(sliding)  # slides under the whole arm (a torso lift): how to leave them out
     if all(kind == 'prismatic' for kind in kinds[:leading]):
-        child = rows[sliding[-1]].find('child').get('link')
+        child = rows[sliding[-1]][1]
         text += (f'. To regulate the arm alone (as an arm controller does), give --base-link '
                  f'{child}')
     return text

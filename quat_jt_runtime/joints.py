@@ -21,11 +21,8 @@ def movable_joints(urdf_xml: str) -> list[str]:
     simulator (PyBullet) and the simulator node all default their joint lists to it. Raises
     ValueError if the text is not XML.
     """
-    try:
-        root = ElementTree.fromstring(urdf_xml)
-    except ElementTree.ParseError as exc:
-        raise ValueError(f'the URDF is not valid XML: {exc}') from exc
-    return [j.get('name') for j in root.iter('joint') if j.get('type') in MOVABLE_TYPES]
+    return [j.get('name') for j in _parsed(urdf_xml).iter('joint')
+            if j.get('type') in MOVABLE_TYPES]
 
 
 def fixed_joints(urdf_xml: str, names: Sequence[str]) -> str:
@@ -36,10 +33,7 @@ def fixed_joints(urdf_xml: str, names: Sequence[str]) -> str:
     with the same origin does. Raises ValueError if the text is not XML or a name is not a
     joint of it.
     """
-    try:
-        root = ElementTree.fromstring(urdf_xml)
-    except ElementTree.ParseError as exc:
-        raise ValueError(f'the URDF is not valid XML: {exc}') from exc
+    root = _parsed(urdf_xml)
     wanted = set(names)
     for joint in root.iter('joint'):
         if joint.get('name') in wanted and joint.get('type') in MOVABLE_TYPES:
@@ -80,6 +74,15 @@ def _joint_rows(root: ElementTree.Element) -> list[tuple[str, str, str, str]]:
     """(name, type, parent link, child link) of each joint of a parsed URDF."""
     return [(j.get('name'), j.get('type'), j.find('parent').get('link'),
              j.find('child').get('link')) for j in root.findall('joint')]
+
+
+def joint_rows(urdf_xml: str) -> list[tuple[str, str, str, str]]:
+    """
+    Return (name, type, parent link, child link) of each joint of a URDF, in document order.
+
+    Raises ValueError if the text is not XML.
+    """
+    return _joint_rows(_parsed(urdf_xml))
 
 
 def default_links(urdf_xml: str, base_link: Optional[str] = None) -> tuple[str, str]:
