@@ -33,6 +33,8 @@ EXAMPLE_ROBOTS = {
     'romeo': 'romeo_description/urdf/romeo_small.urdf',
     'g1': 'g1_description/urdf/g1_29dof_rev_1_0.urdf',
     'centauro': 'centauro_description/urdf/centauro.urdf',
+    'icub': 'icub_description/robots/icub.urdf',
+    'alex': 'alex_description/urdf/alex_nub_hands.urdf',
 }
 
 

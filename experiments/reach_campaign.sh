@@ -39,6 +39,11 @@ more=(
   'romeo_left_arm|--example-robot romeo --name romeo_left_arm'
   'g1_left_arm|--example-robot g1 --name g1_left_arm --base-link torso_link'
   'centauro_arm1|--example-robot centauro --name centauro_arm1 --base-link torso_2'
+  # two more, each from the link its left arm hangs from, to its hand (docs/reach.md, "A
+  # damping that M(q) couples")
+  'icub_left_arm|--example-robot icub --name icub_left_arm --base-link chest --tip-link l_hand'
+  'alex_left_arm|--example-robot alex --name alex_left_arm --base-link Torso
+    --tip-link LeftGripperYawLink'
 )
 for entry in "${arms[@]}" "${more[@]}"; do
   name=${entry%%|*}

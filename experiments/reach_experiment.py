@@ -920,6 +920,8 @@ def main_arm(parser: argparse.ArgumentParser, args, overrides: dict) -> int:
                                    overrides=overrides)
             except (cl.GainsError, sh.ShapingError) as exc:
                 parser.error(f'--param: {exc}')
+            except ValueError as exc:  # design_gains refuses the arm, and says why
+                parser.error(f'design_gains: {exc}')
             label = ', '.join([potential, cond.describe(), args.engine]
                               + [f'{k} {v}' for k, v in overrides.items()])
             text.append(report(robot, label, outcomes, time.monotonic() - t0))

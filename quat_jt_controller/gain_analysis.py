@@ -285,17 +285,30 @@ def largest_stable_damping(inertia: float, delays, dt_s) -> float:
     return lo
 
 
-def damper_spectral_radius(inertia: float, damping: float, delays, dt_s) -> float:
-    """Spectral radius of v_k+1 = v_k - dt D / I v_k-d: a joint's speed under damping alone."""
+def coupled_damper_spectral_radius(M: np.ndarray, D: np.ndarray, delays, dt_s: float) -> float:
+    """
+    Spectral radius of v_k+1 = v_k - dt M^-1 D v_k-d, the worst over ``delays``.
+
+    The arm's speeds under its damping alone, coupled through ``M`` (the positions, which
+    nothing holds then, left out): :func:`damper_spectral_radius` for a whole arm.
+    """
+    n = M.shape[0]
+    step = dt_s * np.linalg.solve(M, D)
     worst = 0.0
     for d in delays:
-        A = np.zeros((d + 1, d + 1))
-        A[0, 0] = 1.0
-        A[0, d] -= dt_s * damping / inertia
+        A = np.zeros((n * (d + 1), n * (d + 1)))
+        A[:n, :n] = np.eye(n)
+        A[:n, n * d:] -= step
         for i in range(1, d + 1):
-            A[i, i - 1] = 1.0
+            A[n * i:n * (i + 1), n * (i - 1):n * i] = np.eye(n)
         worst = max(worst, float(np.abs(np.linalg.eigvals(A)).max()))
     return worst
+
+
+def damper_spectral_radius(inertia: float, damping: float, delays, dt_s: float) -> float:
+    """Spectral radius of v_k+1 = v_k - dt D / I v_k-d: a joint's speed under damping alone."""
+    return coupled_damper_spectral_radius(np.array([[inertia]]), np.array([[damping]]), delays,
+                                          dt_s)
 
 
 def cruising_speed(push_nm: np.ndarray, kv: np.ndarray, damping_speed_rad_s: np.ndarray,

@@ -6,6 +6,7 @@ other here, or on local processes); Ray is imported only when asked and its abse
 error; the chain of an arm is found from its URDF alone.
 """
 import dataclasses
+import re
 import sys
 
 from experiments import arms
@@ -176,6 +177,20 @@ def test_an_arm_from_its_urdf_takes_parameter_overrides(tmp_path, capsys):
                  '1', '--param', 'settling_dampng_rate:=1'])
     assert "['settling_dampng_rate'] are no controller parameters it can set here" in (
         capsys.readouterr().err)
+
+
+@pytest.mark.unit
+def test_an_arm_the_design_refuses_is_one_line_not_a_traceback(tmp_path, capsys):
+    """PR2's arm (no counterbalance in its URDF) ended the experiment in a traceback."""
+    path = tmp_path / 'weak.urdf'
+    path.write_text(re.sub(r'effort="[0-9.]+"', 'effort="0.001"',
+                           small_arm_urdf(('revolute',) * 4)))
+    with pytest.raises(SystemExit) as exit_info:
+        rx.main(['--urdf', str(path), '--cases', '1', '--workers', '1'])
+    assert exit_info.value.code == 2
+    err = capsys.readouterr().err
+    assert 'error: design_gains: the arm cannot hold itself up' in err
+    assert 'Traceback' not in err
 
 
 @pytest.mark.unit

@@ -527,6 +527,53 @@ def test_a_light_wrist_does_not_collapse_the_task_gains():
     assert 'Expected time to a goal' in go.to_yaml(light)
 
 
+def test_a_coupled_damping_is_not_cured_by_lowering_the_task_gains(monkeypatch):
+    """
+    docs/gain_design.md, section 4: the damping alone unstable through M(q) lowers beta.
+
+    The G1's left arm (example-robot-data, from its torso): at the first gains each joint's
+    inertial damping is within what the loop takes on the inertia that joint sees, but coupled
+    by M(q) the damping alone is unstable. Shrinking K_p cures that only as far as it shrinks
+    the damping with it (c follows the stiffness): the design without the rule ran K_p down
+    170x. With it, beta is lowered while that lasts, and restored once the gains allow.
+    """
+    from quat_jt_runtime.joints import chain_joints
+    from robots import example_robot_data_urdf
+    urdf = example_robot_data_urdf('g1_description/urdf/g1_29dof_rev_1_0.urdf').read_text()
+    model = RobotModel(urdf, 'torso_link', 'left_wrist_yaw_link',
+                       chain_joints(urdf, 'torso_link', 'left_wrist_yaw_link'))
+    d = gd.design(model, cl.Task.POSE)
+    delays, dt_s = d.figures['delays'], 1.0 / d.rate_hz
+    assert max(d.figures['spectral_radius'].values()) < 1.0
+    assert d.shaping.inertial_damping_rate_per_s == pytest.approx(
+        gd.inertial_damping_rate(delays, dt_s), rel=1e-3)
+    # the task potential keeps a useful share of the budget
+    assert max(d.figures['task_bound_nm']) > 0.01 * max(d.figures['budget_nm'])
+    configs = gd.survey(model, cl.Task.POSE)['configurations']
+    c = np.array(d.shaping.inertial_damping)
+    assert max(ga.coupled_damper_spectral_radius(
+        M, np.diag(ga.damping_at(d.kv, c, d.shaping.inertial_damping_rate_per_s, M)), delays,
+        dt_s) for _, _, M in configs) < 1.0
+    monkeypatch.setattr(gd, '_coupled_damping_unstable', lambda *args: False)
+    shrunk = gd.design(model, cl.Task.POSE)
+    assert d.kp[0] > 10.0 * shrunk.kp[0] and d.kp[3] > 10.0 * shrunk.kp[3]
+
+
+def test_the_damping_alone_of_two_coupled_joints_is_checked_on_m():
+    """A damping each joint takes on the inertia it sees may not be taken coupled by M."""
+    M = np.array([[1.0, 0.9], [0.9, 1.0]])
+    seen = ga.seen_inertia(M)
+    dt_s = 1e-3
+    per_joint = [ga.largest_stable_damping(i, [1], dt_s) for i in seen]
+    for j in range(2):  # each alone, the others held: stable just below its own bound
+        assert ga.damper_spectral_radius(seen[j], 0.99 * per_joint[j], [1], dt_s) < 1.0
+    # both at once through M: the speeds' modes are M^-1 D's eigenvalues, not its diagonal
+    both = ga.coupled_damper_spectral_radius(M, np.diag(0.99 * np.array(per_joint)), [1], dt_s)
+    assert both > 1.0
+    assert ga.coupled_damper_spectral_radius(M, np.diag(0.4 * np.array(per_joint)), [1],
+                                             dt_s) < 1.0
+
+
 def test_the_carried_speed_is_the_lag_of_a_joint_behind_the_others_push():
     """No coupling, no carried speed; a heavy and a light joint: a lag, by hand."""
     kv, push = np.array([2.0, 0.5]), np.array([3.0, 1.0])
