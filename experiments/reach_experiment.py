@@ -912,6 +912,11 @@ def main_arm(parser: argparse.ArgumentParser, args, overrides: dict) -> int:
         cond = condition(name, args.armature, args.armature_told_scale, args.friction_fraction)
         for potential in args.potential:
             t0 = time.monotonic()
+            try:  # design_gains may refuse the arm, and says why (cached: run_arm reuses it)
+                arm_design(robot, cond.told_armature, float(args.rate),
+                           args.friction_effort_share)
+            except ValueError as exc:
+                parser.error(f'design_gains: {exc}')
             try:
                 outcomes = run_arm(robot, cond, potential, args.cases or 20, args.seed,
                                    args.rate, args.engine, workers=args.workers,
@@ -920,8 +925,6 @@ def main_arm(parser: argparse.ArgumentParser, args, overrides: dict) -> int:
                                    overrides=overrides)
             except (cl.GainsError, sh.ShapingError) as exc:
                 parser.error(f'--param: {exc}')
-            except ValueError as exc:  # design_gains refuses the arm, and says why
-                parser.error(f'design_gains: {exc}')
             label = ', '.join([potential, cond.describe(), args.engine]
                               + [f'{k} {v}' for k, v in overrides.items()])
             text.append(report(robot, label, outcomes, time.monotonic() - t0))
