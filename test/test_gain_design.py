@@ -565,7 +565,7 @@ def test_the_damping_alone_of_two_coupled_joints_is_checked_on_m():
     seen = ga.seen_inertia(M)
     dt_s = 1e-3
     per_joint = [ga.largest_stable_damping(i, [1], dt_s) for i in seen]
-    for j in range(2):  # each alone, the others held: stable just below its own bound
+    for j in range(2):  # each alone, on the inertia it sees: stable just below its bound
         assert ga.damper_spectral_radius(seen[j], 0.99 * per_joint[j], [1], dt_s) < 1.0
     # both at once through M: the speeds' modes are M^-1 D's eigenvalues, not its diagonal
     both = ga.coupled_damper_spectral_radius(M, np.diag(0.99 * np.array(per_joint)), [1], dt_s)
