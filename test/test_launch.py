@@ -83,7 +83,7 @@ def describe(monkeypatch, launch_file: str):
     return module.generate_launch_description().args[0]
 
 
-@pytest.mark.parametrize('launch_file', sorted(DEMOS))
+@pytest.mark.parametrize('launch_file', sorted(DEMOS) + ['arm_demo.launch.py'])
 def test_launch_file_is_jazzy_launch_code(launch_file):
     path = REPO / 'launch' / launch_file
     tree = ast.parse(path.read_text(), str(path))
@@ -91,8 +91,9 @@ def test_launch_file_is_jazzy_launch_code(launch_file):
     assert 'generate_launch_description' in {n.name for n in tree.body
                                              if isinstance(n, ast.FunctionDef)}
     imported = {n.module for n in ast.walk(tree) if isinstance(n, ast.ImportFrom)}
-    assert {'launch', 'launch.actions', 'launch_ros.actions',
-            'ament_index_python.packages'} <= imported
+    assert {'launch', 'launch.actions', 'launch_ros.actions'} <= imported
+    if launch_file in DEMOS:  # their config files are in the package's share directory
+        assert 'ament_index_python.packages' in imported
 
 
 @pytest.mark.parametrize('launch_file', sorted(DEMOS))
@@ -135,6 +136,48 @@ def test_launch_description(monkeypatch, launch_file):
     choices = {a.args[0]: a.kwargs['choices'] for a in actions if 'choices' in a.kwargs}
     assert choices['potential'] == ['tanh', 'quadratic'] and choices['use_gui'] == [
         'true', 'false'] and choices['rviz'] == ['true', 'false']
+
+
+def test_any_arm_runs_from_its_urdf_and_the_two_files_design_gains_writes(monkeypatch):
+    """arm_demo.launch.py: the URDF, and design_gains' --out and --sim-out, all required."""
+    actions = describe(monkeypatch, 'arm_demo.launch.py')
+    arguments = {a.args[0]: a.kwargs for a in actions if 'description' in a.kwargs}
+    required = {name for name, kw in arguments.items() if 'default_value' not in kw}
+    assert required == {'urdf', 'controller_params', 'sim_params'}
+    assert {name: kw['default_value'] for name, kw in arguments.items()
+            if name not in required} == {'use_gui': 'false', 'namespace': ''}
+    nodes = {a.kwargs['executable']: a.kwargs for a in actions if 'executable' in a.kwargs}
+    assert set(nodes) == {'controller_node', 'wrist_sim_node'}
+    assert nodes['controller_node']['name'] == 'quat_jt_controller'
+    assert nodes['wrist_sim_node']['name'] == 'arm_sim'
+    for exe, params_file in (('controller_node', 'controller_params'),
+                             ('wrist_sim_node', 'sim_params')):
+        node = nodes[exe]
+        given, overrides = node['parameters']
+        assert given.args == (params_file,)
+        assert overrides['robot_description_file'].args == ('urdf',)  # both read the file
+        assert exit_shuts_down(node['on_exit'])
+        assert node['namespace'].args == ('namespace',)
+        assert node['remappings'] == [('/clock', 'clock')]
+    assert nodes['wrist_sim_node']['parameters'][1]['use_gui'].kwargs == {'value_type': bool}
+
+
+@pytest.mark.unit
+def test_the_files_design_gains_writes_name_the_urdf_the_launch_gives(tmp_path):
+    """What the nodes build from --out and --sim-out plus robot_description_file: one arm."""
+    from quat_jt_controller import gain_design
+    from quat_jt_controller.controller_config import controller_from_config
+    from robots import small_arm_urdf
+    urdf = tmp_path / 'arm.urdf'
+    urdf.write_text(small_arm_urdf(('revolute',) * 4))
+    out, sim_out = tmp_path / 'arm_controller.yaml', tmp_path / 'arm_sim.yaml'
+    assert gain_design.main(['--urdf', str(urdf), '--task', 'orientation', '--out', str(out),
+                             '--sim-out', str(sim_out)]) == 0
+    controller = yaml.safe_load(out.read_text())['/**']['ros__parameters']
+    sim = yaml.safe_load(sim_out.read_text())['/**']['ros__parameters']
+    assert controller['robot_description'] == '' and sim['robot_description'] == ''
+    built = controller_from_config({**controller, 'robot_description_file': str(urdf)})
+    assert list(built.model.joint_names) == controller['joints'] == sim['joints']
 
 
 def exit_shuts_down(on_exit) -> bool:

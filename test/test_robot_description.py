@@ -190,3 +190,45 @@ def test_a_ctrl_c_while_waiting_for_the_topic_is_a_clean_stop(rig):
     proc = rig.procs.pop('controller')
     assert local_ros.stop_node(proc) == 0, rig.log('controller')
     assert 'Traceback' not in rig.log('controller')
+
+
+@pytest.mark.dds
+def test_any_arm_runs_from_its_urdf_and_the_files_design_gains_writes(rig, tmp_path):
+    """
+    Run arm_demo.launch.py's two nodes as it starts them; a reachable goal is reached.
+
+    Each node gets its file from design_gains (--out, --sim-out) and -p
+    robot_description_file:=<the URDF>.
+    """
+    import math
+    from geometry_msgs.msg import PoseStamped, Vector3Stamped
+    from quat_jt_controller import gain_design
+    from quat_jt_controller import quaternion as quat
+    from quat_jt_controller.model import RobotModel
+    from robots import small_arm_urdf
+    urdf = tmp_path / 'arm.urdf'
+    urdf.write_text(small_arm_urdf(('revolute',) * 4))
+    controller_file, sim_file = tmp_path / 'arm_controller.yaml', tmp_path / 'arm_sim.yaml'
+    assert gain_design.main(['--urdf', str(urdf), '--task', 'orientation', '--out',
+                             str(controller_file), '--sim-out', str(sim_file)]) == 0
+    file_arg = ('-p', f'robot_description_file:={urdf}')
+    rig.spawn('arm_sim', 'wrist_sim_node', sim_file, file_arg)
+    rig.spawn('controller', 'controller_node', controller_file, file_arg)
+    rig.wait_log('controller', 'orientation task, joints')
+    errors = []
+    rig.node.create_subscription(Vector3Stamped, '/quat_jt_controller/orientation_error',
+                                 lambda m: errors.append(math.hypot(m.vector.x, m.vector.y,
+                                                                    m.vector.z)), 10)
+    rig.spin_until(lambda: errors, 30.0, "the controller's orientation error")
+    model = RobotModel(urdf.read_text(), 'base_link', 'tool')
+    _, rotation = model.forward_kinematics([0.4, -0.5, 0.6, 0.3])
+    goal = PoseStamped()
+    goal.header.frame_id = 'base_link'
+    q = quat.from_rotation_matrix(rotation)
+    goal.pose.orientation.w, goal.pose.orientation.x = float(q[0]), float(q[1])
+    goal.pose.orientation.y, goal.pose.orientation.z = float(q[2]), float(q[3])
+    publisher = rig.node.create_publisher(PoseStamped, '/quat_jt_controller/target_pose', 10)
+    rig.spin_until(lambda: publisher.get_subscription_count() >= 1, 20.0, 'the goal topic')
+    publisher.publish(goal)
+    rig.spin_until(lambda: errors and errors[-1] > 0.05, 20.0, 'the new goal taken')
+    rig.spin_until(lambda: errors[-1] < 0.01, 60.0, 'the goal reached (||e|| < 0.01)')
