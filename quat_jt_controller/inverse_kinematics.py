@@ -175,7 +175,7 @@ POSTURE_ITERATIONS = 60  # null-space steps of posture(), at most
 POSTURE_MAX_STEP_RAD = 0.1  # the longest null-space step (any joint)
 POSTURE_HALVINGS = 12  # of a step that does not lower the posture cost, before giving up
 POSTURE_STEP_RAD = 1e-7  # posture() stops once a step moves no joint more than this
-POSTURE_BAND_WEIGHT = 100.0  # of the joint-limit bands in the posture cost, x the others
+POSTURE_BAND_WEIGHT = 1e4  # of the joint-limit bands in the posture cost, x the others
 
 
 def posture(model: RobotModel, q: Sequence[float], quat_desired: Sequence[float],

@@ -122,6 +122,35 @@ def test_the_posture_search_settles_where_a_band_holds_it_back():
     assert np.abs(again - found).max() < 1e-6
 
 
+def test_a_band_is_a_wall_for_the_posture_where_the_self_motion_leaves_it():
+    """
+    Romeo's left arm (8 joints, from its base): a goal whose nearest posture lay in a band.
+
+    With the bands weighted 100 times, the slide along the self-motion stopped with the wrist's
+    yaw 0.004 rad from its stop, 0.040 rad deep in its 0.044 rad band (leaving it cost more
+    distance on the other joints), and the arm touched that stop settling at q*. A band is a
+    wall in the posture cost now: q* lies out of it, to within 1e-3 rad, and reaches the goal.
+    """
+    import numpy as np
+    from quat_jt_controller import inverse_kinematics as gc
+    from quat_jt_controller.model import RobotModel
+    from quat_jt_runtime.joints import chain_joints
+    from robots import example_robot_data_urdf
+    urdf = example_robot_data_urdf('romeo_description/urdf/romeo_small.urdf').read_text()
+    model = RobotModel(urdf, 'base_link', 'l_wrist', chain_joints(urdf, 'base_link', 'l_wrist'))
+    margin = 0.044
+    q_start = [0.1682, -0.7421, 0.0195, 0.8955, -0.1733, -0.5387, 0.2394, 0.4624]
+    q_goal = [-0.0542, 1.0876, 0.4535, -0.1651, -1.0731, -0.349, -0.3011, 0.4953]
+    q_d, p_d = goal_at(model, q_goal)
+    q_star = gc.goal_configuration(model, q_start, q_d, p_d, POSE, margin,
+                                   q_preferred=model.middle_of_ranges(), posture_weight=0.1)
+    assert q_star is not None
+    lower, upper = np.array(model.position_lower), np.array(model.position_upper)
+    assert np.min(np.minimum(q_star - lower, upper - q_star)) > margin - 1e-3
+    p, _ = model.forward_kinematics(q_star.tolist())
+    assert np.linalg.norm(np.array(p) - np.array(p_d)) < 1e-6
+
+
 def test_an_arm_without_self_motion_keeps_its_solution():
     """posture() changes nothing where J has as many rows as columns (the xArm6's pose)."""
     import numpy as np
