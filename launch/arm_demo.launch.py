@@ -8,17 +8,17 @@ Any arm from its URDF: the simulator and the controller, with the two files desi
                                                        [use_gui:=true|false]
                                                        [namespace:=left]
 
-``design_gains`` picks the chain (the URDF's root link to the end of its longest chain of
-revolute joints, or ``--base-link`` / ``--tip-link``), the gains and the simulator's start
+``design_gains`` picks the chain (the URDF's root link to the end of its longest chain of revolute
+or continuous joints, or ``--base-link`` / ``--tip-link``), the gains and the simulator's start
 (docs/gain_design.md). Both nodes read the URDF from ``urdf`` (their ``robot_description_file``;
-meshes are looked for as docs/ros.md says, and the dynamics need none). The simulator node is
-named ``arm_sim``, the controller ``quat_jt_controller``; if either exits on its own, the whole
-launch shuts down. The arm starts at rest where ``--initial-positions`` put it (the middle of
-its ranges by default) and holds there until a goal arrives on
-``/quat_jt_controller/target_pose``, in the base link of the design; ``/diagnostics`` says
-whether the goal is reachable. ``use_gui:=true`` opens the PyBullet window (``engine:
-pybullet`` only). On a real arm driven by ros2_control, run ``controller_node`` alone with the
-controller file (docs/ros.md, "On a real robot").
+meshes are looked for as docs/ros.md says, and the dynamics need none). The simulator node is named
+``arm_sim``, the controller ``quat_jt_controller``; if either exits on its own, the whole launch
+shuts down. The arm starts at rest where ``--initial-positions`` put it (the middle of its ranges
+by default) and holds there until a goal arrives on ``/quat_jt_controller/target_pose`` (under
+``namespace``, if given), in the base link of the design; ``/diagnostics`` says whether the goal is
+reachable. ``use_gui:=true`` opens the PyBullet window (``engine: pybullet`` only). On a real arm
+driven by ros2_control, run ``controller_node`` alone with the controller file (docs/ros.md, "On a
+real robot").
 """
 from launch import LaunchDescription
 from launch.actions import DeclareLaunchArgument

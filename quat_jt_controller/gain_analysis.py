@@ -287,7 +287,7 @@ def largest_stable_damping(inertia: float, delays, dt_s) -> float:
 
 def coupled_damper_spectral_radius(M: np.ndarray, D: np.ndarray, delays, dt_s: float) -> float:
     """
-    Spectral radius of v_k+1 = v_k - dt M^-1 D v_k-d, the worst over ``delays``.
+    Return the spectral radius of v_k+1 = v_k - dt M^-1 D v_k-d, the worst over ``delays``.
 
     The arm's speeds under its damping alone, coupled through ``M`` (the positions, which
     nothing holds then, left out): :func:`damper_spectral_radius` for a whole arm.
@@ -306,7 +306,7 @@ def coupled_damper_spectral_radius(M: np.ndarray, D: np.ndarray, delays, dt_s: f
 
 
 def damper_spectral_radius(inertia: float, damping: float, delays, dt_s: float) -> float:
-    """Spectral radius of v_k+1 = v_k - dt D / I v_k-d: a joint's speed under damping alone."""
+    """Return the spectral radius of v_k+1 = v_k - dt D / I v_k-d: one damped joint's speed."""
     return coupled_damper_spectral_radius(np.array([[inertia]]), np.array([[damping]]), delays,
                                           dt_s)
 

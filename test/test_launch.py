@@ -162,7 +162,6 @@ def test_any_arm_runs_from_its_urdf_and_the_two_files_design_gains_writes(monkey
     assert nodes['wrist_sim_node']['parameters'][1]['use_gui'].kwargs == {'value_type': bool}
 
 
-@pytest.mark.unit
 def test_the_files_design_gains_writes_name_the_urdf_the_launch_gives(tmp_path):
     """What the nodes build from --out and --sim-out plus robot_description_file: one arm."""
     from quat_jt_controller import gain_design
