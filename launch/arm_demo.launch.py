@@ -25,7 +25,8 @@ from launch.actions import DeclareLaunchArgument
 from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
 from launch_ros.parameter_descriptions import ParameterValue
-from quat_jt_bringup.launch_parts import CLOCK_IN_NAMESPACE, shutdown_when_exits
+from quat_jt_bringup.launch_parts import CLOCK_IN_NAMESPACE, gui_and_namespace_arguments
+from quat_jt_bringup.launch_parts import shutdown_when_exits
 
 
 def generate_launch_description() -> LaunchDescription:
@@ -39,12 +40,7 @@ def generate_launch_description() -> LaunchDescription:
         DeclareLaunchArgument('sim_params',
                               description="the simulator's parameter file: design_gains "
                                           '--sim-out (required)'),
-        DeclareLaunchArgument('use_gui', default_value='false', choices=['true', 'false'],
-                              description='open the PyBullet window of the simulator'),
-        DeclareLaunchArgument('namespace', default_value='',
-                              description='namespace of both nodes, their topics and their '
-                                          'simulated clock, e.g. left (one robot per '
-                                          'namespace)'),
+        *gui_and_namespace_arguments(),
         Node(package='quat_jt_controller', executable='wrist_sim_node', name='arm_sim',
              output='screen', emulate_tty=True, namespace=namespace,
              remappings=CLOCK_IN_NAMESPACE,

@@ -44,8 +44,9 @@ from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
 from launch_ros.parameter_descriptions import ParameterValue
 import pybullet_data
-from quat_jt_bringup.launch_parts import CLOCK_IN_NAMESPACE, live_view
-from quat_jt_bringup.launch_parts import publish_robot_description, shutdown_when_exits
+from quat_jt_bringup.launch_parts import CLOCK_IN_NAMESPACE, gui_and_namespace_arguments
+from quat_jt_bringup.launch_parts import live_view, publish_robot_description
+from quat_jt_bringup.launch_parts import shutdown_when_exits
 
 PANDA_URDF = Path(pybullet_data.getDataPath()) / 'franka_panda' / 'panda.urdf'
 
@@ -64,12 +65,7 @@ def generate_launch_description() -> LaunchDescription:
                               choices=['tanh', 'quadratic'],
                               description="controller potential: 'tanh' (Eq. 32) or "
                                           "'quadratic' (Eq. 24)"),
-        DeclareLaunchArgument('use_gui', default_value='false', choices=['true', 'false'],
-                              description='open the PyBullet window of the simulator'),
-        DeclareLaunchArgument('namespace', default_value='',
-                              description='namespace of both nodes, their topics and their '
-                                          'simulated clock, e.g. left (one robot per '
-                                          'namespace)'),
+        *gui_and_namespace_arguments(),
         DeclareLaunchArgument('rviz', default_value='false', choices=['true', 'false'],
                               description='start robot_state_publisher and RViz (the robot, '
                                           'the goal and the measured pose)'),

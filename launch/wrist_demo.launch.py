@@ -32,8 +32,9 @@ from launch.conditions import IfCondition, UnlessCondition
 from launch.substitutions import LaunchConfiguration
 from launch_ros.actions import Node
 from launch_ros.parameter_descriptions import ParameterValue
-from quat_jt_bringup.launch_parts import CLOCK_IN_NAMESPACE, live_view
-from quat_jt_bringup.launch_parts import publish_robot_description, shutdown_when_exits
+from quat_jt_bringup.launch_parts import CLOCK_IN_NAMESPACE, gui_and_namespace_arguments
+from quat_jt_bringup.launch_parts import live_view, publish_robot_description
+from quat_jt_bringup.launch_parts import shutdown_when_exits
 
 
 def generate_launch_description() -> LaunchDescription:
@@ -54,12 +55,7 @@ def generate_launch_description() -> LaunchDescription:
                               choices=['tanh', 'quadratic'],
                               description="controller potential: 'tanh' (Eq. 38) or "
                                           "'quadratic' (Eq. 37)"),
-        DeclareLaunchArgument('use_gui', default_value='false', choices=['true', 'false'],
-                              description='open the PyBullet window of the simulator'),
-        DeclareLaunchArgument('namespace', default_value='',
-                              description='namespace of both nodes, their topics and their '
-                                          'simulated clock, e.g. left (one robot per '
-                                          'namespace)'),
+        *gui_and_namespace_arguments(),
         DeclareLaunchArgument('composed', default_value='false', choices=['true', 'false'],
                               description='both nodes in one process on one executor '
                                           '(the composed mode)'),

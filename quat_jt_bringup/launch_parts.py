@@ -6,6 +6,7 @@ What the demo launch files (``launch/*.launch.py``) share: the exit rule and the
   down, with the reason logged once. If it exits because the launch is already shutting down
   (Ctrl-C, or the other node's exit), nothing more: launch's ``Shutdown`` action would log
   "process[...] was required: shutting down launched system" again for every such node.
+- :func:`gui_and_namespace_arguments`: the ``use_gui`` and ``namespace`` arguments.
 - :func:`live_view`: with ``rviz:=true``, robot_state_publisher (the URDF as its parameter,
   ``/tf`` from the simulator's ``joint_states``) and RViz with the shipped
   ``rviz/quat_jt.rviz``: the robot, the controller's ``~/goal_pose`` and ``~/current_pose``.
@@ -25,6 +26,19 @@ RVIZ_CONFIG = os.path.join('rviz', 'quat_jt.rviz')
 RVIZ_TOPICS = ('/robot_description', '/quat_jt_controller/goal_pose',
                '/quat_jt_controller/current_pose')
 RVIZ_IN_NAMESPACE = [(topic, topic.lstrip('/')) for topic in RVIZ_TOPICS]
+
+
+def gui_and_namespace_arguments() -> list:
+    """Return the launch arguments every demo takes: ``use_gui`` and ``namespace``."""
+    from launch.actions import DeclareLaunchArgument
+    return [
+        DeclareLaunchArgument('use_gui', default_value='false', choices=['true', 'false'],
+                              description='open the PyBullet window of the simulator'),
+        DeclareLaunchArgument('namespace', default_value='',
+                              description='namespace of both nodes, their topics and their '
+                                          'simulated clock, e.g. left (one robot per '
+                                          'namespace)'),
+    ]
 
 
 def shutdown_when_exits(reason: str) -> Callable[[Any, Any], Optional[list]]:
