@@ -193,8 +193,7 @@ def baseline_benchmark(duration_s: float, warmup_s: float, out: Path,
     try:
         sim.wait(timeout=duration_s + warmup_s + 60.0)
     finally:
-        for proc in (sim, ctrl):
-            local_ros.stop_node(proc)
+        local_ros.stop_nodes((sim, ctrl))
     host = [b - a for a, b in zip(host0, _cpu_times())]
     if not stats_file.exists():
         raise RuntimeError(f'the minimal pair wrote no statistics; logs in {out}')
@@ -301,8 +300,8 @@ def loop_benchmark(duration_s: float, warmup_s: float, out: Path, composed: bool
         cpu = {pid: 100.0 * (_cpu_seconds(pid) - cpu0[pid]) / wall for pid in procs}
         host = [b - a for a, b in zip(host0, _cpu_times())]
     finally:
-        for proc in (sim, ctrl):  # the sim first: its statistics end with the controller alive
-            local_ros.stop_node(proc)
+        # the sim first: its statistics end with the controller alive
+        local_ros.stop_nodes((sim, ctrl))
         probe.close()
     sim_stats = json.loads(stats_file.read_text())
     if not windows:

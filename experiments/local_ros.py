@@ -14,7 +14,7 @@ import signal
 import subprocess
 import sys
 import tempfile
-from typing import Any, Mapping, Optional
+from typing import Any, Mapping, Optional, Sequence
 
 from quat_jt_runtime.resources import share_path
 
@@ -157,8 +157,7 @@ class RecordedPair:
 
     def stop(self) -> dict:
         """Ctrl-C both (the simulator first); return its statistics ({} if none came)."""
-        for proc in (self.sim, self.controller):
-            stop_node(proc)
+        stop_nodes((self.sim, self.controller))
         try:
             return json.loads(self.stats_file.read_text())
         except (OSError, ValueError):
@@ -184,20 +183,31 @@ def spawn_recorded_pair(work_dir: Path, sim_params: Optional[Mapping[str, Any]] 
     return RecordedPair(domain_id, env, sim, controller, stats_file)
 
 
-def stop_node(proc: subprocess.Popen, timeout: float = 10.0) -> int:
+def stop_nodes(procs: Sequence[subprocess.Popen], timeout: float = 10.0) -> list[int]:
     """
-    Ctrl-C to the process group, then SIGKILL (the group) if it does not exit in ``timeout``.
+    Ctrl-C each process group in turn, then SIGKILL every group left; return the exit codes.
 
-    Return the exit code.
+    Each gets ``timeout`` to exit after its Ctrl-C. One that does not is killed with all the
+    others still running before any is waited for: two nodes pinned to one CPU in SCHED_FIFO
+    can starve each other, and a process must run to die, so waiting for one to die while the
+    other spins would wait for ever.
     """
-    if proc.poll() is None:
-        interrupt_group(proc)
-        try:
-            proc.wait(timeout)
-        except subprocess.TimeoutExpired:
+    for proc in procs:
+        if proc.poll() is None:
+            interrupt_group(proc)
+            try:
+                proc.wait(timeout)
+            except subprocess.TimeoutExpired:
+                break
+    for proc in procs:
+        if proc.poll() is None:
             try:
                 os.killpg(proc.pid, signal.SIGKILL)
             except ProcessLookupError:
                 pass
-            proc.wait()
-    return proc.returncode
+    return [proc.wait() for proc in procs]
+
+
+def stop_node(proc: subprocess.Popen, timeout: float = 10.0) -> int:
+    """Ctrl-C the process group, then SIGKILL it if it does not exit in ``timeout``: its code."""
+    return stop_nodes([proc], timeout)[0]

@@ -617,8 +617,7 @@ def run_dds(robot: Robot, count: int, seed: int, progress=print) -> str:
                                                else f' (logs in {work})'))
             progress(lines[-1], flush=True)
         finally:
-            for proc in (sim, ctrl):
-                local_ros.stop_node(proc)
+            local_ros.stop_nodes((sim, ctrl))
             probe.close()
     return '\n'.join(lines)
 

@@ -241,8 +241,7 @@ def soak(duration_s: float, out: Path, load: int = 0, report_s: float = 60.0,
     finally:
         if cli is not None:
             cli.wait(10.0)
-        for proc in (sim, ctrl):
-            local_ros.stop_node(proc)
+        local_ros.stop_nodes((sim, ctrl))
         probe.close()
         for b in burners:
             b.terminate()

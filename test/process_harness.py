@@ -39,8 +39,7 @@ class ProcessHarnessMixin:
             self.executor.spin_once(timeout_sec=0.05)
 
     def close(self) -> None:
-        for proc in self.procs.values():
-            local_ros.stop_node(proc)
+        local_ros.stop_nodes(list(self.procs.values()))
         self.executor.shutdown(timeout_sec=1.0)
         self.node.destroy_node()
         rclpy.try_shutdown(context=self.context)

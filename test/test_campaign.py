@@ -209,3 +209,31 @@ def test_the_urdf_sweep_tells_taken_refused_and_crashed_apart(tmp_path):
     assert urdf_sweep.simulator_outcome(empty, 'mujoco')[0] == 'refused'
     assert urdf_sweep.cell(('refused', 'x' * 200)).endswith('...')
     assert urdf_sweep.cell(('crashed', 'a | b')) == 'crashed: a / b'
+
+
+@pytest.mark.unit
+def test_nodes_that_do_not_stop_are_all_killed_before_any_is_waited_for():
+    """
+    local_ros.stop_nodes: Ctrl-C in turn, then SIGKILL to every group left, then reap.
+
+    Two nodes pinned to one CPU in SCHED_FIFO once starved each other: the one Ctrl-C'd
+    first could not run to die while the other spun, and the harness waited for it for ever.
+    Here both ignore Ctrl-C: both are killed, and neither is left running.
+    """
+    import signal
+    import subprocess
+    from experiments import local_ros
+    stubborn = ('import signal, sys, time; signal.signal(signal.SIGINT, signal.SIG_IGN); '
+                "print('ready', flush=True); time.sleep(600)")
+    procs = [subprocess.Popen([sys.executable, '-c', stubborn], stdout=subprocess.PIPE,
+                              text=True, start_new_session=True) for _ in range(2)]
+    try:
+        for proc in procs:  # each has set its handler
+            assert proc.stdout.readline().strip() == 'ready'
+        assert local_ros.stop_nodes(procs, timeout=0.2) == [-signal.SIGKILL] * 2
+        assert all(proc.poll() is not None for proc in procs)
+    finally:
+        for proc in procs:
+            if proc.poll() is None:
+                proc.kill()
+            proc.stdout.close()

@@ -132,5 +132,4 @@ def test_both_nodes_talk_udp_on_loopback_to_a_process_on_fast_dds_defaults(tmp_p
                 assert addresses and addresses <= {'127.0.0.1'}, addresses
     finally:
         probe.close()
-        for proc in (sim, ctrl):
-            local_ros.stop_node(proc)
+        local_ros.stop_nodes((sim, ctrl))

@@ -81,8 +81,7 @@ def test_the_panda_reaches_the_goal_and_rests_at_its_goal_configuration(tmp_path
         spin_until(lambda: goal_status and goal_status[-1].get('goal_configuration_rad'),
                    'q* on /diagnostics')
     finally:
-        for proc in (sim, ctrl):
-            local_ros.stop_node(proc)
+        local_ros.stop_nodes((sim, ctrl))
         probe.close()
     last = [s for s in states if s.header.stamp.sec + 1e-9 * s.header.stamp.nanosec
             >= t0 + REACH_WITHIN_S]
