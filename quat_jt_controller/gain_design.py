@@ -621,7 +621,6 @@ def design(model: RobotModel, task: cl.Task, rate_hz: float = 1000.0,
     else:
         raise ValueError(f'no stable gains found (spectral radius {rho})')
     if beta < beta_tolerated:  # lowered for gains since shrunk: back up, if the loop takes it
-        inertial = _inertial_damping(configs, kp * lam, extra, task)
         if (max(worst_rho(configs, kp, kv, lam, extra, delays, dt_s, task, inertial,
                           beta_tolerated).values()) < 1.0
                 and not _coupled_damping_unstable(configs, kv, inertial, beta_tolerated, delays,
