@@ -35,6 +35,14 @@ EXAMPLE_ROBOTS = {
     'centauro': 'centauro_description/urdf/centauro.urdf',
     'icub': 'icub_description/robots/icub.urdf',
     'alex': 'alex_description/urdf/alex_nub_hands.urdf',
+    # arms tried once the project's own were done (docs/reach.md, "Seven more arms")
+    'ur5_limited': 'ur_description/urdf/ur5_joint_limited_robot.urdf',  # ranges of +-pi
+    'ur10_limited': 'ur_description/urdf/ur10_joint_limited_robot.urdf',
+    'b1_z1': 'b1_description/urdf/b1-z1.urdf',  # a Z1 on a quadruped's body
+    'anymal_kinova': 'anymal_b_simple_description/robots/anymal-kinova.urdf',  # a Jaco on it
+    'hextilt': 'hextilt_description/urdf/hextilt_flying_arm_5.urdf',  # 5 joints, on a drone
+    'talos_full': 'talos_data/robots/talos_full_v2.urdf',  # the whole robot
+    'tiago_dual': 'tiago_description/robots/tiago_dual.urdf',  # two arms and hands
 }
 
 

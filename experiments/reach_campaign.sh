@@ -44,6 +44,17 @@ more=(
   'icub_left_arm|--example-robot icub --name icub_left_arm --base-link chest --tip-link l_hand'
   'alex_left_arm|--example-robot alex --name alex_left_arm --base-link Torso
     --tip-link LeftGripperYawLink'
+  # seven more, each from its URDF's root link unless its arm hangs from a body with more
+  # limbs, to its flange (docs/reach.md, "Seven more arms no one tuned on")
+  'ur5_limited|--example-robot ur5_limited'
+  'ur10_limited|--example-robot ur10_limited'
+  'b1_z1|--example-robot b1_z1 --tip-link link06'
+  'anymal_kinova|--example-robot anymal_kinova'
+  'hextilt_arm5|--example-robot hextilt --name hextilt_arm5'
+  'talos_right_arm|--example-robot talos_full --name talos_right_arm --base-link torso_2_link
+    --tip-link arm_right_7_link'
+  'tiago_dual_right_arm|--example-robot tiago_dual --name tiago_dual_right_arm
+    --base-link torso_lift_link --tip-link arm_right_7_link'
 )
 for entry in "${arms[@]}" "${more[@]}"; do
   name=${entry%%|*}

@@ -6,7 +6,9 @@ other here, or on local processes); Ray is imported only when asked and its abse
 error; the chain of an arm is found from its URDF alone.
 """
 import dataclasses
+from pathlib import Path
 import re
+import shlex
 import sys
 
 from experiments import arms
@@ -55,6 +57,29 @@ def test_the_chain_of_an_arm_is_found_from_its_urdf():
         arms.default_links('<robot xmlns:xacro="http://wiki.ros.org/xacro"></robot>')
     with pytest.raises(ValueError, match="unknown example robot 'nao'"):
         arms.example_robot_urdf('nao')
+
+
+def campaign_arms() -> dict:
+    """Return each arm of experiments/reach_campaign.sh (its main and more arms): its arguments."""
+    script = (Path(__file__).resolve().parent.parent / 'experiments' / 'reach_campaign.sh')
+    text = script.read_text().split('arms=(', 1)[1].split('for entry in', 1)[0]
+    entries = re.findall(r"^\s*['\"]([a-z0-9_]+)\|([^'\"]*)['\"]", text, flags=re.M)
+    return {name: shlex.split(args.replace('\n', ' ')) for name, args in entries}
+
+
+@pytest.mark.unit
+def test_every_example_robot_arm_of_the_campaign_resolves_to_its_chain():
+    """Each arm the campaign names by ``--example-robot``: its URDF installed, its links found."""
+    found = campaign_arms()
+    assert {'ur3', 'wrist', 'talos_right_arm', 'tiago_dual_right_arm'} <= set(found)
+    named = {name: args for name, args in found.items() if '--example-robot' in args}
+    assert len(named) >= 20
+    for name, args in named.items():
+        option = dict(zip(args[::2], args[1::2]))
+        urdf = arms.example_robot_urdf(option['--example-robot']).read_text()
+        base, tip, joints = arms.arm_links(urdf, option.get('--base-link'),
+                                           option.get('--tip-link'))
+        assert len(joints) >= 5, (name, base, tip, joints)  # the arms run have 5 to 7
 
 
 def finger(name: str, parent: str, mimic: str = '') -> str:
