@@ -54,7 +54,8 @@ from quat_jt_runtime.param_table import row
 TORQUE_SHARE = 0.8  # of what gravity and friction compensation leave; the rest: damping
 UNHELD_SHARE_MAX = 0.5  # of the survey's configurations where gravity exceeds the effort: refused
 GUIDE_OVER_TASK = 2.0  # the goal-configuration term must overcome the task term at a stop
-LIMIT_OVER_TASK = 1.5  # the limit band at the stop holds 1.5 x the task term's bound
+LIMIT_OVER_TASK = 1.5  # the limit band at the stop holds at least 1.5 x the task term's bound,
+# and up to what K_v brakes at SPEED_MARGIN x the velocity limit (within the budget)
 LAMBDA_ORIENTATION = 4.0  # tanh(4 ||e||) = 0.96 at ||e|| = 0.5 (60 degrees)
 POSITION_SATURATION_M = 0.1  # tanh(lambda_p 0.1 m) = 0.96
 DAMPING_RATIO = sqrt(0.5)  # of the tanh law's linearised loop (the quadratic's: x sqrt(lambda))
@@ -635,6 +636,10 @@ def design(model: RobotModel, task: cl.Task, rate_hz: float = 1000.0,
             'room (a higher --rate, fewer --delays) or a robot with more inertia on them')
 
     # Joint-limit band and goal-configuration term, checked per joint on its smallest inertia.
+    # At the stop the band holds the task term's bound with a margin, and what the joint's K_v
+    # brakes at the speed ceiling, within its budget: a joint that the others carry into its
+    # band is stopped there, and one that starts inside is pushed out no faster than the
+    # ceiling once K_v balances it (docs/gain_design.md, section 5).
     lower, upper = np.array(model.position_lower), np.array(model.position_upper)
     limited = np.isfinite(lower) & np.isfinite(upper) & (upper - lower < FULL_TURN_RAD)
     margin = 0.0
@@ -643,7 +648,9 @@ def design(model: RobotModel, task: cl.Task, rate_hz: float = 1000.0,
         half = 0.5 * float(np.min((upper - lower)[limited]))
         margin = round(min(LIMIT_MARGIN_MAX_RAD, LIMIT_MARGIN_FRACTION * half), 3)
         for j in np.flatnonzero(limited):
-            k = min(LIMIT_OVER_TASK * bound[j], effort[j] - reserve[j]) / margin
+            stop_nm = max(LIMIT_OVER_TASK * bound[j],
+                          min(budget[j], SPEED_MARGIN * velocity[j] * kv[j]))
+            k = min(stop_nm, effort[j] - reserve[j]) / margin
             while _joint_unstable(inertia[j], k, kv[j], b_max[j], delays, dt_s):
                 k *= SHRINK
             limit_gain[j] = k

@@ -40,8 +40,9 @@ MAX_LEARNING_STEP_S = 0.01  # a longer gap between ticks advances the friction l
 TICK_MEMORY = 0.999
 # A q* far from the last one (a step of up to T_j on every joint) fades in over this, so that a
 # heavy joint's step does not jolt a light one past its velocity limit through the coupling of
-# M(q) before the damping sees the motion (docs/lyapunov.md, section 5)
-CONFIGURATION_FADE_IN_S = 0.1
+# M(q) before the damping sees the motion, nor the heavy joints' rise to their cruise carry it
+# there (docs/lyapunov.md, section 5)
+CONFIGURATION_FADE_IN_S = 0.25
 
 
 @dataclass(frozen=True)

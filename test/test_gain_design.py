@@ -129,6 +129,30 @@ def test_spectral_radius_of_a_sampled_mass_spring_damper():
     assert ga.largest_stable_damping(1.0, (1,), 1e-3) == pytest.approx(1000.0, rel=1e-3)
 
 
+def test_the_limit_band_stops_what_the_damping_brakes_at_the_speed_ceiling(designs):
+    """
+    At the stop the band holds 1.5 x the task bound, or K_v x 0.8 x the velocity limit if more.
+
+    Within the budget and the effort left after gravity, and lower only where the joint's
+    sampled mass-spring-damper would be unstable: a joint the others carry into its band is
+    stopped there (docs/gain_design.md, section 5).
+    """
+    for name in ('xarm6', 'panda'):
+        model, d = designs[name]
+        f = d.figures
+        at_stop, bound, kv = f['limit_at_stop_nm'], f['task_bound_nm'], np.array(d.kv)
+        wanted = np.maximum(gd.LIMIT_OVER_TASK * bound,
+                            np.minimum(f['budget_nm'],
+                                       gd.SPEED_MARGIN * f['velocity_limits_rad_s'] * kv))
+        wanted = np.minimum(wanted, f['effort_limits_nm'] - f['gravity_reserve_nm'])
+        limited = at_stop > 0.0
+        assert limited.sum() >= 3, name
+        assert np.all(at_stop[limited] <= wanted[limited] * (1.0 + 1e-3)), name
+        # the damping's share is the larger on these arms' joints: the band is stiffer than
+        # the task bound alone asked
+        assert np.all(at_stop[limited] > 1.5 * gd.LIMIT_OVER_TASK * bound[limited]), name
+
+
 @pytest.mark.parametrize('name, args', [('wrist_controller.yaml', WRIST_ARGS),
                                         ('xarm6_controller.yaml', XARM6_ARGS),
                                         ('panda_controller.yaml', PANDA_ARGS)])

@@ -206,9 +206,10 @@ def test_a_far_new_q_star_fades_in_and_a_near_one_keeps_its_share():
     reg = Regulator(model, ORI, paper_gains(), unlimited, Goal(paper.Q_DESIRED), shaping)
     reg.set_goal_configuration(reg.goal, [1.3, 1.6, 0.8])
     share = dt / CONFIGURATION_FADE_IN_S
+    ticks = int(round(CONFIGURATION_FADE_IN_S / dt))  # the fade's length in ticks
     np.testing.assert_allclose(guide(reg), [2.0 * share] * 3, atol=1e-12)
     np.testing.assert_allclose(guide(reg, 0.0), [2.0 * share] * 3, atol=1e-12)  # re-evaluated
-    for _ in range(int(round(CONFIGURATION_FADE_IN_S / dt))):
+    for _ in range(ticks):
         torque = guide(reg)
     np.testing.assert_allclose(torque, [2.0, 2.0, 2.0], atol=1e-12)
     reg.set_goal_configuration(reg.goal, [1.31, 1.59, 0.8])  # a streamed goal's next q*
@@ -219,14 +220,14 @@ def test_a_far_new_q_star_fades_in_and_a_near_one_keeps_its_share():
         guide(reg)
     reg.set_goal_configuration(reg.goal, [1.3, 1.6, 1.3])  # near, mid-fade: it goes on
     np.testing.assert_allclose(guide(reg), [2.0 * 11 * share] * 3, atol=1e-12)
-    for _ in range(100):
+    for _ in range(ticks):  # (to the full share)
         guide(reg)
     goal = Goal(paper.Q_DESIRED)  # a new goal: no q* until the goal check gives it
     reg.set_goal(goal)
     for _ in range(30):  # 30 ticks without q*: the share falls as it rises
         np.testing.assert_allclose(guide(reg), [0.0, 0.0, 0.0], atol=1e-12)
     reg.set_goal_configuration(goal, [1.3, 1.6, 1.29])  # back near the last q*
-    np.testing.assert_allclose(guide(reg), [2.0 * 71 * share] * 3, atol=1e-12)
+    np.testing.assert_allclose(guide(reg), [2.0 * (ticks - 29) * share] * 3, atol=1e-12)
     reg.set_shaping(sh.Shaping.create(3, configuration_gain=(2.0, 2.0, 3.0)))  # raised live
     np.testing.assert_allclose(guide(reg), [2.0 * share, 2.0 * share, 3.0 * share], atol=1e-12)
 
