@@ -17,7 +17,7 @@ from quat_jt_controller.gain_design import (
     CRUISE_FRACTION, DEFAULT_FRICTION_EFFORT_SHARE, design, FRICTION_LEARNING)
 from quat_jt_controller.gain_output import ENGINES, sim_yaml, to_yaml
 from quat_jt_controller.model import ModelError, RobotModel
-from quat_jt_runtime.joints import chain_joints, check_state_rate, default_links, joint_rows
+from quat_jt_runtime.joints import chain_joints, check_state_rate, default_chain_end, joint_rows
 from quat_jt_runtime.joints import STATE_RATE_RANGE_HZ
 
 
@@ -104,14 +104,15 @@ def _default_chain(parser: argparse.ArgumentParser, args: argparse.Namespace, ur
     chosen = []
     try:
         if args.base_link is None or args.tip_link is None:
-            base, tip = default_links(urdf, args.base_link)
+            base, tip, hand = default_chain_end(urdf, args.base_link)
             if args.base_link is None:
                 args.base_link = base
                 chosen.append(f"--base-link {base} (the URDF's root link)")
             if args.tip_link is None:
                 args.tip_link = tip
                 chosen.append(f'--tip-link {tip} (the end of its longest chain of revolute '
-                              'joints)')
+                              'joints' + (f', the wrist above the hand at {hand}: its fingers '
+                                          'are not the arm' if hand else '') + ')')
         if args.joints is None:
             args.joints = chain_joints(urdf, args.base_link, args.tip_link)
             chosen.append(f'--joints {" ".join(args.joints)} (the movable joints between them)'

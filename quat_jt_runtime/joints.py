@@ -11,6 +11,10 @@ from xml.etree import ElementTree
 
 MOVABLE_TYPES = ('revolute', 'continuous', 'prismatic')
 ROTATING_TYPES = ('revolute', 'continuous')
+# A hand ends the default chain (default_links): a link on it from which two or more branches
+# of rotating joints leave (fingers), all it carries lighter than this share of the links the
+# chain moves above it, and no more rotating joints on the chain below it than above
+HAND_MASS_SHARE = 0.25
 
 
 def movable_joints(urdf_xml: str) -> list[str]:
@@ -89,6 +93,17 @@ def default_links(urdf_xml: str, base_link: Optional[str] = None) -> tuple[str, 
     """
     Return ``(base_link, tip_link)``: the root link, and the end of the longest rotating chain.
 
+    :func:`default_chain_end` gives the tip; the base is ``base_link``, default the root link.
+    """
+    base_link, tip_link, _ = default_chain_end(urdf_xml, base_link)
+    return base_link, tip_link
+
+
+def default_chain_end(urdf_xml: str,
+                      base_link: Optional[str] = None) -> tuple[str, str, Optional[str]]:
+    """
+    Return ``(base_link, tip_link, hand_link)``: the default chain, and the hand that ends it.
+
     The tip is the child link of the last revolute or continuous joint on the path from the
     base (``base_link``, default the root link) with the most such joints; on a tie the one
     found first breadth-first (the shallower, then the first in document order). A joint
@@ -96,9 +111,16 @@ def default_links(urdf_xml: str, base_link: Optional[str] = None) -> tuple[str, 
     which move together, not as the regulator's free coordinates) does not count, so a
     gripper of them adds nothing to the chain and the tip stays at the wrist; a linkage inside
     an arm does not cut it short either. A gripper's prismatic fingers do not count; a
-    revolute jaw that nothing mimics does (give the tip link then). Raises ValueError if the
-    URDF has no single root link (and no base is given), if the base is not a link of it, or
-    if no revolute or continuous joint lies below the base.
+    revolute jaw that nothing mimics does (give the tip link then).
+
+    A hand of independent fingers ends the chain at the wrist above it (``hand_link`` is the
+    link the fingers leave from; None where there is none): the first link on the path with
+    two or more branches of counted joints below it, all it carries (its own mass left out)
+    lighter than ``HAND_MASS_SHARE`` of the links the path moves above it, and no more
+    counted joints on the path below it than above. A torso's arms are as heavy as what
+    carries them, or longer: they do not end it. Raises ValueError if the URDF has no single
+    root link (and no base is given), if the base is not a link of it, or if no revolute or
+    continuous joint lies below the base.
     """
     root = _parsed(urdf_xml)
     coupled = set()
@@ -136,7 +158,53 @@ def default_links(urdf_xml: str, base_link: Optional[str] = None) -> tuple[str, 
         raise ValueError(f'no revolute or continuous joint below link {base_link!r}'
                          + (' but those coupled by <mimic>' if coupled else '')
                          + '; give the tip link')
-    return base_link, best[1]
+    tip_link, hand_link = _above_a_hand(root, joints, coupled, base_link, best[1])
+    return base_link, tip_link, hand_link
+
+
+def _above_a_hand(root: ElementTree.Element, joints: list, coupled: set, base_link: str,
+                  tip_link: str) -> tuple[str, Optional[str]]:
+    """Return ``(tip_link, hand_link)``: the wrist above a hand on the path, or the tip."""
+    mass = {}
+    for link in root.findall('link'):
+        value = link.find('inertial/mass')
+        mass[link.get('name')] = float(value.get('value', 0.0)) if value is not None else 0.0
+    below: dict[str, list[tuple[bool, str]]] = {}
+    above: dict[str, tuple[bool, str]] = {}
+    for name, kind, parent, child in joints:
+        counted = kind in ROTATING_TYPES and name not in coupled
+        below.setdefault(parent, []).append((counted, child))
+        above[child] = (counted, parent)
+    carried: dict[str, tuple[float, bool]] = {}  # link: (mass below it, a counted joint below)
+
+    def subtree(link: str) -> tuple[float, bool]:
+        if link not in carried:
+            total, counted_below = 0.0, False
+            for counted, child in below.get(link, []):
+                child_mass, child_counted = subtree(child)
+                total += mass.get(child, 0.0) + child_mass
+                counted_below = counted_below or counted or child_counted
+            carried[link] = (total, counted_below)
+        return carried[link]
+
+    path = [tip_link]
+    while path[-1] != base_link:
+        path.append(above[path[-1]][1])
+    path.reverse()
+    total = sum(above[link][0] for link in path[1:])
+    moved_kg, counted_above, wrist = 0.0, 0, None
+    for link in path[1:]:
+        counted, _ = above[link]
+        if counted:
+            counted_above, wrist = counted_above + 1, link
+        moved_kg += mass.get(link, 0.0)
+        fingers = sum(1 for counted, child in below.get(link, [])
+                      if counted or subtree(child)[1])
+        if (wrist is not None and fingers >= 2
+                and subtree(link)[0] < HAND_MASS_SHARE * moved_kg
+                and total - counted_above <= counted_above):
+            return wrist, link
+    return tip_link, None
 
 
 def chain_joints(urdf_xml: str, base_link: str, tip_link: str) -> list[str]:

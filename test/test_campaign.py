@@ -18,6 +18,7 @@ from experiments import urdf_sweep
 import numpy as np
 import pytest
 from quat_jt_controller import control_law as cl
+from quat_jt_runtime import joints
 
 from robots import small_arm_urdf
 
@@ -99,7 +100,10 @@ def test_the_chain_stops_at_a_gripper_whose_fingers_mimic_each_other():
     urdf = small_arm_urdf(('revolute',) * 3).replace('</robot>', fingers + '</robot>')
     assert arms.default_links(urdf) == ('base_link', 'tool')  # not left_tip
     uncoupled = urdf.replace('<mimic joint="left_joint" multiplier="-1"/>', '')
-    assert arms.default_links(uncoupled) == ('base_link', 'left_tip')  # a jaw: as before
+    assert arms.default_links(uncoupled) == ('base_link', 'tool')  # two free fingers: a hand
+    one_jaw = small_arm_urdf(('revolute',) * 3).replace(
+        '</robot>', finger('jaw', 'tool') + finger('jaw_tip', 'jaw') + '</robot>')
+    assert arms.default_links(one_jaw) == ('base_link', 'jaw_tip')  # a jaw: as before
     # a linkage in the arm (joint2 mimicked by a side link) does not cut the chain short
     linkage = small_arm_urdf(('revolute',) * 3).replace(
         '</robot>', finger('rod', 'link1', 'joint2') + '</robot>')
@@ -108,6 +112,42 @@ def test_the_chain_stops_at_a_gripper_whose_fingers_mimic_each_other():
         '</robot>', finger('rod', 'base_link', 'tool') + '</robot>')
     with pytest.raises(ValueError, match='but those coupled by <mimic>; give the tip link'):
         arms.default_links(only_coupled)
+
+
+def heavy_finger(name: str, parent: str, kg: float) -> str:
+    """Return ``finger(name, parent)`` with a link of ``kg``."""
+    return finger(name, parent).replace(
+        f'<link name="{name}"/>', f'<link name="{name}"><inertial><mass value="{kg}"/><inertia '
+        'ixx="1e-4" ixy="0" ixz="0" iyy="1e-4" iyz="0" izz="1e-4"/></inertial></link>')
+
+
+@pytest.mark.unit
+def test_the_chain_stops_at_the_wrist_above_a_hand():
+    """
+    TIAGo++'s, the G1's and Alex's hands: fingers of free joints end the default chain.
+
+    A link with two or more branches of rotating joints, lighter than a quarter of what the
+    chain moves above it and with no more joints below than above, is a hand; a torso's arms,
+    as heavy as what carries them or longer, are not.
+    """
+    arm = small_arm_urdf(('revolute',) * 4)  # links of 1, 1/2, 1/3 and 1/4 kg
+    hand = ''.join(heavy_finger(f'f{i}', 'tool', 0.02) + heavy_finger(f'f{i}_tip', f'f{i}', 0.01)
+                   for i in range(3))
+    assert joints.default_chain_end(arm.replace('</robot>', hand + '</robot>')) == (
+        'base_link', 'tool', 'tool')
+    assert joints.default_chain_end(arm) == ('base_link', 'tool', None)
+    # fingers as heavy as the arm: limbs, not a hand; the chain runs on to a fingertip
+    limbs = ''.join(heavy_finger(f'f{i}', 'tool', 1.0) + heavy_finger(f'f{i}_tip', f'f{i}', 1.0)
+                    for i in range(3))
+    assert joints.default_chain_end(arm.replace('</robot>', limbs + '</robot>'))[1:] == (
+        'f0_tip', None)
+    # light arms on a torso, longer than the chain that carries them: not a hand either
+    arms_of_torso = ''.join(
+        heavy_finger(f'a{i}', 'tool', 0.01) + heavy_finger(f'a{i}_2', f'a{i}', 0.01)
+        + heavy_finger(f'a{i}_3', f'a{i}_2', 0.01) + heavy_finger(f'a{i}_4', f'a{i}_3', 0.01)
+        for i in range(2))
+    torso = small_arm_urdf(('revolute',) * 2).replace('</robot>', arms_of_torso + '</robot>')
+    assert joints.default_chain_end(torso)[1:] == ('a0_4', None)
 
 
 @pytest.mark.unit
