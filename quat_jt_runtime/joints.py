@@ -191,18 +191,16 @@ def _above_a_hand(root: ElementTree.Element, joints: list, coupled: set, base_li
     while path[-1] != base_link:
         path.append(above[path[-1]][1])
     path.reverse()
-    total = sum(above[link][0] for link in path[1:])
+    on_path = sum(above[link][0] for link in path[1:])  # the counted joints of the chain
     moved_kg, counted_above, wrist = 0.0, 0, None
     for link in path[1:]:
-        counted, _ = above[link]
-        if counted:
+        if above[link][0]:
             counted_above, wrist = counted_above + 1, link
         moved_kg += mass.get(link, 0.0)
-        fingers = sum(1 for counted, child in below.get(link, [])
-                      if counted or subtree(child)[1])
+        fingers = sum(1 for free, child in below.get(link, []) if free or subtree(child)[1])
         if (wrist is not None and fingers >= 2
                 and subtree(link)[0] < HAND_MASS_SHARE * moved_kg
-                and total - counted_above <= counted_above):
+                and on_path - counted_above <= counted_above):
             return wrist, link
     return tip_link, None
 
