@@ -158,23 +158,24 @@ def default_chain_end(urdf_xml: str,
         raise ValueError(f'no revolute or continuous joint below link {base_link!r}'
                          + (' but those coupled by <mimic>' if coupled else '')
                          + '; give the tip link')
-    tip_link, hand_link = _above_a_hand(root, joints, coupled, base_link, best[1])
+    tip_link, hand_link = _above_a_hand(root, by_parent, base_link, best[1], best[0])
     return base_link, tip_link, hand_link
 
 
-def _above_a_hand(root: ElementTree.Element, joints: list, coupled: set, base_link: str,
-                  tip_link: str) -> tuple[str, Optional[str]]:
-    """Return ``(tip_link, hand_link)``: the wrist above a hand on the path, or the tip."""
+def _above_a_hand(root: ElementTree.Element, below: dict[str, list[tuple[bool, str]]],
+                  base_link: str, tip_link: str, on_path: int) -> tuple[str, Optional[str]]:
+    """
+    Return ``(tip_link, hand_link)``: the wrist above a hand on the path, or the tip.
+
+    ``below`` maps a link to ``(counted, child)`` per joint under it (``default_chain_end``'s
+    tree); ``on_path`` is the number of counted joints from ``base_link`` to ``tip_link``.
+    """
     mass = {}
     for link in root.findall('link'):
         value = link.find('inertial/mass')
         mass[link.get('name')] = float(value.get('value', 0.0)) if value is not None else 0.0
-    below: dict[str, list[tuple[bool, str]]] = {}
-    above: dict[str, tuple[bool, str]] = {}
-    for name, kind, parent, child in joints:
-        counted = kind in ROTATING_TYPES and name not in coupled
-        below.setdefault(parent, []).append((counted, child))
-        above[child] = (counted, parent)
+    above = {child: (counted, parent)
+             for parent, children in below.items() for counted, child in children}
     carried: dict[str, tuple[float, bool]] = {}  # link: (mass below it, a counted joint below)
 
     def subtree(link: str) -> tuple[float, bool]:
@@ -191,7 +192,6 @@ def _above_a_hand(root: ElementTree.Element, joints: list, coupled: set, base_li
     while path[-1] != base_link:
         path.append(above[path[-1]][1])
     path.reverse()
-    on_path = sum(above[link][0] for link in path[1:])  # the counted joints of the chain
     moved_kg, counted_above, wrist = 0.0, 0, None
     for link in path[1:]:
         if above[link][0]:
