@@ -322,6 +322,18 @@ class RobotModel:
         seen = pin.computeMinverse(self.model, self.data, qv).diagonal().tolist()
         return [own[i] for i in self._idx], [1.0 / seen[i] for i in self._idx]
 
+    def inverse_inertia(self, q: Sequence[float]) -> np.ndarray:
+        """
+        Return ``M(q)^-1`` (n x n, symmetric; the armature included), in ``joint_names`` order.
+
+        Row j maps the joints' torques to joint j's acceleration: the speed guard's cancellation
+        of the push the other joints give it (Regulator.update, docs/lyapunov.md, section 6).
+        """
+        qv = self._set_q(q)
+        minv = pin.computeMinverse(self.model, self.data, qv)  # its upper triangle is filled
+        minv = np.triu(minv) + np.triu(minv, 1).T
+        return minv[np.ix_(self._idx, self._idx)]
+
     def forward_dynamics(self, q: Sequence[float], qdot: Sequence[float],
                          tau: Sequence[float]) -> np.ndarray:
         """

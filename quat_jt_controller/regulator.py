@@ -220,6 +220,10 @@ class Regulator:
         # one) a joint's damping rises to beta I_j(q), the most the sampled loop tolerates
         self._guard = [sh.SPEED_GUARD_FRACTION * v if isfinite(v) and v > 0.0 else inf
                        for v in model.velocity_limits]
+        # ... and towards a stop, above what that damping stops in the room left (rad/s):
+        # STOP_GUARD_SHARE x beta x the distance to the stop less its clearance
+        self._stop_lower = tuple(model.position_lower)  # -inf / inf: no stop
+        self._stop_upper = tuple(model.position_upper)
         self._caps = [0.0] * self.n  # beta I_j(q) this tick
         self._own = [0.0] * self.n  # M_jj(q) this tick (with the inertial damping)
         self._seen = [0.0] * self.n  # ... and 1 / (M(q)^-1)_jj
@@ -476,19 +480,32 @@ class Regulator:
             for j in range(n):
                 tau[j] += kv[j] * g_v * qdot_goal[j]
         own = None  # M_jj(q), where the inertial damping computed it
+        guarded = None  # (j, speed over the guard, within the stop's clearance) where it acts
         if shaping.inertial_damping_on:  # docs/lyapunov.md, section 10: on the same velocity
             caps = self._caps
             own = self._own
+            stop_rate = sh.STOP_GUARD_SHARE * shaping.inertial_damping_rate_per_s
+            clearance = sh.STOP_CLEARANCE_SHARE * shaping.joint_limit_margin_rad
             for j, d in enumerate(self._inertial_damping(q, kv, shaping, caps, own,
                                                          self._seen)):
                 if d > kv[j]:
                     tau[j] -= (d - kv[j]) * (qdot[j] - g_v * qdot_goal[j] if g_v > 0.0
                                              else qdot[j])
+                # the speed guard, docs/lyapunov.md s. 6: above 0.8 v_lim, or what the cap
+                # stops in the room left before the stop it moves to
                 v = qdot[j]
-                over = (v - self._guard[j] if v > self._guard[j] else
-                        (v + self._guard[j] if v < -self._guard[j] else 0.0))
-                if over != 0.0 and caps[j] > d:  # the speed guard, docs/lyapunov.md s. 6
-                    tau[j] -= (caps[j] - d) * over
+                room = (self._stop_upper[j] - q[j] if v > 0.0
+                        else q[j] - self._stop_lower[j]) - clearance
+                guard = self._guard[j]
+                if stop_rate * room < guard:
+                    guard = stop_rate * room if room > 0.0 else 0.0
+                over = v - guard if v > guard else (v + guard if v < -guard else 0.0)
+                if over != 0.0:
+                    if caps[j] > d:
+                        tau[j] -= (caps[j] - d) * over
+                    if guarded is None:
+                        guarded = []
+                    guarded.append((j, over, room <= 0.0))
         settled = None  # (psi alpha, v, M(q) v) of the settling damping, if it acts
         k = _settling_gain(y, gains, shaping)  # docs/lyapunov.md, section 11
         if k > 0.0:
@@ -528,6 +545,8 @@ class Regulator:
                     shaping.learning_torque_band if q_star is not None else None)
                 for j in range(n):
                     tau[j] += fc[j]
+        if guarded is not None:
+            self._cancel_push(q, tau, guarded, shaping.inertial_damping_rate_per_s)
         if gains.gravity_compensation:
             g = self.model.gravity(q)
             for j in range(n):
@@ -543,6 +562,33 @@ class Regulator:
                               self._unmet, self._held)
         saturated = cl.saturate(tau, self.effort_limits_nm)
         return TickOutput(tau, y, eta_e, p, R, saturated, True, tuple(tau_p), self.task)
+
+    def _cancel_push(self, q: Sequence[float], tau: list[float], guarded: list,
+                     beta: float) -> None:
+        """
+        Take from each guarded joint the push the other joints' torques give it (in place).
+
+        The other joints' torques ``tau_i`` (gravity apart: its compensation cancels it)
+        accelerate joint j by ``a_j = sum_i!=j (M^-1)_ji tau_i`` through M(q). Where the speed
+        guard acts on j and ``a_j`` drives j further along its excess, ``tau_j`` gets
+        ``-a_j I_j(q)``, ``I_j = 1 / (M^-1)_jj``, which cancels that acceleration: up to
+        ``beta`` x the excess (continuous at the guard) on the way, all of it within the stop's
+        clearance. It always opposes ``qdot_j`` and is zero at rest: a dissipation
+        (docs/lyapunov.md, section 6).
+        """
+        minv = self.model.inverse_inertia(q)
+        pushed = list(tau)  # the torques before any cancellation
+        for j, over, within in guarded:
+            row = minv[j]
+            a = 0.0
+            for i, t in enumerate(pushed):
+                if i != j:
+                    a += row[i] * t
+            if a * over <= 0.0:  # it does not drive the joint along its excess
+                continue
+            if not within and abs(a) > beta * abs(over):
+                a = beta * over
+            tau[j] -= a / row[j]
 
     def _track_acceleration(self, qdot: Sequence[float], dt_s: float) -> None:
         """

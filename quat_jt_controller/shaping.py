@@ -91,6 +91,11 @@ ACCELERATION_TIME_S = 0.02
 # Above this share of its URDF velocity limit a joint's damping rises to the most the sampled
 # loop tolerates (the speed guard, with the inertial damping; docs/lyapunov.md, section 6)
 SPEED_GUARD_FRACTION = 0.8
+# ... and towards a stop, above this share of beta x the room left before the stop's clearance:
+# with the guard's damping the approach x'' = -beta x' - s beta^2 x is critically damped at
+# s = 1/4, so it comes to rest short of the clearance (docs/lyapunov.md, section 6)
+STOP_GUARD_SHARE = 0.25
+STOP_CLEARANCE_SHARE = 0.25  # of the joint-limit margin: the room the stop guard keeps
 # A joint whose potential torque asks less than what the goal-configuration term's stiffness
 # gives at this distance from its rest (rad) learns the slower the less it asks: it sits at its
 # own equilibrium, not held away from it by a friction (learn_friction)

@@ -122,6 +122,38 @@ def test_lyapunov_never_increases_through_the_speed_guard():
     assert traj.lyapunov[-1] < 0.5 * traj.lyapunov[0]
 
 
+def test_lyapunov_never_increases_through_the_stop_guard(monkeypatch):
+    """
+    Moving fast at a stop, below the speed guard, the stop guard brakes it short of the stop.
+
+    docs/lyapunov.md, section 6: towards a stop the guard's speed falls with the room left
+    before the stop's clearance, and the push of the other joints along the motion is taken
+    away; both oppose the motion and vanish at rest, so V never increases. The joint comes to
+    rest about the clearance from its stop, nearer without the stop guard.
+    """
+    model = wrist_model()
+    gains = cl.Gains.create('tanh', (8.0, 8.0, 8.0), (1.5, 1.2, 0.8), (4.0, 4.0, 4.0), ORI, 3)
+    q_goal = (0.5, 1.2, -0.4)
+    _, R = model.forward_kinematics(list(q_goal))
+    # a weak band, the inertial damping below its cap and no cubic part
+    values = dict(EVERYTHING, inertial_damping=(0.5, 0.5, 0.5), damping_speed=(0.0, 0.0, 0.0),
+                  joint_limit_gain=(1.0, 1.0, 1.0))
+    clearance = sh.STOP_CLEARANCE_SHARE * values['joint_limit_margin']
+    q0 = (2.5, model.position_upper[1] - 0.09, 1.0)
+    qdot0 = (0.0, 0.78 * model.velocity_limits[1], 0.0)  # below the speed guard
+    gaps, guarded = {}, sh.STOP_GUARD_SHARE
+    for share in (guarded, math.inf):  # with the stop guard, and without
+        monkeypatch.setattr(sh, 'STOP_GUARD_SHARE', share)
+        loop = ClosedLoop(model, gains, ORI, quat.from_rotation_matrix(R),
+                          shaping=sh.Shaping.create(3, **values), q_star=q_goal)
+        traj = loop.run(q0, 1.0, dt_s=2e-4, qdot0=qdot0)
+        dV = np.diff(traj.lyapunov)
+        assert dV.max() <= 1e-9 * traj.lyapunov[0], f'V increased by {dV.max()}'
+        assert traj.lyapunov[-1] < 1e-3 * traj.lyapunov[0]
+        gaps[share] = model.position_upper[1] - traj.q_rad[:, 1].max()
+    assert gaps[guarded] > 0.9 * clearance > gaps[math.inf] > 0.0, gaps
+
+
 def test_compensation_never_does_more_than_the_friction_it_cancels():
     """
     Check section 4's inequality pointwise.

@@ -390,7 +390,9 @@ def test_above_the_speed_guard_the_damping_rises_to_the_sampled_cap():
     docs/lyapunov.md, section 6: above 0.8 v_lim a joint is damped at beta I_j(q) on the excess.
 
     Below the guard the tick is the inertial damping's alone; a joint at 0.95 of its limit gets
-    ``-(beta I_j - d_j) (|qdot| - 0.8 v_lim) sgn(qdot)`` more, and no other joint does.
+    ``-(beta I_j - d_j) (|qdot| - 0.8 v_lim) sgn(qdot)`` more, and no other joint does; and
+    where the other joints' torques accelerate it along its excess, ``-a_j I_j`` with
+    ``a_j = sum_i!=j (M^-1)_ji tau_i`` up to beta x the excess (the push cancelled).
     """
     model = xarm6_model()
     rng = np.random.default_rng(4)
@@ -406,16 +408,89 @@ def test_above_the_speed_guard_the_damping_rises_to_the_sampled_cap():
                     sh.Shaping.create(model.n, inertial_damping=[0.1] * 6,
                                       inertial_damping_rate=beta))
     d = np.array(reg.linear_damping(q))
+    lower, upper = np.array(model.position_lower), np.array(model.position_upper)
+    assert np.all(np.minimum(q - lower, upper - q) > 0.05)  # the stops' own guard: none here
     slow = (0.7 * limits * np.where(np.arange(6) % 2, 1.0, -1.0)).tolist()
     base = np.array(reg.update(q, slow).tau_nm)
-    for j in (0, 5):
-        fast = list(slow)
-        fast[j] = 0.95 * limits[j] * (1.0 if j else -1.0)
-        want = base.copy()
-        want[j] -= d[j] * (fast[j] - slow[j])  # the linear damping on the faster joint
-        guard = sh.SPEED_GUARD_FRACTION * limits[j]
-        want[j] -= (beta * seen[j] - d[j]) * (fast[j] - np.sign(fast[j]) * guard)
-        np.testing.assert_allclose(reg.update(q, fast).tau_nm, want, rtol=1e-9, atol=1e-9)
+    gravity = np.array(model.gravity(q))
+    minv = model.inverse_inertia(q)
+    np.testing.assert_allclose(1.0 / np.diag(minv), seen, rtol=1e-9)
+    cancelled = 0
+    for j in range(6):
+        for sign in (1.0, -1.0):
+            fast = list(slow)
+            fast[j] = 0.95 * limits[j] * sign
+            want = base.copy()
+            want[j] -= d[j] * (fast[j] - slow[j])  # the linear damping on the faster joint
+            over = fast[j] - sign * sh.SPEED_GUARD_FRACTION * limits[j]
+            want[j] -= (beta * seen[j] - d[j]) * over
+            push = (minv[j] @ (want - gravity) - minv[j, j] * (want[j] - gravity[j]))
+            if push * over > 0.0:  # along the excess: cancelled, up to beta x the excess
+                cancelled += 1
+                want[j] -= np.clip(push, -beta * abs(over), beta * abs(over)) * seen[j]
+            np.testing.assert_allclose(reg.update(q, fast).tau_nm, want, rtol=1e-9,
+                                       atol=1e-9)
+    assert 0 < cancelled < 12  # both cases were met
+
+
+@pytest.mark.parametrize('within', [False, True])
+def test_towards_a_stop_the_guard_acts_above_what_its_cap_stops_in_the_room_left(within):
+    """
+    docs/lyapunov.md, section 6: towards a stop the guard is at s beta (room - clearance).
+
+    Each joint in turn is put near a stop (outside the clearance, or within it), moving
+    towards it slower than 0.8 v_lim: it is damped at beta I_j on the speed above
+    ``STOP_GUARD_SHARE beta (distance - clearance)`` (0 within the clearance), and the other
+    joints' push along its motion is taken away, up to beta x the excess outside the clearance
+    and all of it within. Moving away from the same stop, nothing of this.
+    """
+    model = xarm6_model()
+    rng = np.random.default_rng(7)
+    limits = np.array(model.velocity_limits)
+    lower, upper = np.array(model.position_lower), np.array(model.position_upper)
+    gains = cl.Gains.create('tanh', [50.0] * 3 + [2.0] * 3, [0.5] * 6, [20.0] * 3 + [4.0] * 3,
+                            POSE, 6)
+    goal = Regulator(model, POSE, gains).pose(random_q(model, rng).tolist())
+    margin = 0.2
+    clearance = sh.STOP_CLEARANCE_SHARE * margin
+    beta = 2e4  # the cap beta I_j above k_v, but on the lightest joints
+    reg = Regulator(model, POSE, gains, [math.inf] * 6, goal,
+                    sh.Shaping.create(model.n, inertial_damping=[0.1] * 6,
+                                      inertial_damping_rate=beta, joint_limit_margin=margin,
+                                      joint_limit_gain=[0.0] * 6))
+    cancelled = 0
+    for j in range(6):
+        for sign in (1.0, -1.0):
+            q = random_q(model, rng)
+            q[j] = np.clip(q[j], lower[j] + 0.3, upper[j] - 0.3)  # the others: their room
+            distance = 0.5 * clearance if within else clearance + 1e-4
+            q[j] = upper[j] - distance if sign > 0.0 else lower[j] + distance
+            q = q.tolist()
+            seen = np.array(model.inertias(q)[1])
+            d = np.array(reg.linear_damping(q))
+            gravity = np.array(model.gravity(q))
+            minv = model.inverse_inertia(q)
+            rest = np.array(reg.update(q, [0.0] * 6).tau_nm)
+            guard = 0.0 if within else sh.STOP_GUARD_SHARE * beta * 1e-4
+            speed = 0.5 * sh.SPEED_GUARD_FRACTION * limits[j]  # below the speed guard
+            assert guard < speed
+            qdot = [0.0] * 6
+            qdot[j] = sign * speed
+            want = rest.copy()
+            want[j] -= d[j] * qdot[j]
+            over = sign * (speed - guard)
+            want[j] -= max(0.0, beta * seen[j] - d[j]) * over
+            push = (minv[j] @ (want - gravity) - minv[j, j] * (want[j] - gravity[j]))
+            if push * over > 0.0:  # along the motion: taken away
+                cancelled += 1
+                bound = math.inf if within else beta * abs(over)
+                want[j] -= np.clip(push, -bound, bound) * seen[j]
+            np.testing.assert_allclose(reg.update(q, qdot).tau_nm, want, rtol=1e-9,
+                                       atol=1e-9)
+            qdot[j] = -qdot[j]  # away from the stop: the linear damping alone
+            np.testing.assert_allclose(reg.update(q, qdot).tau_nm,
+                                       rest - d * np.array(qdot), rtol=1e-9, atol=1e-9)
+    assert cancelled > 0
 
 
 @pytest.mark.parametrize('with_q_star', [True, False])
