@@ -22,6 +22,7 @@ from quat_jt_controller import quaternion as quat
 from quat_jt_controller.controller import Controller, GoalRequest
 from quat_jt_controller.model import RobotModel
 from quat_jt_controller.regulator import Goal, Regulator
+from quat_jt_controller.shaping import Shaping
 from quat_jt_runtime.joints import stamp_problem, StateLayout
 from quat_jt_runtime.loop_stats import LoopStats, TickStats
 from quat_jt_runtime.resources import default_urdf_xml
@@ -98,6 +99,12 @@ def profile(calls: int) -> dict[str, dict[str, float]]:
         q, qdot = layout.extract(js.name, js.position, js.velocity)
         stamp_ns = js.header.stamp.sec * 1_000_000_000 + js.header.stamp.nanosec
         out = regulator.update(q, qdot)
+        # the inertial damping on, so the speed guard: at rest, and every joint past its guard
+        # (the guard's damping and the push taken away, docs/lyapunov.md, section 6)
+        guarded = Regulator(model, cl.Task.ORIENTATION, gains, goal=Goal(paper.Q_DESIRED),
+                            shaping=Shaping.create(3, inertial_damping=(1.0, 1.0, 1.0),
+                                                   inertial_damping_rate=222.5))
+        fast = [0.95 * v * sign for v, sign in zip(model.velocity_limits, (1.0, -1.0, 1.0))]
         cmd = Float64MultiArray(data=[0.0] * 3)
         tick_stats, loop_stats = TickStats(), LoopStats()
         tau = [0.1, -0.1, 0.05]
@@ -134,6 +141,10 @@ def profile(calls: int) -> dict[str, dict[str, float]]:
             'stamp check': best_us(lambda: stamp_problem(stamp_ns, time.time_ns(), 500_000_000),
                                    calls),
             'Regulator.update (paper config)': best_us(lambda: regulator.update(q, qdot), calls),
+            '... with the inertial damping, no guard acting':
+                best_us(lambda: guarded.update(q, qdot), calls),
+            '... every joint past its speed guard':
+                best_us(lambda: guarded.update(q, fast), calls),
             'the whole tick without ROS (Controller.on_state: joints, stamp, law and the '
             'decisions around it)': best_us(whole_tick, calls),
             'command into the message': best_us(set_data, calls),

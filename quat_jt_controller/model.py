@@ -322,17 +322,26 @@ class RobotModel:
         seen = pin.computeMinverse(self.model, self.data, qv).diagonal().tolist()
         return [own[i] for i in self._idx], [1.0 / seen[i] for i in self._idx]
 
-    def inverse_inertia(self, q: Sequence[float]) -> np.ndarray:
+    def inverse_inertia(self, q: Sequence[float]) -> list[list[float]]:
         """
-        Return ``M(q)^-1`` (n x n, symmetric; the armature included), in ``joint_names`` order.
+        Return ``M(q)^-1`` as rows (n x n, symmetric; the armature included), in joint order.
 
         Row j maps the joints' torques to joint j's acceleration: the speed guard's cancellation
         of the push the other joints give it (Regulator.update, docs/lyapunov.md, section 6).
         """
         qv = self._set_q(q)
         minv = pin.computeMinverse(self.model, self.data, qv)  # its upper triangle is filled
-        minv = np.triu(minv) + np.triu(minv, 1).T
-        return minv[np.ix_(self._idx, self._idx)]
+        if not self._identity_order:
+            minv = minv[np.ix_(self._idx, self._idx)]
+        rows = minv.tolist()
+        idx = self._idx
+        for a in range(self.n):  # the lower triangle from the upper, in Pinocchio's order
+            for b in range(a):
+                if idx[a] > idx[b]:
+                    rows[a][b] = rows[b][a]
+                else:
+                    rows[b][a] = rows[a][b]
+        return rows
 
     def forward_dynamics(self, q: Sequence[float], qdot: Sequence[float],
                          tau: Sequence[float]) -> np.ndarray:

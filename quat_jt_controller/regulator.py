@@ -580,10 +580,9 @@ class Regulator:
         pushed = list(tau)  # the torques before any cancellation
         for j, over, within in guarded:
             row = minv[j]
-            a = 0.0
-            for i, t in enumerate(pushed):
-                if i != j:
-                    a += row[i] * t
+            a = -row[j] * pushed[j]
+            for m, t in zip(row, pushed):
+                a += m * t
             if a * over <= 0.0:  # it does not drive the joint along its excess
                 continue
             if not within and abs(a) > beta * abs(over):

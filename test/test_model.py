@@ -137,6 +137,23 @@ def test_bad_urdf_is_a_model_error():
         RobotModel('<robot name="x"><link name="a"/', 'a', 'a')
 
 
+def test_inverse_inertia_is_the_inverse_of_m_in_the_callers_order():
+    """M(q)^-1 as rows, symmetric, the armature in, for the chain's order and a permuted one."""
+    xml = default_urdf_xml()
+    armature = (0.1, 0.25, 0.05)
+    model = RobotModel(xml, 'base_link', 'tool0', armature=armature)
+    order = [2, 0, 1]
+    perm = RobotModel(xml, 'base_link', 'tool0', joint_names=['joint3', 'joint1', 'joint2'],
+                      armature=[armature[i] for i in order])
+    rng = np.random.default_rng(5)
+    for _ in range(5):
+        q = random_q(model, rng)
+        inverse = np.linalg.inv(model.mass_matrix(q))
+        np.testing.assert_allclose(model.inverse_inertia(q), inverse, rtol=1e-9, atol=1e-12)
+        np.testing.assert_allclose(perm.inverse_inertia(np.asarray(q)[order]),
+                                   inverse[np.ix_(order, order)], rtol=1e-9, atol=1e-12)
+
+
 def test_armature_adds_to_the_diagonal_of_the_inertia_in_the_callers_order():
     """M(q) = M_links(q) + diag(a), and the forward dynamics are Pinocchio's ABA with it."""
     xml = default_urdf_xml()

@@ -413,7 +413,7 @@ def test_above_the_speed_guard_the_damping_rises_to_the_sampled_cap():
     slow = (0.7 * limits * np.where(np.arange(6) % 2, 1.0, -1.0)).tolist()
     base = np.array(reg.update(q, slow).tau_nm)
     gravity = np.array(model.gravity(q))
-    minv = model.inverse_inertia(q)
+    minv = np.array(model.inverse_inertia(q))
     np.testing.assert_allclose(1.0 / np.diag(minv), seen, rtol=1e-9)
     cancelled = 0
     for j in range(6):
@@ -469,7 +469,7 @@ def test_towards_a_stop_the_guard_acts_above_what_its_cap_stops_in_the_room_left
             seen = np.array(model.inertias(q)[1])
             d = np.array(reg.linear_damping(q))
             gravity = np.array(model.gravity(q))
-            minv = model.inverse_inertia(q)
+            minv = np.array(model.inverse_inertia(q))
             rest = np.array(reg.update(q, [0.0] * 6).tau_nm)
             guard = 0.0 if within else sh.STOP_GUARD_SHARE * beta * 1e-4
             speed = 0.5 * sh.SPEED_GUARD_FRACTION * limits[j]  # below the speed guard
