@@ -43,6 +43,9 @@ EXAMPLE_ROBOTS = {
     'hextilt': 'hextilt_description/urdf/hextilt_flying_arm_5.urdf',  # 5 joints, on a drone
     'talos_full': 'talos_data/robots/talos_full_v2.urdf',  # the whole robot
     'tiago_dual': 'tiago_description/robots/tiago_dual.urdf',  # two arms and hands
+    # two arms held out until the stop guard was done (docs/reach.md, "Two arms held out")
+    'human': 'human_description/robots/human.urdf',  # shoulders of three joints, massless links
+    'simple_humanoid': 'simple_humanoid_description/urdf/simple_humanoid.urdf',
 }
 
 

@@ -55,6 +55,12 @@ more=(
     --tip-link arm_right_7_link'
   'tiago_dual_right_arm|--example-robot tiago_dual --name tiago_dual_right_arm
     --base-link torso_lift_link --tip-link arm_right_7_link'
+  # two held out until the stop guard was done, each from the link its left arm hangs from
+  # (docs/reach.md, "Two arms held out")
+  'human_left_arm|--example-robot human --name human_left_arm --base-link left_clavicle
+    --tip-link left_hand'
+  'simple_humanoid_left_arm|--example-robot simple_humanoid --name simple_humanoid_left_arm
+    --base-link torso --tip-link l_wrist'
 )
 for entry in "${arms[@]}" "${more[@]}"; do
   name=${entry%%|*}

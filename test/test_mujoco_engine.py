@@ -12,6 +12,7 @@ import pytest
 from quat_jt_controller.model import RobotModel
 from quat_jt_runtime.resources import default_urdf_xml
 from robots import PANDA_JOINTS, PANDA_URDF, random_q, XARM6_URDF
+from wrist_sim.mujoco_engine import MASSLESS_LINK_KG, mujoco_urdf
 from wrist_sim.simulator import ENGINES, repaired_inertia_note, RobotSimulator, SimulatorError
 
 pytestmark = pytest.mark.unit
@@ -192,6 +193,42 @@ def test_bad_engines_and_values_are_refused_by_name(urdf, monkeypatch):
     monkeypatch.setitem(__import__('sys').modules, 'mujoco', None)  # not installed
     with pytest.raises(SimulatorError, match='pip install mujoco'):
         RobotSimulator(urdf, engine='mujoco')
+
+
+def test_a_moving_link_without_mass_gets_a_milligram_if_it_carries_mass(urdf):
+    """
+    A frame between two joints' axes (the human model's shoulder): MuJoCo refuses it as it is.
+
+    link1 of the wrist made massless, with link2 and link3 below it: the simulator gives it
+    ``MASSLESS_LINK_KG`` (and m (1 mm)^2) and names it; the fall under gravity is the
+    URDF's to within that milligram. A massless link that carries nothing is left to MuJoCo's
+    refusal, which says to leave its joint undriven.
+    """
+    link1 = ('<mass value="3.0"/>\n      <inertia ixx="0.03" ixy="0" ixz="0" iyy="0.03" iyz="0" '
+             'izz="0.05"/>')
+    assert link1 in urdf
+    virtual = urdf.replace(link1, '<mass value="0"/>\n      <inertia ixx="0" ixy="0" ixz="0" '
+                                  'iyy="0" iyz="0" izz="0"/>')
+    with pytest.raises(ValueError, match='mass and inertia of moving bodies'):
+        mujoco.MjModel.from_xml_string(virtual)  # MuJoCo alone
+    text, repaired = mujoco_urdf(virtual, ('joint1', 'joint2', 'joint3'))
+    assert repaired == ('link1',)
+    assert f'<mass value="{MASSLESS_LINK_KG!r}"' in text
+    q0 = [0.3, 0.8, -0.4]
+    model = RobotModel(virtual, 'base_link', 'tool0')
+    with RobotSimulator(virtual, engine='mujoco', initial_positions_rad=q0) as sim:
+        assert sim.repaired_inertia_links == ('link1',)
+        accel = one_step_acceleration(sim, q0, [0.0] * 3, [0.0] * 3)
+    want = model.forward_dynamics(q0, [0.0] * 3, [0.0] * 3)
+    np.testing.assert_allclose(accel, want, rtol=1e-3, atol=1e-3)
+    tip = ('<mass value="0.8"/>\n      <inertia ixx="0.012" ixy="0" ixz="0" iyy="0.012" iyz="0" '
+           'izz="0.02"/>')
+    assert tip in urdf
+    leaf = urdf.replace(tip, '<mass value="0"/>\n      <inertia ixx="0" ixy="0" ixz="0" '
+                             'iyy="0" iyz="0" izz="0"/>').replace(
+        '<mass value="0.001"/>', '<mass value="0"/>')  # tool0, below it, massless too
+    with pytest.raises(SimulatorError, match='drive only the joints that move mass'):
+        RobotSimulator(leaf, engine='mujoco')
 
 
 def with_antenna(urdf: str, inertia: str) -> str:

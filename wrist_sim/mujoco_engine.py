@@ -22,7 +22,12 @@ only where the simulator's plant requires it:
   ``m (1 mm)^2``), about the same principal axes, before the compiler balances it; those
   links are listed in ``repaired_inertia_links``, to be said once
   (:func:`repaired_inertia_note`). A tensor of zeros on a link that does not move (a point
-  mass, which MuJoCo takes) is left as it is (:func:`_repair_inertias`).
+  mass, which MuJoCo takes) is left as it is (:func:`_repair_inertias`). A link without mass
+  that a driven joint moves and that carries links with mass (a frame between the axes of a
+  shoulder split into three joints, as the human model's `left_upperarm_virtual`) gets
+  ``MASSLESS_LINK_KG`` and ``m (1 mm)^2``, and is listed too: MuJoCo refuses a moving body
+  without mass. One that carries none is left to MuJoCo's refusal (drive only the joints that
+  move mass).
 
 Then, per driven joint (MuJoCo's DOF fields, set after compiling, so the URDF's ``<dynamics
 damping friction>`` are replaced by the simulator's parameters, as in the PyBullet engine):
@@ -53,6 +58,7 @@ from wrist_sim.engine import Engine, GRAVITY_MPS2, SimulatorError
 REPAIRED_MOMENT_SHARE = 1e-3  # of the largest principal moment, for one <= 0
 POINT_MASS_RADIUS_M = 1e-3  # ... and at least m r^2: a link of mass m given no inertia
 MUJOCO_MIN_MOMENT = 1e-15  # kg m^2, mjMINVAL: MuJoCo refuses a principal moment below it
+MASSLESS_LINK_KG = 1e-6  # for a moving link without mass that carries links with mass
 FRICTION_IMPEDANCE = 0.9999  # MuJoCo's largest: the stiffest constraint (least creep)
 CONSTRAINT_TIME_STEPS = 2.0  # solref time constant, in steps: MuJoCo's smallest stable
 
@@ -72,8 +78,10 @@ def repaired_inertia_note(links: Sequence[str]) -> str:
     return (f'MuJoCo simulates {", ".join(links)} with a principal moment of inertia raised to '
             'a thousandth of the largest (at least their mass times (1 mm)^2): the '
             'inertia tensors robot_description gives them have one at or below 1e-15 (or none '
-            "on a moving link), which MuJoCo refuses. The controller's model keeps them as "
-            'given; masses and centres of mass, hence gravity, agree')
+            'on a moving link), which MuJoCo refuses; a moving link without mass that carries '
+            f'links with mass gets {MASSLESS_LINK_KG:g} kg. The model of the controller keeps '
+            'them as given; the masses and centres of mass, hence gravity, agree to that '
+            'milligram')
 
 
 _INERTIA_KEYS = ('ixx', 'ixy', 'ixz', 'iyy', 'iyz', 'izz')
@@ -90,8 +98,10 @@ def _repair_inertias(root: ET.Element, moving: Collection[str] = ()) -> tuple[st
     does not move (a point mass, which MuJoCo takes: the TALOS arm's force-torque sensor), or
     one too light for the floor to reach ``MUJOCO_MIN_MOMENT``, is left as it is.
     """
-    repaired = []
+    repaired = list(_give_mass(root, moving))
     for link in root.iter('link'):
+        if link.get('name') in repaired:
+            continue
         inertia = link.find('inertial/inertia')
         if inertia is None:
             continue
@@ -123,6 +133,57 @@ def _repair_inertias(root: ET.Element, moving: Collection[str] = ()) -> tuple[st
             inertia.set(key, repr(float(fixed[i, j])))
         repaired.append(link.get('name'))
     return tuple(repaired)
+
+
+def _mass(link: ET.Element) -> float:
+    """Return the link's ``<inertial><mass value>`` (kg), 0 without one."""
+    node = link.find('inertial/mass')
+    try:
+        return float(node.get('value', 0.0)) if node is not None else 0.0
+    except ValueError as exc:
+        raise SimulatorError(f'link {link.get("name")!r}: the mass is not a number '
+                             f'({exc})') from None
+
+
+def _give_mass(root: ET.Element, moving: Collection[str]) -> tuple[str, ...]:
+    """
+    Give ``MASSLESS_LINK_KG`` to each moving link without mass that carries mass; return them.
+
+    Its inertia becomes ``m (1 mm)^2`` about its origin. A moving link without mass whose
+    descendants have none either is left as it is (MuJoCo refuses it, and says which).
+    """
+    links = {link.get('name'): link for link in root.iter('link')}
+    children: dict = {}
+    for joint in root.iter('joint'):
+        parent, child = joint.find('parent'), joint.find('child')
+        if parent is not None and child is not None:
+            children.setdefault(parent.get('link'), []).append(child.get('link'))
+
+    def carried(name: str, seen: set) -> float:  # the mass below ``name``
+        total = 0.0
+        for child in children.get(name, ()):
+            if child in links and child not in seen:
+                seen.add(child)
+                total += _mass(links[child]) + carried(child, seen)
+        return total
+
+    given = []
+    for name in sorted(moving):
+        link = links.get(name)
+        if link is None or _mass(link) > MUJOCO_MIN_MOMENT or carried(name, {name}) <= 0.0:
+            continue
+        inertial = link.find('inertial')
+        if inertial is None:
+            inertial = ET.SubElement(link, 'inertial')
+        for tag in ('mass', 'inertia'):
+            if inertial.find(tag) is None:
+                ET.SubElement(inertial, tag)
+        inertial.find('mass').set('value', repr(MASSLESS_LINK_KG))
+        moment = repr(MASSLESS_LINK_KG * POINT_MASS_RADIUS_M ** 2)
+        for key in _INERTIA_KEYS:
+            inertial.find('inertia').set(key, moment if key in ('ixx', 'iyy', 'izz') else '0')
+        given.append(name)
+    return tuple(given)
 
 
 def mujoco_urdf(urdf_xml: str, driven: Sequence[str]) -> tuple[str, tuple[str, ...]]:
