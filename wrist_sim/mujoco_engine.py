@@ -58,6 +58,7 @@ from wrist_sim.engine import Engine, GRAVITY_MPS2, SimulatorError
 REPAIRED_MOMENT_SHARE = 1e-3  # of the largest principal moment, for one <= 0
 POINT_MASS_RADIUS_M = 1e-3  # ... and at least m r^2: a link of mass m given no inertia
 MUJOCO_MIN_MOMENT = 1e-15  # kg m^2, mjMINVAL: MuJoCo refuses a principal moment below it
+MUJOCO_MIN_MASS_KG = 1e-15  # mjMINVAL: MuJoCo refuses a moving body of no more mass
 MASSLESS_LINK_KG = 1e-6  # for a moving link without mass that carries links with mass
 FRICTION_IMPEDANCE = 0.9999  # MuJoCo's largest: the stiffest constraint (least creep)
 CONSTRAINT_TIME_STEPS = 2.0  # solref time constant, in steps: MuJoCo's smallest stable
@@ -170,7 +171,7 @@ def _give_mass(root: ET.Element, moving: Collection[str]) -> tuple[str, ...]:
     given = []
     for name in sorted(moving):
         link = links.get(name)
-        if link is None or _mass(link) > MUJOCO_MIN_MOMENT or carried(name, {name}) <= 0.0:
+        if link is None or _mass(link) > MUJOCO_MIN_MASS_KG or carried(name, {name}) <= 0.0:
             continue
         inertial = link.find('inertial')
         if inertial is None:
