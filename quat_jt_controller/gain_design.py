@@ -108,6 +108,9 @@ TICK_SPEED_SHARE = (1.0 - FADE_FLOOR_FRACTION) / (1.0 + FADE_DELAY_TICKS)
 # no armature given, is taken for a URDF without its drive's rotor inertia (a warning)
 PLAUSIBLE_ACCELERATION_RAD_S2 = 5000.0
 SUGGESTED_ARMATURE = 0.1  # kg m^2, what a geared drive of a ~1 m arm reflects, as an example
+# A URDF velocity limit above this is taken for a placeholder (iCub's and Alex's 100 rad/s,
+# Solo's 1000, the hextilt arm's 10,000; the G1's 37 is real): a warning
+PLAUSIBLE_SPEED_RAD_S = 60.0
 SAMPLES = 24  # representative regular configurations for M(q), J(q)
 SURVEY = 400  # random configurations for the largest g(q) and lever ||J_p[:, j]||
 REGULAR_SIGMA_MIN = 0.1
@@ -732,6 +735,7 @@ def design(model: RobotModel, task: cl.Task, rate_hz: float = 1000.0,
         'warnings': (friction_warnings(model, friction, learning)
                      + gravity_warnings(model, effort, data['gravity'])
                      + inertia_warnings(model, effort, inertia)
+                     + speed_warnings(model)
                      + learning_warnings(model, friction, learning,
                                          friction_effort_share * effort)
                      + guide_warnings(model, guide, bound)),
@@ -813,6 +817,24 @@ def inertia_warnings(model: RobotModel, effort: np.ndarray, inertia: np.ndarray)
             "The URDF's inertias likely leave out the drives' rotor inertia, and the gains are "
             'sized for that light a joint (slow, weakly damped). Give the rotor inertia with '
             f'--armature (e.g. --armature {SUGGESTED_ARMATURE:g} kg m^2 per joint)']
+
+
+def speed_warnings(model: RobotModel) -> list[str]:
+    """
+    Warn of URDF velocity limits no drive has (above PLAUSIBLE_SPEED_RAD_S): placeholders.
+
+    The speed rule and the speed guard hold a joint to 0.8 of its URDF limit; a placeholder
+    holds nothing back, so a light joint that the others carry may be thrown into its stops
+    (iCub's arm, docs/reach.md, "the stop guard").
+    """
+    fast = [f'{name} ({v:g} rad/s)' for name, v in zip(model.joint_names, model.velocity_limits)
+            if isfinite(v) and v > PLAUSIBLE_SPEED_RAD_S]
+    if not fast:
+        return []
+    return [f'velocity limits no drive has: {", ".join(fast)}, likely placeholders. The speeds '
+            'are held to 0.8 of the URDF limits, so on these joints nothing holds them back '
+            'but the damping, and a light joint the others carry may be thrown into its '
+            "stops. Give the drives' real velocity limits in the URDF"]
 
 
 def learning_warnings(model: RobotModel, friction: np.ndarray, learning: np.ndarray,

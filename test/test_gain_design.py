@@ -210,6 +210,19 @@ def test_the_design_warns_of_estimates_the_urdf_does_not_support():
     assert gd.friction_warnings(wrist_model(), np.zeros(3), np.zeros(3)) == []
 
 
+def test_the_design_warns_of_velocity_limits_no_drive_has():
+    """A velocity limit of 100 rad/s (iCub's) is named a placeholder; 6.28 rad/s is not."""
+    stock = gd.design(wrist_model(), cl.Task.ORIENTATION)
+    assert not [w for w in stock.figures['warnings'] if w.startswith('velocity limits')]
+    urdf = default_urdf_xml()
+    placeholder = urdf.replace('effort="30.0" velocity="6.2832"', 'effort="30.0" velocity="100"')
+    assert placeholder != urdf
+    fast = gd.design(RobotModel(placeholder, 'base_link', 'tool0'), cl.Task.ORIENTATION)
+    warned = [w for w in fast.figures['warnings'] if w.startswith('velocity limits')]
+    assert len(warned) == 1 and 'joint2 (100 rad/s)' in warned[0]
+    assert 'joint1' not in warned[0] and 'joint3' not in warned[0]
+
+
 def test_the_learnable_friction_comes_out_of_the_budget():
     model = wrist_model()
     friction = [1.8, 0.72, 0.45]
