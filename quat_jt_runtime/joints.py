@@ -80,6 +80,47 @@ def _joint_rows(root: ElementTree.Element) -> list[tuple[str, str, str, str]]:
              j.find('child').get('link')) for j in root.findall('joint')]
 
 
+def link_masses(root: ElementTree.Element) -> dict[str, float]:
+    """
+    Return each link's ``<inertial><mass value>`` (kg; 0 without one) of a parsed URDF.
+
+    Raises ValueError naming the link if a mass is not a number.
+    """
+    masses = {}
+    for link in root.findall('link'):
+        node = link.find('inertial/mass')
+        try:
+            masses[link.get('name')] = float(node.get('value', 0.0)) if node is not None else 0.0
+        except ValueError as exc:
+            raise ValueError(f'link {link.get("name")!r}: the mass is not a number '
+                             f'({exc})') from None
+    return masses
+
+
+def masses_below(root: ElementTree.Element,
+                 masses: Optional[dict[str, float]] = None) -> dict[str, float]:
+    """
+    Return per link the mass (kg) of every link below it in a parsed URDF's tree, its own out.
+
+    ``masses``: :func:`link_masses` of ``root``, if already read. Raises ValueError as it does.
+    """
+    masses = link_masses(root) if masses is None else masses
+    children: dict[str, list[str]] = {}
+    for _, _, parent, child in _joint_rows(root):
+        children.setdefault(parent, []).append(child)
+    below: dict[str, float] = {}
+
+    def carried(link: str) -> float:
+        if link not in below:
+            below[link] = 0.0  # seen: a malformed URDF's loop ends here
+            below[link] = sum(masses.get(c, 0.0) + carried(c) for c in children.get(link, []))
+        return below[link]
+
+    for link in masses:
+        carried(link)
+    return below
+
+
 def joint_rows(urdf_xml: str) -> list[tuple[str, str, str, str]]:
     """
     Return (name, type, parent link, child link) of each joint of a URDF, in document order.
@@ -170,23 +211,17 @@ def _above_a_hand(root: ElementTree.Element, below: dict[str, list[tuple[bool, s
     ``below`` maps a link to ``(counted, child)`` per joint under it (``default_chain_end``'s
     tree); ``on_path`` is the number of counted joints from ``base_link`` to ``tip_link``.
     """
-    mass = {}
-    for link in root.findall('link'):
-        value = link.find('inertial/mass')
-        mass[link.get('name')] = float(value.get('value', 0.0)) if value is not None else 0.0
+    mass = link_masses(root)
+    carried_kg = masses_below(root, mass)
     above = {child: (counted, parent)
              for parent, children in below.items() for counted, child in children}
-    carried: dict[str, tuple[float, bool]] = {}  # link: (mass below it, a counted joint below)
+    rotating: dict[str, bool] = {}  # link: a counted joint below it
 
-    def subtree(link: str) -> tuple[float, bool]:
-        if link not in carried:
-            total, counted_below = 0.0, False
-            for counted, child in below.get(link, []):
-                child_mass, child_counted = subtree(child)
-                total += mass.get(child, 0.0) + child_mass
-                counted_below = counted_below or counted or child_counted
-            carried[link] = (total, counted_below)
-        return carried[link]
+    def turns_below(link: str) -> bool:
+        if link not in rotating:
+            rotating[link] = any(counted or turns_below(child)
+                                 for counted, child in below.get(link, []))
+        return rotating[link]
 
     path = [tip_link]
     while path[-1] != base_link:
@@ -197,9 +232,9 @@ def _above_a_hand(root: ElementTree.Element, below: dict[str, list[tuple[bool, s
         if above[link][0]:
             counted_above, wrist = counted_above + 1, link
         moved_kg += mass.get(link, 0.0)
-        fingers = sum(1 for free, child in below.get(link, []) if free or subtree(child)[1])
+        fingers = sum(1 for free, child in below.get(link, []) if free or turns_below(child))
         if (wrist is not None and fingers >= 2
-                and subtree(link)[0] < HAND_MASS_SHARE * moved_kg
+                and carried_kg.get(link, 0.0) < HAND_MASS_SHARE * moved_kg
                 and on_path - counted_above <= counted_above):
             return wrist, link
     return tip_link, None

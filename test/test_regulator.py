@@ -462,7 +462,6 @@ def test_towards_a_stop_the_guard_acts_above_what_its_cap_stops_in_the_room_left
     for j in range(6):
         for sign in (1.0, -1.0):
             q = random_q(model, rng)
-            q[j] = np.clip(q[j], lower[j] + 0.3, upper[j] - 0.3)  # the others: their room
             distance = 0.5 * clearance if within else clearance + 1e-4
             q[j] = upper[j] - distance if sign > 0.0 else lower[j] + distance
             q = q.tolist()

@@ -52,7 +52,8 @@ from typing import Any, Collection, Optional, Sequence
 import xml.etree.ElementTree as ET
 
 import numpy as np
-from quat_jt_runtime.joints import movable_joints, MOVABLE_TYPES, select_joints
+from quat_jt_runtime.joints import link_masses, masses_below, movable_joints
+from quat_jt_runtime.joints import MOVABLE_TYPES, select_joints
 from wrist_sim.engine import Engine, GRAVITY_MPS2, SimulatorError
 
 REPAIRED_MOMENT_SHARE = 1e-3  # of the largest principal moment, for one <= 0
@@ -99,7 +100,12 @@ def _repair_inertias(root: ET.Element, moving: Collection[str] = ()) -> tuple[st
     does not move (a point mass, which MuJoCo takes: the TALOS arm's force-torque sensor), or
     one too light for the floor to reach ``MUJOCO_MIN_MOMENT``, is left as it is.
     """
-    repaired = list(_give_mass(root, moving))
+    try:
+        masses = link_masses(root)
+        below = masses_below(root, masses)
+    except ValueError as exc:  # a mass that is not a number, named
+        raise SimulatorError(str(exc)) from None
+    repaired = list(_give_mass(root, moving, masses, below))
     for link in root.iter('link'):
         if link.get('name') in repaired:
             continue
@@ -115,12 +121,7 @@ def _repair_inertias(root: ET.Element, moving: Collection[str] = ()) -> tuple[st
         if not np.all(np.isfinite(tensor)):
             raise SimulatorError(f'link {link.get("name")!r}: the inertia tensor is not '
                                  f'finite ({dict(inertia.attrib)})')
-        mass_node = link.find('inertial/mass')
-        try:
-            mass = float(mass_node.get('value', 0.0)) if mass_node is not None else 0.0
-        except ValueError as exc:
-            raise SimulatorError(f'link {link.get("name")!r}: the mass is not a number '
-                                 f'({exc})') from None
+        mass = masses.get(link.get('name'), 0.0)
         if not tensor.any() and link.get('name') not in moving:
             continue  # no tensor given, on a link that does not move: MuJoCo takes it
         moments, axes = np.linalg.eigh(tensor)
@@ -136,42 +137,22 @@ def _repair_inertias(root: ET.Element, moving: Collection[str] = ()) -> tuple[st
     return tuple(repaired)
 
 
-def _mass(link: ET.Element) -> float:
-    """Return the link's ``<inertial><mass value>`` (kg), 0 without one."""
-    node = link.find('inertial/mass')
-    try:
-        return float(node.get('value', 0.0)) if node is not None else 0.0
-    except ValueError as exc:
-        raise SimulatorError(f'link {link.get("name")!r}: the mass is not a number '
-                             f'({exc})') from None
-
-
-def _give_mass(root: ET.Element, moving: Collection[str]) -> tuple[str, ...]:
+def _give_mass(root: ET.Element, moving: Collection[str], masses: dict[str, float],
+               below: dict[str, float]) -> tuple[str, ...]:
     """
     Give ``MASSLESS_LINK_KG`` to each moving link without mass that carries mass; return them.
 
-    Its inertia becomes ``m (1 mm)^2`` about its origin. A moving link without mass whose
-    descendants have none either is left as it is (MuJoCo refuses it, and says which).
+    ``masses`` and ``below``: each link's mass and the mass below it (``joints.link_masses``,
+    ``joints.masses_below``). Its inertia becomes ``m (1 mm)^2`` about its origin. A moving
+    link without mass whose descendants have none either is left as it is (MuJoCo refuses it,
+    and says which).
     """
     links = {link.get('name'): link for link in root.iter('link')}
-    children: dict = {}
-    for joint in root.iter('joint'):
-        parent, child = joint.find('parent'), joint.find('child')
-        if parent is not None and child is not None:
-            children.setdefault(parent.get('link'), []).append(child.get('link'))
-
-    def carried(name: str, seen: set) -> float:  # the mass below ``name``
-        total = 0.0
-        for child in children.get(name, ()):
-            if child in links and child not in seen:
-                seen.add(child)
-                total += _mass(links[child]) + carried(child, seen)
-        return total
-
     given = []
     for name in sorted(moving):
         link = links.get(name)
-        if link is None or _mass(link) > MUJOCO_MIN_MASS_KG or carried(name, {name}) <= 0.0:
+        if (link is None or masses.get(name, 0.0) > MUJOCO_MIN_MASS_KG
+                or below.get(name, 0.0) <= 0.0):
             continue
         inertial = link.find('inertial')
         if inertial is None:
