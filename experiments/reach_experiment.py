@@ -367,8 +367,9 @@ def classify(model: RobotModel, loop: ClosedLoop, shaping: sh.Shaping, q_star,
     return '; '.join(causes)
 
 
-def report(robot: Robot, potential: str, outcomes: list, elapsed_s: float) -> str:
-    """Return the summary lines of one robot and potential."""
+def report(robot: Robot, potential: str, outcomes: list, elapsed_s: float,
+           cruise_fraction: float = CRUISE_FRACTION) -> str:
+    """Return the summary lines of one robot and potential (designed for ``cruise_fraction``)."""
     n = len(outcomes)
     ok = sum(o.reached for o in outcomes)
     touched = sum(o.touched for o in outcomes)
@@ -397,11 +398,11 @@ def report(robot: Robot, potential: str, outcomes: list, elapsed_s: float) -> st
     if np.any(np.isfinite(travel) & (travel > 0.0)):  # what the velocity limits allow
         over = int(np.count_nonzero(travel > robot.duration_s))
         ceiling = int(np.count_nonzero(travel / SPEED_MARGIN > robot.duration_s))
-        cruise = int(np.count_nonzero(travel / CRUISE_FRACTION > robot.duration_s))
+        cruise = int(np.count_nonzero(travel / cruise_fraction > robot.duration_s))
         lines.append(f'  the longest joint travel to q* takes more than {robot.duration_s:g} s '
                      f"at the velocity limits in {over} cases, at the design's speed ceiling "
                      f'({SPEED_MARGIN:g} x the limits) in {ceiling}, at its cruise '
-                     f'({CRUISE_FRACTION:g} x the limits) in {cruise}')
+                     f'({cruise_fraction:g} x the limits) in {cruise}')
     if robot.hold_s > 0.0 and ok:  # after settling: the cases reached
         drift = np.array([o.final_speed_rad_s for o in outcomes if o.reached])
         away = np.array([o.from_q_star_rad for o in outcomes if o.reached])
@@ -705,11 +706,15 @@ def arm_robot(name: str, urdf_path: str, base_link: Optional[str], tip_link: Opt
 
 @functools.lru_cache(maxsize=16)
 def arm_design(robot: Robot, told_armature: float, rate_hz: float,
-               friction_effort_share: Optional[float] = None):
+               friction_effort_share: Optional[float] = None,
+               approach_time_s: Optional[float] = None,
+               cruise_fraction: Optional[float] = None):
     """
     Return ``(model, design)``: ``design_gains``' Python API on the URDF + the armature.
 
-    ``friction_effort_share`` is design_gains' ``--friction-effort-share`` (None: its default).
+    ``friction_effort_share`` is design_gains' ``--friction-effort-share`` (None: its default),
+    ``approach_time_s`` its ``--approach-time`` (None: none), ``cruise_fraction`` its
+    ``--cruise-fraction`` (None: its default).
     """
     from quat_jt_controller import gain_design
     urdf = robot_urdf(robot)
@@ -717,14 +722,18 @@ def arm_design(robot: Robot, told_armature: float, rate_hz: float,
                        [told_armature] * len(robot.joints))
     share = (gain_design.DEFAULT_FRICTION_EFFORT_SHARE if friction_effort_share is None
              else friction_effort_share)
-    return model, gain_design.design(model, robot.task, rate_hz, friction_effort_share=share)
+    fraction = gain_design.CRUISE_FRACTION if cruise_fraction is None else cruise_fraction
+    return model, gain_design.design(model, robot.task, rate_hz, friction_effort_share=share,
+                                     approach_time_s=approach_time_s, cruise_fraction=fraction)
 
 
 def run_arm(robot: Robot, cond: Condition, potential: str, count: int, seed: int,
             rate_hz: float = 1000.0, engine: str = 'mujoco', progress=print,
             workers: Optional[int] = None, ray_address: Optional[str] = None,
             friction_effort_share: Optional[float] = None,
-            overrides: Optional[dict] = None) -> list:
+            overrides: Optional[dict] = None,
+            approach_time_s: Optional[float] = None,
+            cruise_fraction: Optional[float] = None) -> list:
     """
     Run ``count`` cases of an arm from its URDF in condition ``cond``; their outcomes.
 
@@ -732,9 +741,12 @@ def run_arm(robot: Robot, cond: Condition, potential: str, count: int, seed: int
     is ``engine``'s, without the velocity clamp (a speed past the URDF limit is measured, not
     hidden), with ``cond``'s rotor inertia and Coulomb friction; the control period is
     1 / ``rate_hz``. ``overrides`` replace parameters of the design, by their ROS names
-    (validated as the node does; ShapingError or GainsError names a bad one).
+    (validated as the node does; ShapingError or GainsError names a bad one);
+    ``friction_effort_share``, ``approach_time_s`` and ``cruise_fraction`` are design_gains'
+    options (:func:`arm_design`).
     """
-    model, d = arm_design(robot, cond.told_armature, float(rate_hz), friction_effort_share)
+    model, d = arm_design(robot, cond.told_armature, float(rate_hz), friction_effort_share,
+                          approach_time_s, cruise_fraction)
     n = model.n
     gains, shaping = d.gains(potential), d.shaping
     if overrides:  # as a node would take the design's file with these values
@@ -835,6 +847,10 @@ def main(argv: Optional[list] = None) -> int:
                      help="'friction': untold Coulomb friction, x each effort limit")
     arm.add_argument('--friction-effort-share', type=float, default=None,
                      help="design_gains' --friction-effort-share (default: its default)")
+    arm.add_argument('--approach-time', type=float, default=None,
+                     help="design_gains' --approach-time, s (default: none)")
+    arm.add_argument('--cruise-fraction', type=float, default=None,
+                     help="design_gains' --cruise-fraction (default: its default)")
     args = parser.parse_args(argv)
     if args.workers is not None and args.workers < 1:
         parser.error(f'--workers must be >= 1, got {args.workers}')
@@ -913,7 +929,7 @@ def main_arm(parser: argparse.ArgumentParser, args, overrides: dict) -> int:
             t0 = time.monotonic()
             try:  # design_gains may refuse the arm, and says why (cached: run_arm reuses it)
                 arm_design(robot, cond.told_armature, float(args.rate),
-                           args.friction_effort_share)
+                           args.friction_effort_share, args.approach_time, args.cruise_fraction)
             except ValueError as exc:
                 parser.error(f'design_gains: {exc}')
             try:
@@ -921,12 +937,14 @@ def main_arm(parser: argparse.ArgumentParser, args, overrides: dict) -> int:
                                    args.rate, args.engine, workers=args.workers,
                                    ray_address=args.ray_address,
                                    friction_effort_share=args.friction_effort_share,
-                                   overrides=overrides)
+                                   overrides=overrides, approach_time_s=args.approach_time,
+                                   cruise_fraction=args.cruise_fraction)
             except (cl.GainsError, sh.ShapingError) as exc:
                 parser.error(f'--param: {exc}')
             label = ', '.join([potential, cond.describe(), args.engine]
                               + [f'{k} {v}' for k, v in overrides.items()])
-            text.append(report(robot, label, outcomes, time.monotonic() - t0))
+            text.append(report(robot, label, outcomes, time.monotonic() - t0,
+                               args.cruise_fraction or CRUISE_FRACTION))
             print(text[-1], flush=True)
             rows.append(table_row(robot, cond, outcomes))
             print(rows[-1], flush=True)

@@ -197,6 +197,11 @@ def main(argv: Optional[list] = None) -> int:
                         help='the speed far from the goal, as a fraction of the URDF velocity '
                         'limits: a strong joint gets a goal-configuration gain that drives it '
                         f'this fast, within its budget (default {CRUISE_FRACTION:g})')
+    parser.add_argument('--approach-time', type=_number(0.0),
+                        help='s: shorten the goal-configuration ramp to at most this time at '
+                        "the slowest joint's cruising speed, for a faster approach near the "
+                        'goal on an arm with slow joints (default: none, the 0.25 rad ramp; '
+                        'docs/gain_design.md, section 5)')
     parser.add_argument('--preferred-configuration', type=_number(-float('inf')), nargs='+',
                         help="rad per joint: the posture a redundant arm's goal configuration "
                         'leans to (default: the middle of the ranges)')
@@ -257,7 +262,8 @@ def main(argv: Optional[list] = None) -> int:
                         friction_learning=args.friction_learning,
                         friction_effort_share=args.friction_effort_share,
                         cruise_fraction=args.cruise_fraction,
-                        preferred_configuration_rad=args.preferred_configuration)
+                        preferred_configuration_rad=args.preferred_configuration,
+                        approach_time_s=args.approach_time)
         command = shlex.join(['python', '-m', 'quat_jt_controller.gain_design']
                              + _public_argv(sys.argv[1:] if argv is None else argv))
         text = to_yaml(result, args.potential, command, args.robot_note)

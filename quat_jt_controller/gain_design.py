@@ -86,7 +86,7 @@ DAMPER_SAFETY = 0.5  # of the largest damping the sampled loop tolerates on a jo
 LIMIT_MARGIN_MAX_RAD = 0.25
 LIMIT_MARGIN_FRACTION = 0.1  # of the smallest half range of a limited joint
 GUIDE_RADIUS_RAD = 0.0  # > 0: a dead zone around q* where only the paper's term acts
-GUIDE_RAMP_RAD = 0.25
+GUIDE_RAMP_RAD = 0.25  # the goal-configuration term's ramp w, unless --approach-time asks less
 FRICTION_VELOCITY_RAD_S = 0.075  # v_eps of the compensation (docs/reach.md says why 0.075)
 FRICTION_ERROR_BAND = 0.004  # ||e||; a little below the 0.005 the wrist is asked to reach
 FRICTION_POSITION_BAND_M = 0.0005
@@ -352,7 +352,8 @@ def inertial_damping_rate(delays: Sequence[int], dt_s: float) -> float:
 def _cruising_guide(configs, kp: np.ndarray, lam: np.ndarray, bound: np.ndarray,
                     push_max: np.ndarray, cruise: np.ndarray, b_max: np.ndarray,
                     task: cl.Task = cl.Task.POSE,
-                    kv_floor: Optional[np.ndarray] = None) -> np.ndarray:
+                    kv_floor: Optional[np.ndarray] = None,
+                    ramp_rad: float = GUIDE_RAMP_RAD) -> np.ndarray:
     """
     Return the goal-configuration gains T_j: GUIDE_OVER_TASK x the task bound, or more.
 
@@ -360,19 +361,43 @@ def _cruising_guide(configs, kp: np.ndarray, lam: np.ndarray, bound: np.ndarray,
     against its damping K_v (which grows with the ramp's stiffness T / w) gets a larger T, up
     to what its budget leaves, ``push_max - bound``. So a strong joint is not held to the pace
     that the task bound, set by the weakest joint, gives it (the Panda's 87 N m shoulder
-    beside its 12 N m wrist). ``kv_floor``: the least K_v per joint (default none).
+    beside its 12 N m wrist). ``kv_floor``: the least K_v per joint (default none);
+    ``ramp_rad`` the term's ramp w.
     """
     guide = GUIDE_OVER_TASK * bound
     ceiling = np.maximum(push_max - bound, guide)
     floor = np.zeros(len(bound)) if kv_floor is None else kv_floor
     for _ in range(60):
-        kv = np.minimum(np.maximum(_damping(configs, kp, lam, guide / GUIDE_RAMP_RAD, task),
+        kv = np.minimum(np.maximum(_damping(configs, kp, lam, guide / ramp_rad, task),
                                    floor), b_max)
         slow = ((bound + guide) / kv < cruise) & (guide < ceiling)
         if not slow.any():
             break
         guide = np.where(slow, np.minimum(guide * CRUISE_STEP, ceiling), guide)
     return guide
+
+
+def approach_ramp(cruise_rad_s: np.ndarray, prismatic: Sequence[bool],
+                  approach_time_s: Optional[float] = None) -> float:
+    """
+    Return the goal-configuration term's ramp ``w`` (rad): GUIDE_RAMP_RAD, or less if asked.
+
+    Near ``q*`` a joint that cruises at ``v`` against the damping that holds it there
+    approaches ``q*`` at about the rate ``v / w``, overdamped or at a damping ratio of 0.71
+    alike (docs/gain_design.md, section 5, "The ramp"): the linear approach's time constant is
+    ``w / v``. With ``approach_time_s`` the ramp is at most that time at the slowest cruise of a
+    revolute joint (a slide's ramp would be metres); None keeps GUIDE_RAMP_RAD. Rounded to 3
+    significant digits, as the file writes it.
+    """
+    if approach_time_s is None:
+        return GUIDE_RAMP_RAD
+    if not (isfinite(approach_time_s) and approach_time_s > 0.0):
+        raise ValueError(f'approach_time_s must be finite and > 0, got {approach_time_s}')
+    rotating = ~np.asarray(prismatic, dtype=bool)
+    if not rotating.any():
+        return GUIDE_RAMP_RAD
+    return min(GUIDE_RAMP_RAD,
+               float(f'{approach_time_s * float(np.min(cruise_rad_s[rotating])):.3g}'))
 
 
 def holding_damping(push_nm: np.ndarray, kv: np.ndarray, b_max: np.ndarray,
@@ -412,7 +437,8 @@ def design(model: RobotModel, task: cl.Task, rate_hz: float = 1000.0,
            seed: int = 0, friction_learning: float = FRICTION_LEARNING,
            cruise_fraction: float = CRUISE_FRACTION,
            preferred_configuration_rad: Optional[Sequence[float]] = None,
-           friction_effort_share: float = DEFAULT_FRICTION_EFFORT_SHARE) -> Design:
+           friction_effort_share: float = DEFAULT_FRICTION_EFFORT_SHARE,
+           approach_time_s: Optional[float] = None) -> Design:
     """
     Compute gains and extensions for ``model`` and ``task`` (docs/gain_design.md).
 
@@ -424,7 +450,9 @@ def design(model: RobotModel, task: cl.Task, rate_hz: float = 1000.0,
     ``TICK_SPEED_SHARE`` of its velocity limit in one tick); ``cruise_fraction`` of the velocity
     limits the speed far from the goal that the goal-configuration gain is raised towards and
     the cubic damping holds (``_cruising_guide``); ``preferred_configuration_rad`` the
-    posture a redundant arm's q* leans to (default: the middle of the ranges). Raises
+    posture a redundant arm's q* leans to (default: the middle of the ranges);
+    ``approach_time_s`` shortens the goal-configuration ramp to at most that time at the
+    slowest joint's cruise (:func:`approach_ramp`; default None: 0.25 rad). Raises
     ValueError if a joint has no
     torque left, or if the goal-configuration term of a joint cannot stay above the task
     term's bound (it would no longer lead that joint round its stop).
@@ -554,6 +582,7 @@ def design(model: RobotModel, task: cl.Task, rate_hz: float = 1000.0,
     # damping ratio below DAMPING_RATIO_MIN; a joint whose own mass-spring-damper (smallest
     # inertia) is unstable gets a smaller goal-configuration gain.
     cruise = cruise_fraction * velocity
+    ramp = approach_ramp(cruise, model.prismatic, approach_time_s)
     guide_cap = np.full(n, np.inf)  # per joint: lowered where the capped damping is too weak
     # The position rows leave a joint whose axis passes through the tip (a wrist roll) with
     # little or no task torque; the goal-configuration term alone holds it. Its terms are
@@ -573,15 +602,15 @@ def design(model: RobotModel, task: cl.Task, rate_hz: float = 1000.0,
         aim = (cruise if pace is None
                else np.where(kv_floor > 0.0, np.maximum(cruise, pace), cruise))
         guide = np.minimum(_cruising_guide(configs, kp, lam, bound, push_max, aim, b_max,
-                                           task, kv_floor),
+                                           task, kv_floor, ramp),
                            np.maximum(guide_cap, GUIDE_OVER_TASK * bound))
-        kv = np.minimum(np.maximum(_damping(configs, kp, lam, guide / GUIDE_RAMP_RAD, task),
+        kv = np.minimum(np.maximum(_damping(configs, kp, lam, guide / ramp, task),
                                    kv_floor), b_max)
         for j in range(n):
-            while _joint_unstable(inertia[j], guide[j] / GUIDE_RAMP_RAD, kv[j], b_max[j],
+            while _joint_unstable(inertia[j], guide[j] / ramp, kv[j], b_max[j],
                                   delays, dt_s):
                 guide[j] *= SHRINK
-        extra = guide / GUIDE_RAMP_RAD
+        extra = guide / ramp
         kv = np.minimum(np.maximum(_damping(configs, kp, lam, extra, task), kv_floor), b_max)
         kv = np.where(limited_speed, holding_damping(bound + guide, kv, b_max, ceiling,
                                                      velocity), kv)
@@ -676,13 +705,13 @@ def design(model: RobotModel, task: cl.Task, rate_hz: float = 1000.0,
     # c from the values as written, a little above the ratio, so the floor survives rounding
     guide_r = guide.round(3)
     inertial = (1.0 + 1e-3) * _inertial_damping(configs, np.array(kp_r) * np.array(lam_r),
-                                                guide_r / GUIDE_RAMP_RAD, task)
+                                                guide_r / ramp, task)
     inertial = np.array([_round_up(v) for v in inertial])
     beta_r = float(f'{beta:.4g}')  # as written
     # The settling damping alpha M near the goal: the alpha that makes the slowest coupled
     # mode decay (nearly) fastest, its median over the configurations (docs/gain_design.md)
     settling, decay_before, decay_after = settling_rate(
-        configs, np.array(kp_r) * np.array(lam_r), np.array(kv_r), guide_r / GUIDE_RAMP_RAD,
+        configs, np.array(kp_r) * np.array(lam_r), np.array(kv_r), guide_r / ramp,
         SETTLING_RATES_PER_S, SETTLING_NEAR_BEST, task, inertial, beta_r)
     shaping = Shaping.create(
         n, joint_limit_margin=margin, joint_limit_gain=limit_gain.round(3).tolist(),
@@ -692,7 +721,7 @@ def design(model: RobotModel, task: cl.Task, rate_hz: float = 1000.0,
         friction_error_band=FRICTION_ERROR_BAND,
         friction_position_band=FRICTION_POSITION_BAND_M,
         configuration_gain=guide_r.tolist(), configuration_radius=GUIDE_RADIUS_RAD,
-        configuration_ramp=GUIDE_RAMP_RAD, damping_speed=damping_speed.round(3).tolist(),
+        configuration_ramp=ramp, damping_speed=damping_speed.round(3).tolist(),
         inertial_damping=inertial.tolist(),
         inertial_damping_rate=beta_r,
         settling_damping_rate=settling,

@@ -197,7 +197,7 @@ def to_yaml(d: Design, potential: str = 'tanh', command: str = '',
         'configuration_gain': f'N m: {GUIDE_OVER_TASK:g} x the task bound, more on a joint it '
                               'would leave slow',
         'configuration_radius': 'rad, dead zone around q*',
-        'configuration_ramp': 'rad, the torque rises over this',
+        'configuration_ramp': 'rad, the torque rises over this (0.25, or --approach-time)',
         'damping_speed': 'rad/s, v_c of the cubic damping (0 = none)',
         'inertial_damping': 'damping at least c sqrt(M_jj(q)): the damping ratio where the '
                             'arm is heavy',

@@ -408,6 +408,8 @@ def test_a_urdf_without_effort_limits_or_ranges_is_refused_by_name(tmp_path, cap
     (['--delays', '-1'], 2, 'argument --delays: -1 is not an integer in [0, inf)'),
     (['--cruise-fraction', '1.5'], 2, 'argument --cruise-fraction: 1.5 is not a finite number '
      'in (0, 1]'),
+    (['--approach-time', '0'], 2, 'argument --approach-time: 0 is not a finite number in '
+     '(0, inf)'),
     (['--task', 'velocity'], 2, "argument --task: invalid choice: 'velocity'"),
     (['--task', 'position'], 1, 'the position task Jacobian is singular'),
     (['--effort-limits', '0.1', '0.1', '0.1'], 1, 'no design: the arm cannot hold itself up '
@@ -716,6 +718,38 @@ def test_the_inertial_damping_damps_the_heavy_arm_within_what_the_light_one_tole
     # the median cruise, with the damping at each configuration, is no faster than K_v's
     assert np.all(xarm7.figures['typical_speed_rad_s']
                   <= xarm7.figures['terminal_speed_rad_s'] * (1.0 + 1e-6))
+
+
+def test_the_ramp_is_the_approach_time_at_the_slowest_revolute_cruise():
+    """docs/gain_design.md, section 5, "The ramp": 0.25 rad, or that time at the cruise."""
+    cruise = np.array([0.6, 1.2, 0.05])
+    slide = [False, False, True]  # its 0.05 m/s does not count: its ramp would be metres
+    assert gd.approach_ramp(cruise, slide) == gd.GUIDE_RAMP_RAD
+    assert gd.approach_ramp(cruise, slide, 0.2) == pytest.approx(0.12)
+    assert gd.approach_ramp(cruise, slide, 1.0) == gd.GUIDE_RAMP_RAD  # never more
+    assert gd.approach_ramp(cruise, [True] * 3, 0.2) == gd.GUIDE_RAMP_RAD
+    for bad in (0.0, -1.0, math.nan, math.inf):
+        with pytest.raises(ValueError, match=f'approach_time_s must be finite and > 0, got {bad}'):
+            gd.approach_ramp(cruise, slide, bad)
+
+
+def test_the_approach_time_shortens_the_ramp_and_speeds_the_linear_approach(designs):
+    """
+    0.05 s at the wrist's cruise, 0.6 x 2 pi rad/s, is a ramp of 0.188 rad: the design's.
+
+    The design sizes the goal-configuration stiffness T / w and the damping for that ramp;
+    the sampled loop stays stable and the linear loop's slowest mode decays faster.
+    """
+    model, d = designs['wrist']
+    assert d.shaping.configuration_ramp_rad == gd.GUIDE_RAMP_RAD
+    short = gd.design(model, cl.Task.ORIENTATION, friction_nm=(1.8, 0.72, 0.45),
+                      delays=(1, 2), approach_time_s=0.05)
+    w = short.shaping.configuration_ramp_rad
+    assert w == pytest.approx(0.05 * gd.CRUISE_FRACTION * min(model.velocity_limits), rel=3e-3)
+    assert w < gd.GUIDE_RAMP_RAD
+    assert max(short.figures['spectral_radius'].values()) < 1.0
+    assert short.figures['settling_decay_per_s'][0] > d.figures['settling_decay_per_s'][0]
+    assert 'configuration_ramp: 0.188' in go.to_yaml(short)
 
 
 def test_the_design_damps_the_slowest_coupled_mode(designs):
