@@ -259,6 +259,26 @@ def test_an_arm_the_design_refuses_is_one_line_not_a_traceback(tmp_path, capsys)
 
 
 @pytest.mark.unit
+def test_the_design_options_reach_the_design_and_a_bad_one_is_one_line(tmp_path, capsys):
+    """``--approach-time`` and ``--cruise-fraction`` are design_gains', checked by it."""
+    path = tmp_path / 'arm.urdf'
+    path.write_text(small_arm_urdf(('revolute',) * 4))  # 3 rad/s: a cruise of 1.8 rad/s
+    robot = rx.arm_robot('small', str(path), None, None, cl.Task.ORIENTATION)
+    assert rx.arm_design(robot, 0.0, 1000.0)[1].shaping.configuration_ramp_rad == 0.25
+    assert rx.arm_design(robot, 0.0, 1000.0, None, 0.1)[1].shaping.configuration_ramp_rad == (
+        pytest.approx(0.18))
+    for option, value, words in (
+            ('--approach-time', '-1', 'approach_time_s must be finite and > 0, got -1.0'),
+            ('--cruise-fraction', '1.5', 'cruise_fraction must be in (0, 1], got 1.5')):
+        with pytest.raises(SystemExit) as exit_info:
+            rx.main(['--urdf', str(path), '--task', 'orientation', '--cases', '1',
+                     '--workers', '1', option, value])
+        assert exit_info.value.code == 2
+        err = capsys.readouterr().err
+        assert f'error: design_gains: {words}' in err and 'Traceback' not in err, err
+
+
+@pytest.mark.unit
 def test_the_urdf_sweep_tells_taken_refused_and_crashed_apart(tmp_path):
     """design_gains and the simulator on a URDF as it comes: each outcome, and what was said."""
     good = tmp_path / 'arm.urdf'
