@@ -326,8 +326,10 @@ class RobotModel:
         """
         Return ``M(q)^-1`` as rows (n x n, symmetric; the armature included), in joint order.
 
-        Row j maps the joints' torques to joint j's acceleration: the speed guard's cancellation
-        of the push the other joints give it (Regulator.update, docs/lyapunov.md, section 6).
+        Row j maps the joints' torques to joint j's acceleration: the speed guard's damping of
+        the guarded joints through their block of it, and its cancellation of the push the
+        other joints give a joint within a stop's clearance (Regulator.update,
+        docs/lyapunov.md, section 6).
         """
         qv = self._set_q(q)
         minv = pin.computeMinverse(self.model, self.data, qv)  # its upper triangle is filled

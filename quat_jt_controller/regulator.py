@@ -169,6 +169,70 @@ def _settling_gain(y_tilde: Sequence[float], gains: cl.Gains, shaping: sh.Shapin
     return alpha * sh.settling_fade(y_tilde, gains.lam) if alpha > 0.0 else 0.0
 
 
+def _guard_damping(minv: Sequence[Sequence[float]], qdot: Sequence[float], tau: list[float],
+                   guarded: list, beta: float) -> None:
+    """
+    Damp the guarded joints' excess together, through M(q) (in place; docs/lyapunov.md, s. 6).
+
+    ``G`` the guarded joints, ``A = (M^-1)_GG``, ``s_j = over_j / qdot_j`` in (0, 1] the share
+    of each speed above its guard: ``tau_G`` gets ``-beta S^(1/2) A^-1 S^(1/2) qdot_G`` on top
+    of the inertial damping. A joint guarded alone gets ``-beta I_j over_j``,
+    ``I_j = 1 / A_jj``: the damping the sampled loop tolerates on that joint, on its excess.
+    Several coupled joints guarded at once each decelerate at about ``beta`` x their excess,
+    as one alone would; ``beta I_j`` on each apart couples through ``A`` to the edge of what
+    the loop tolerates. ``A^-1`` is positive definite, so it is a dissipation.
+    """
+    g = len(guarded)
+    root = [sqrt(over / qdot[j]) for j, over, _ in guarded]
+    # Cholesky of A (symmetric positive definite), then A x = S^(1/2) qdot_G
+    low = [[0.0] * g for _ in range(g)]
+    for a in range(g):
+        ja = guarded[a][0]
+        for b in range(a + 1):
+            jb = guarded[b][0]
+            acc = minv[ja][jb]
+            for c in range(b):
+                acc -= low[a][c] * low[b][c]
+            low[a][b] = sqrt(acc) if a == b else acc / low[b][b]
+    x = [0.0] * g
+    for a in range(g):
+        acc = root[a] * qdot[guarded[a][0]]
+        for c in range(a):
+            acc -= low[a][c] * x[c]
+        x[a] = acc / low[a][a]
+    for a in range(g - 1, -1, -1):
+        acc = x[a]
+        for c in range(a + 1, g):
+            acc -= low[c][a] * x[c]
+        x[a] = acc / low[a][a]
+    for a, (j, _, _) in enumerate(guarded):
+        tau[j] -= beta * root[a] * x[a]
+
+
+def _cancel_push(minv: Sequence[Sequence[float]], tau: list[float], guarded: list) -> None:
+    """
+    Take from each joint within a stop's clearance the push the others give it (in place).
+
+    The other joints' torques ``tau_i`` (gravity apart: its compensation cancels it)
+    accelerate joint j by ``a_j = sum_i!=j (M^-1)_ji tau_i`` through M(q). Where the stop
+    guard acts on j within the clearance and ``a_j`` drives j on towards its stop, ``tau_j``
+    gets ``-a_j I_j(q)``, ``I_j = 1 / (M^-1)_jj``, which cancels that acceleration. It opposes
+    ``qdot_j`` and is zero at rest: a dissipation (docs/lyapunov.md, section 6). On the way
+    (outside the clearance) nothing is taken: that added its gain to the guard's damping and
+    made coupled guarded joints ripple (docs/reach.md, "the speed guard through M(q)").
+    """
+    pushed = list(tau)  # the torques before any cancellation
+    for j, over, within in guarded:
+        if not within:
+            continue
+        row = minv[j]
+        a = -row[j] * pushed[j]
+        for m, t in zip(row, pushed):
+            a += m * t
+        if a * over > 0.0:  # it drives the joint on towards its stop
+            tau[j] -= a / row[j]
+
+
 class Regulator:
     """
     The transpose-Jacobian unit-quaternion regulator of Eq. (22) for one robot and task.
@@ -481,6 +545,7 @@ class Regulator:
                 tau[j] += kv[j] * g_v * qdot_goal[j]
         own = None  # M_jj(q), where the inertial damping computed it
         guarded = None  # (j, speed over the guard, within the stop's clearance) where it acts
+        minv = None  # M(q)^-1, where the guard acts
         if shaping.inertial_damping_on:  # docs/lyapunov.md, section 10: on the same velocity
             caps = self._caps
             own = self._own
@@ -501,11 +566,12 @@ class Regulator:
                     guard = stop_rate * room if room > 0.0 else 0.0
                 over = v - guard if v > guard else (v + guard if v < -guard else 0.0)
                 if over != 0.0:
-                    if caps[j] > d:
-                        tau[j] -= (caps[j] - d) * over
                     if guarded is None:
                         guarded = []
                     guarded.append((j, over, room <= 0.0))
+            if guarded is not None:
+                minv = self.model.inverse_inertia(q)
+                _guard_damping(minv, qdot, tau, guarded, shaping.inertial_damping_rate_per_s)
         settled = None  # (psi alpha, v, M(q) v) of the settling damping, if it acts
         k = _settling_gain(y, gains, shaping)  # docs/lyapunov.md, section 11
         if k > 0.0:
@@ -546,7 +612,7 @@ class Regulator:
                 for j in range(n):
                     tau[j] += fc[j]
         if guarded is not None:
-            self._cancel_push(q, tau, guarded, shaping.inertial_damping_rate_per_s)
+            _cancel_push(minv, tau, guarded)
         if gains.gravity_compensation:
             g = self.model.gravity(q)
             for j in range(n):
@@ -562,32 +628,6 @@ class Regulator:
                               self._unmet, self._held)
         saturated = cl.saturate(tau, self.effort_limits_nm)
         return TickOutput(tau, y, eta_e, p, R, saturated, True, tuple(tau_p), self.task)
-
-    def _cancel_push(self, q: Sequence[float], tau: list[float], guarded: list,
-                     beta: float) -> None:
-        """
-        Take from each guarded joint the push the other joints' torques give it (in place).
-
-        The other joints' torques ``tau_i`` (gravity apart: its compensation cancels it)
-        accelerate joint j by ``a_j = sum_i!=j (M^-1)_ji tau_i`` through M(q). Where the speed
-        guard acts on j and ``a_j`` drives j further along its excess, ``tau_j`` gets
-        ``-a_j I_j(q)``, ``I_j = 1 / (M^-1)_jj``, which cancels that acceleration: up to
-        ``beta`` x the excess (continuous at the guard) on the way, all of it within the stop's
-        clearance. It always opposes ``qdot_j`` and is zero at rest: a dissipation
-        (docs/lyapunov.md, section 6).
-        """
-        minv = self.model.inverse_inertia(q)
-        pushed = list(tau)  # the torques before any cancellation
-        for j, over, within in guarded:
-            row = minv[j]
-            a = -row[j] * pushed[j]
-            for m, t in zip(row, pushed):
-                a += m * t
-            if a * over <= 0.0:  # it does not drive the joint along its excess
-                continue
-            if not within and abs(a) > beta * abs(over):
-                a = beta * over
-            tau[j] -= a / row[j]
 
     def _track_acceleration(self, qdot: Sequence[float], dt_s: float) -> None:
         """
