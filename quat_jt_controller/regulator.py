@@ -221,6 +221,8 @@ def _cancel_push(minv: Sequence[Sequence[float]], tau: list[float], guarded: lis
     (outside the clearance) nothing is taken: that added its gain to the guard's damping and
     made coupled guarded joints ripple (docs/reach.md, "the speed guard through M(q)").
     """
+    if not any(within for _, _, within in guarded):
+        return  # the speed guard alone, on the way: nothing to take, no copy
     pushed = list(tau)  # the torques before any cancellation
     for j, over, within in guarded:
         if not within:
