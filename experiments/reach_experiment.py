@@ -42,7 +42,8 @@ Any arm from its URDF plus what a user knows, instead of ``--robot`` (docs/reach
 
     python -m experiments.reach_experiment (--urdf FILE | --example-robot NAME)
         [--base-link L] [--tip-link L] [--task pose|orientation|position] [--rate HZ]
-        [--condition ideal armature armature-wrong friction armature-friction no-velocities]
+        [--condition ideal armature armature-wrong friction armature-friction no-velocities
+         encoder] [--encoder-bits B] [--no-encoder-told]
         [--engine mujoco|pybullet] [--armature A] [--armature-told-scale S]
         [--friction-fraction F] [--cases N] [--potential tanh]
 
@@ -50,7 +51,9 @@ The gains are ``gain_design.design`` on the URDF with the armature the condition
 the rate; the plant is the same URDF in ``--engine`` with the condition's rotor inertia and
 untold Coulomb friction, its velocities not clamped (a peak past a URDF velocity limit is
 reported as ``|qdot|/limit``), or its states given without velocities (estimated by
-``quat_jt_runtime.joints.VelocityEstimator``, as the node does). A markdown table ends the
+``quat_jt_runtime.joints.VelocityEstimator``, as the node does), their positions exact or, in
+``encoder``, in whole counts of a ``--encoder-bits`` encoder whose count the controller is
+told (``position_resolution``) unless ``--no-encoder-told``. A markdown table ends the
 output: reached, stops touched, velocity limits exceeded, limit cycles, time to goal.
 
 ``--dds K`` also runs the first K cases of each robot over DDS with the real nodes
@@ -222,6 +225,7 @@ class Outcome:
     # max_j |q*_j - q_start,j| / velocity limit_j: the least time to the goal configuration
     # at the velocity limits, acceleration aside (nan: no q* or no limits)
     travel_s: float = math.nan
+    ripple: float = math.nan  # max_j std(tau_j - g_j) in the last second / effort limit_j
 
 
 class PositionsOnly:
@@ -230,15 +234,23 @@ class PositionsOnly:
 
     As the node does for such joint states (``quat_jt_runtime.joints.JointStateReader``): a
     ``VelocityEstimator`` of time constant one period, restarted after ten periods without a
-    state, fed each state's positions and time.
+    state, fed each state's positions and time. With ``resolution_rad`` > 0 the positions
+    are an encoder's, rounded to whole counts of that size (``sensed_q_rad``, what the
+    controller reads: ``reference_sim.run_sampled``), and with ``told`` the controller is
+    told the count (its ``position_resolution``: ``WindowedVelocityEstimator``); ``q_rad``
+    stays the plant's, for the errors and speeds the case is judged by.
     """
 
-    def __init__(self, sim) -> None:
-        from quat_jt_runtime.joints import VelocityEstimator
+    def __init__(self, sim, resolution_rad: float = 0.0, told: bool = True) -> None:
+        from quat_jt_runtime.joints import velocity_estimator
+        if not (math.isfinite(resolution_rad) and resolution_rad >= 0.0):
+            raise ValueError(f'resolution_rad must be finite and >= 0, got {resolution_rad}')
         self.sim, self.n, self.dt_s = sim, sim.n, sim.dt_s
-        self._estimator = VelocityEstimator(sim.n, sim.dt_s, 10.0 * sim.dt_s)
+        self.resolution_rad = float(resolution_rad)
+        self._estimator = velocity_estimator(sim.n, 1.0 / sim.dt_s,
+                                             [self.resolution_rad if told else 0.0] * sim.n)
         self._k = 0
-        self._v = np.array(self._estimator.update(sim.q_rad.tolist(), 0))
+        self._v = np.array(self._estimator.update(self.sensed_q_rad.tolist(), 0))
 
     @property
     def q_rad(self) -> np.ndarray:
@@ -246,30 +258,48 @@ class PositionsOnly:
         return self.sim.q_rad
 
     @property
+    def sensed_q_rad(self) -> np.ndarray:
+        """Return the joint positions as the encoders read them (whole counts)."""
+        q = self.sim.q_rad
+        if self.resolution_rad == 0.0:
+            return q
+        return np.round(q / self.resolution_rad) * self.resolution_rad
+
+    @property
     def qdot_rad_s(self) -> np.ndarray:
-        """Return the velocities estimated from the positions (not the plant's)."""
+        """Return the velocities estimated from the sensed positions (not the plant's)."""
         return self._v
 
     def step(self, tau):
-        """Step the plant, then estimate the velocities from the new positions."""
+        """Step the plant, then estimate the velocities from the new sensed positions."""
         applied = self.sim.step(tau)
         self._k += 1
         self._v = np.array(self._estimator.update(
-            self.sim.q_rad.tolist(), int(round(self._k * self.dt_s * 1e9))))
+            self.sensed_q_rad.tolist(), int(round(self._k * self.dt_s * 1e9))))
         return applied
+
+
+def encoder_resolution_rad(bits: int) -> float:
+    """Return the count of an absolute encoder of ``bits`` bits a turn, rad (0: exact)."""
+    if bits == 0:
+        return 0.0
+    if not 8 <= bits <= 32:
+        raise ValueError(f'--encoder-bits must be 0 (exact) or in [8, 32], got {bits}')
+    return 2.0 * math.pi / 2 ** bits
 
 
 def run_case(robot: Robot, model: RobotModel, gains: cl.Gains, shaping: sh.Shaping,
              sim_params: dict, index: int, q0: np.ndarray, qg: np.ndarray,
              delay_ticks: int = 1, q_star_after_s: float = Q_STAR_AFTER_S,
              engine: str = 'pybullet', sim_armature=None, no_velocities: bool = False,
-             dt_s: float = 1e-3) -> Outcome:
+             dt_s: float = 1e-3, encoder_bits: int = 0, encoder_told: bool = True) -> Outcome:
     """
     Run one case on the simulator core (``engine``); classify it.
 
     ``sim_armature`` is the plant's rotor inertia (kg m^2 per joint; the model's may differ),
-    ``no_velocities`` gives the controller estimated velocities (``PositionsOnly``), ``dt_s``
-    the plant's step and the control period.
+    ``no_velocities`` gives the controller estimated velocities (``PositionsOnly``), from
+    positions read by encoders of ``encoder_bits`` bits a turn (0: exact), their count told
+    to the controller if ``encoder_told``, ``dt_s`` the plant's step and the control period.
     """
     from wrist_sim.simulator import RobotSimulator
 
@@ -288,7 +318,8 @@ def run_case(robot: Robot, model: RobotModel, gains: cl.Gains, shaping: sh.Shapi
                              enforce_velocity_limits=sim_params.get('enforce_velocity_limits',
                                                                     True),
                              engine=engine, armature=sim_armature, dt_s=dt_s)
-    plant = PositionsOnly(sim) if no_velocities else sim
+    plant = (PositionsOnly(sim, encoder_resolution_rad(encoder_bits), encoder_told)
+             if no_velocities else sim)
     try:
         held = run_sampled(loop, plant, robot.duration_s + robot.hold_s, delay_ticks, q_star,
                            q_star_after_s)
@@ -316,7 +347,8 @@ def run_case(robot: Robot, model: RobotModel, gains: cl.Gains, shaping: sh.Shapi
                                        float(np.abs(held.q_rad[-1] - q_star).max())),
                       speed_ratio=float((qdot / limits).max()),
                       travel_s=(math.nan if q_star is None else
-                                float((np.abs(np.asarray(q_star) - q0) / limits).max())))
+                                float((np.abs(np.asarray(q_star) - q0) / limits).max())),
+                      ripple=torque_ripple(model, held))
     if not reached:
         outcome.cause = classify(model, loop, shaping, q_star, run)
     if outcome.flips_per_s > LIMIT_CYCLE_FLIPS_PER_S:
@@ -333,16 +365,36 @@ def torque_flips_per_s(model: RobotModel, run) -> float:
     More than ``LIMIT_CYCLE_FLIPS_PER_S`` there: the case ends in a limit cycle. Torques below
     ``FLIP_FLOOR`` of the effort limit carry no sign (numerical dither at rest).
     """
-    k0 = int(np.searchsorted(run.t_s, float(run.t_s[-1]) - 1.0))
-    q, tau = run.q_rad[k0:], run.tau_nm[k0:]
-    g = np.array([model.gravity(qi.tolist()) for qi in q])
-    floor = FLIP_FLOOR * np.array([v if math.isfinite(v) else 1.0 for v in model.effort_limits])
+    rest = _last_second_torques(model, run)
+    floor = FLIP_FLOOR * _efforts(model)
     most = 0
     for j in range(model.n):
-        signs = np.sign(tau[:, j] - g[:, j])
-        signs = signs[np.abs(tau[:, j] - g[:, j]) > floor[j]]
+        signs = np.sign(rest[:, j])
+        signs = signs[np.abs(rest[:, j]) > floor[j]]
         most = max(most, int(np.count_nonzero(np.diff(signs))))
     return float(most)
+
+
+def torque_ripple(model: RobotModel, run) -> float:
+    """
+    Return the largest standard deviation of a joint's ``tau - g(q)`` in the last second.
+
+    As a fraction of the joint's effort limit. In a case reached that second is the hold at
+    the goal: how hard the torque shakes there (a limit cycle, or the damping acting on the
+    count steps of an encoder's positions), whether or not its sign changes.
+    """
+    rest = _last_second_torques(model, run)
+    return float((rest.std(axis=0) / _efforts(model)).max())
+
+
+def _efforts(model: RobotModel) -> np.ndarray:
+    return np.array([v if math.isfinite(v) else 1.0 for v in model.effort_limits])
+
+
+def _last_second_torques(model: RobotModel, run) -> np.ndarray:
+    k0 = int(np.searchsorted(run.t_s, float(run.t_s[-1]) - 1.0))
+    q, tau = run.q_rad[k0:], run.tau_nm[k0:]
+    return tau - np.array([model.gravity(qi.tolist()) for qi in q])
 
 
 def classify(model: RobotModel, loop: ClosedLoop, shaping: sh.Shaping, q_star,
@@ -391,9 +443,12 @@ def report(robot: Robot, potential: str, outcomes: list, elapsed_s: float,
                      f'{max(o.max_speed_rad_s for o in outcomes):.2f} rad/s')
     flips = np.array([o.flips_per_s for o in outcomes])
     cycles = int(np.count_nonzero(flips > LIMIT_CYCLE_FLIPS_PER_S))
+    ripple = np.array([o.ripple for o in outcomes])
     lines.append(f'  torque sign changes in the last second (tau - g, worst joint): median '
                  f'{np.median(flips):.2f}, max {flips.max():.2f}; limit cycles (> '
-                 f'{LIMIT_CYCLE_FLIPS_PER_S:g}) in {cycles} cases')
+                 f'{LIMIT_CYCLE_FLIPS_PER_S:g}) in {cycles} cases; its ripple (std, worst '
+                 f'joint, x its effort limit) median {np.nanmedian(ripple):.1e}, max '
+                 f'{np.nanmax(ripple):.1e}')
     travel = np.array([o.travel_s for o in outcomes])
     if np.any(np.isfinite(travel) & (travel > 0.0)):  # what the velocity limits allow
         over = int(np.count_nonzero(travel > robot.duration_s))
@@ -495,6 +550,8 @@ class CaseJob:
     sim_armature: Optional[tuple] = None
     no_velocities: bool = False
     dt_s: float = 1e-3
+    encoder_bits: int = 0
+    encoder_told: bool = True
 
 
 @functools.lru_cache(maxsize=8)
@@ -514,7 +571,8 @@ def run_job(job: CaseJob) -> Outcome:
     return run_case(job.robot, _model(*job.model_spec), job.gains, job.shaping, job.sim_params,
                     job.index, job.q_start, job.q_goal, job.delay_ticks, engine=job.engine,
                     sim_armature=job.sim_armature, no_velocities=job.no_velocities,
-                    dt_s=job.dt_s)
+                    dt_s=job.dt_s, encoder_bits=job.encoder_bits,
+                    encoder_told=job.encoder_told)
 
 
 def run_jobs(jobs: list, label: str, progress=print, workers: Optional[int] = None,
@@ -624,7 +682,7 @@ def run_dds(robot: Robot, count: int, seed: int, progress=print) -> str:
 
 
 CONDITIONS = ('ideal', 'armature', 'armature-wrong', 'friction', 'armature-friction',
-              'no-velocities')
+              'no-velocities', 'encoder')
 
 
 @dataclass(frozen=True)
@@ -636,6 +694,8 @@ class Condition:
     told_armature: float = 0.0  # kg m^2 per joint, given to the design and the controller
     coulomb_effort_fraction: float = 0.0  # simulated Coulomb friction, x the effort limits
     no_velocities: bool = False
+    encoder_bits: int = 0  # the positions read in whole counts of 2 pi / 2^bits (0: exact)
+    encoder_told: bool = True  # ... and the controller told the count (position_resolution)
 
     def describe(self) -> str:
         """Return the condition in words, for the table."""
@@ -649,12 +709,17 @@ class Condition:
                                  f'untold Coulomb friction {self.coulomb_effort_fraction:g} x '
                                  'effort',
             'no-velocities': 'states without velocities (estimated)',
+            'encoder': f'positions from {self.encoder_bits}-bit encoders, no velocities '
+                       + ('(estimated, the count told)' if self.encoder_told else
+                          '(estimated, the count not told)'),
         }[self.name]
 
 
 def condition(name: str, armature: float = 0.1, told_scale: float = 0.5,
-              friction_fraction: float = 0.01) -> Condition:
+              friction_fraction: float = 0.01, encoder_bits: int = 17,
+              encoder_told: bool = True) -> Condition:
     """Return the condition ``name`` (``CONDITIONS``) with these plant figures."""
+    encoder_resolution_rad(encoder_bits)  # ValueError names a bad count
     return {
         'ideal': Condition('ideal'),
         'armature': Condition('armature', armature, armature),
@@ -663,6 +728,8 @@ def condition(name: str, armature: float = 0.1, told_scale: float = 0.5,
         'armature-friction': Condition('armature-friction', armature, armature,
                                        friction_fraction),
         'no-velocities': Condition('no-velocities', no_velocities=True),
+        'encoder': Condition('encoder', no_velocities=True, encoder_bits=encoder_bits,
+                             encoder_told=encoder_told),
     }[name]
 
 
@@ -759,7 +826,8 @@ def run_arm(robot: Robot, cond: Condition, potential: str, count: int, seed: int
                   'enforce_velocity_limits': False}
     spec = model_spec(model, robot_urdf(robot))
     jobs = [CaseJob(robot, spec, gains, shaping, sim_params, i, q0, qg, 1, engine,
-                    (cond.plant_armature,) * n, cond.no_velocities, 1.0 / rate_hz)
+                    (cond.plant_armature,) * n, cond.no_velocities, 1.0 / rate_hz,
+                    cond.encoder_bits, cond.encoder_told)
             for i, (q0, qg) in enumerate(cases(model, robot, count, seed))]
     return run_jobs(jobs, f'{robot.name} {cond.name}', progress, workers, ray_address)
 
@@ -845,6 +913,12 @@ def main(argv: Optional[list] = None) -> int:
                      help="'armature-wrong': the design is told this x the rotor inertia")
     arm.add_argument('--friction-fraction', type=float, default=0.01,
                      help="'friction': untold Coulomb friction, x each effort limit")
+    arm.add_argument('--encoder-bits', type=int, default=17,
+                     help="'encoder': the positions in counts of 2 pi / 2^bits (8 to 32; "
+                     'default 17)')
+    arm.add_argument('--encoder-told', action=argparse.BooleanOptionalAction, default=True,
+                     help="'encoder': the controller is told the count (position_resolution; "
+                     'default) or not (--no-encoder-told)')
     arm.add_argument('--friction-effort-share', type=float, default=None,
                      help="design_gains' --friction-effort-share (default: its default)")
     arm.add_argument('--approach-time', type=float, default=None,
@@ -916,6 +990,7 @@ def main_arm(parser: argparse.ArgumentParser, args, overrides: dict) -> int:
                             ('--friction-effort-share', args.friction_effort_share or 0.0)):
             if not (math.isfinite(value) and value >= 0.0):
                 raise ValueError(f'{name} must be finite and >= 0, got {value}')
+        encoder_resolution_rad(args.encoder_bits)
         robot = arm_robot(args.name or args.example_robot or Path(path).stem, str(path),
                           args.base_link, args.tip_link, cl.Task(args.task),
                           args.fraction if args.fraction is not None else 0.8,
@@ -924,7 +999,8 @@ def main_arm(parser: argparse.ArgumentParser, args, overrides: dict) -> int:
         parser.error(str(exc))
     rows, text = [], []
     for name in args.condition:
-        cond = condition(name, args.armature, args.armature_told_scale, args.friction_fraction)
+        cond = condition(name, args.armature, args.armature_told_scale, args.friction_fraction,
+                         args.encoder_bits, args.encoder_told)
         for potential in args.potential:
             t0 = time.monotonic()
             try:  # design_gains may refuse the arm, and says why (cached: run_arm reuses it)

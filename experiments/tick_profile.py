@@ -23,7 +23,7 @@ from quat_jt_controller.controller import Controller, GoalRequest
 from quat_jt_controller.model import RobotModel
 from quat_jt_controller.regulator import Goal, Regulator
 from quat_jt_controller.shaping import Shaping
-from quat_jt_runtime.joints import stamp_problem, StateLayout
+from quat_jt_runtime.joints import stamp_problem, StateLayout, velocity_estimator
 from quat_jt_runtime.loop_stats import LoopStats, TickStats
 from quat_jt_runtime.resources import default_urdf_xml
 
@@ -132,6 +132,15 @@ def profile(calls: int) -> dict[str, dict[str, float]]:
             tick_stats.window(1.0)
         window_us = best_us(full_window, 50) - 1000 * best_us(
             lambda: tick_stats.record(1, 2, 3, 4.0, False), calls)
+        # states without velocities: the estimate on each state, at rest on a count boundary
+        estimators = {resolution: velocity_estimator(3, 1000.0, [resolution] * 3)
+                      for resolution in (0.0, 1e-4)}
+        states = [0]
+
+        def estimate(resolution: float) -> None:
+            states[0] += 1
+            k = states[0]
+            estimators[resolution].update([1e-4 * (k % 2)] * 3, k * 1_000_000)
 
         controller = {
             'rclpy deserialising the JointState (before the callback)':
@@ -140,6 +149,10 @@ def profile(calls: int) -> dict[str, dict[str, float]]:
                 best_us(lambda: layout.extract(js.name, js.position, js.velocity), calls),
             'stamp check': best_us(lambda: stamp_problem(stamp_ns, time.time_ns(), 500_000_000),
                                    calls),
+            'velocities estimated, states without them (one-period low-pass)':
+                best_us(lambda: estimate(0.0), calls),
+            "... an encoder's, position_resolution given (window of up to 16 states)":
+                best_us(lambda: estimate(1e-4), calls),
             'Regulator.update (paper config)': best_us(lambda: regulator.update(q, qdot), calls),
             '... with the inertial damping, no guard acting':
                 best_us(lambda: guarded.update(q, qdot), calls),

@@ -40,6 +40,7 @@ from quat_jt_controller.goal_motion import GoalVelocityEstimator
 from quat_jt_controller.regulator import Goal, Regulator, TickOutput
 from quat_jt_controller.stall import StallDetector
 from quat_jt_runtime.joints import DEFAULT_STATE_RATE_HZ, StaleState, StateCheck
+from quat_jt_runtime.joints import VELOCITY_WINDOW_STATES
 from quat_jt_runtime.throttle import cause, Throttle
 
 # /diagnostics wait for the next tick while states come at least this often (else: at once)
@@ -116,12 +117,15 @@ class Controller:
     :param state_rate_hz: the states' expected rate (the velocity estimate's time constant).
     :param checker: the goal-check worker (``submit``, ``poll``, ``take_*``), or None.
     :param started_ns: when the node started (``steady_ns``), for :meth:`no_state_yet`.
+    :param position_resolution: a count of each joint's position in the states (0: exact),
+        for the velocity estimate of states without velocities.
     """
 
     def __init__(self, regulator: Regulator, state_timeout_s: float,
                  publish_rate_divider: int, max_state_age_s: float = 0.0,
                  state_rate_hz: float = DEFAULT_STATE_RATE_HZ, checker: Optional[Any] = None,
-                 started_ns: int = 0) -> None:
+                 started_ns: int = 0,
+                 position_resolution: Optional[Sequence[float]] = None) -> None:
         self.regulator = regulator
         model = regulator.model
         self.checker = checker
@@ -136,7 +140,8 @@ class Controller:
         self.stall = StallDetector(regulator)
         self._frames = GoalFrames(model, regulator.task)  # the base and every link
         self._check_state = StateCheck(model.joint_names, max_state_age_s, state_rate_hz,
-                                       model.continuous)
+                                       model.continuous, position_resolution)
+        self.position_resolution = tuple(position_resolution or ())
         self._zero = [0.0] * regulator.n
         # the goal
         self.goal_source = 'none'  # 'none' | 'hold' (initial pose) | 'target_pose'
@@ -245,11 +250,16 @@ class Controller:
 
     def _estimating(self, stamp_ns: int) -> str:
         rate = self.state_rate_hz
+        if any(r > 0.0 for r in self.position_resolution):
+            how = (f'on the longest window of up to {VELOCITY_WINDOW_STATES} states that '
+                   'position_resolution allows')
+        else:
+            how = (f'finite differences, low-pass of time constant {1e3 / rate:g} ms = one '
+                   f'period at state_rate {rate:g} Hz; from an encoder, give its count as '
+                   'position_resolution')
         return ('joint_states carry no velocities: estimating them from the positions and '
                 + ('their stamps' if stamp_ns else 'their arrival times (no stamps)')
-                + f' (finite differences, low-pass of time constant {1e3 / rate:g} ms = one '
-                f'period at state_rate {rate:g} Hz); a driver that publishes velocities gives '
-                'better damping')
+                + f' ({how}); a driver that publishes velocities gives better damping')
 
     def _tick_interval_s(self, stamp_ns: int, steady_ns: int) -> float:
         """

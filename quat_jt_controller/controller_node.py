@@ -65,7 +65,8 @@ class QuatJtController(Node):
             cfg.urdf_xml, cfg.base_link, cfg.tip_link, cfg.joints, cfg.task))
         ctl = self.controller = Controller(
             reg, cfg.state_timeout_s, cfg.publish_rate_divider, cfg.max_state_age_s,
-            cfg.state_rate_hz, self._goal_checker, started_ns=steady_ns())
+            cfg.state_rate_hz, self._goal_checker, started_ns=steady_ns(),
+            position_resolution=cfg.position_resolution)
         self.counters = ctl.counters
         self.stats = TickStats()
         self._cmd_msg = Float64MultiArray(data=[0.0] * model.n)

@@ -39,6 +39,17 @@ ARMATURE = Spec(
     'square of the gear ratio, often more than the links; design_gains --armature takes the '
     'same values.', read_only=True, size='n', bounds=(0.0, inf),
     default_text=JOINT_ZEROS_TEXT)
+# Declared after ``joints``, as ARMATURE.
+POSITION_RESOLUTION = Spec(
+    'position_resolution', Kind.DOUBLE_ARRAY, joint_zeros,
+    "One count of each joint's position as joint_states report it ({n} values), rad (m for "
+    'a prismatic joint), e.g. 2 pi / 2^17 for a 17-bit encoder on the joint; 0 = exact. Read '
+    'only where the states carry no velocities: any count > 0 estimates them on the longest '
+    'window the counts allow (at rest a step of one count moves the estimate 16 times less '
+    'than the one-period low-pass used for exact positions, so the damping shakes the '
+    'torque less; docs/ros.md, "Joint states without velocities").', read_only=True,
+    size='n', bounds=(0.0, inf), default_text=JOINT_ZEROS_TEXT)
+PER_JOINT_STRUCTURE = (ARMATURE, POSITION_RESOLUTION)
 STRUCTURE = (
     Spec('task', Kind.STRING, Task.ORIENTATION.value,
          "What is regulated: 'orientation' (y = e, Eqs. 37/38; the paper's wrist), 'pose' "
@@ -50,6 +61,7 @@ STRUCTURE = (
          'Controlled joints, in the order of effort_controller/commands; joint_states are '
          'matched by name.', read_only=True, constraints='non-empty names'),
     ARMATURE,
+    POSITION_RESOLUTION,
     Spec('base_link', Kind.STRING, 'base_link',
          'Frame of goals and published poses (target_pose header.frame_id).', read_only=True),
     Spec('tip_link', Kind.STRING, 'tool0', 'The end-effector link whose pose is regulated.',

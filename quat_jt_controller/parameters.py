@@ -36,6 +36,7 @@ class StructuralConfig(WithDescription):
     tip_link: str
     description: Description  # the URDF in use and where it came from
     armature: tuple[float, ...]  # kg m^2 per joint, finite and >= 0
+    position_resolution: tuple[float, ...]  # rad (m) a count per joint; 0: exact
     state_timeout_s: float
     max_state_age_s: float  # 0: stamps not checked
     state_rate_hz: float
@@ -58,9 +59,12 @@ class StructuralConfig(WithDescription):
         if not values['base_link'] or not values['tip_link']:
             raise ValueError('base_link and tip_link must not be empty')
         armature = table.ARMATURE.check(values['armature'], {'n': len(joints)})
+        resolution = table.POSITION_RESOLUTION.check(values['position_resolution'],
+                                                     {'n': len(joints)})
         state_rate_hz = check_state_rate(values['state_rate'])
         return cls(task=task, joints=joints, base_link=values['base_link'],
                    tip_link=values['tip_link'], armature=armature,
+                   position_resolution=resolution,
                    description=description(),
                    state_timeout_s=float(values['state_timeout']),
                    max_state_age_s=float(values['max_state_age']),
@@ -76,8 +80,9 @@ def declare_structural(node: Node) -> StructuralConfig:
     A ``robot_description_topic`` is waited for here, before the model is built. Raises
     ValueError naming the parameter if a value is unusable (DescriptionError for the URDF).
     """
-    values = declare(node, tuple(s for s in table.STRUCTURE if s is not table.ARMATURE))
-    values.update(declare(node, (table.ARMATURE,), {'n': len(values['joints'])}))
+    values = declare(node, tuple(s for s in table.STRUCTURE
+                                 if s not in table.PER_JOINT_STRUCTURE))
+    values.update(declare(node, table.PER_JOINT_STRUCTURE, {'n': len(values['joints'])}))
     return StructuralConfig.create(values, lambda: robot_description(node, values))
 
 

@@ -160,7 +160,9 @@ def run_sampled(loop: ClosedLoop, sim, duration_s: float, delay_ticks: int = 1,
     Run ``loop``'s regulator on a simulator as the nodes do: sampled, delayed, held, clamped.
 
     ``sim`` is a simulator of the same URDF and joints (``wrist_sim.simulator.RobotSimulator``
-    or anything with ``q_rad``, ``qdot_rad_s``, ``dt_s`` and ``step(tau) -> applied``). Each
+    or anything with ``q_rad``, ``qdot_rad_s``, ``dt_s`` and ``step(tau) -> applied``; with a
+    ``sensed_q_rad`` too, the regulator reads that, as from encoders, and the errors and the
+    record are the plant's ``q_rad``). Each
     step applies (zero-order hold) the torque of the node's tick (Regulator.update: Eq. (22) +
     g(q), clamped to the URDF effort limits) computed from the state measured ``delay_ticks``
     steps earlier. The nodes run
@@ -170,7 +172,11 @@ def run_sampled(loop: ClosedLoop, sim, duration_s: float, delay_ticks: int = 1,
     (the node gets it from its goal-check worker a little after the goal).
     """
     q_star_step = int(round(q_star_after_s / sim.dt_s)) if q_star is not None else -1
-    history = [(sim.q_rad.tolist(), sim.qdot_rad_s.tolist())] * (delay_ticks + 1)
+
+    def measured() -> tuple:
+        q = sim.sensed_q_rad if hasattr(sim, 'sensed_q_rad') else sim.q_rad
+        return q.tolist(), sim.qdot_rad_s.tolist()
+    history = [measured()] * (delay_ticks + 1)
     steps = int(round(duration_s / sim.dt_s))
     pos, ori, tau_max = np.zeros(steps), np.empty(steps), np.empty(steps)
     qs, taus = np.zeros((steps, sim.n)), np.zeros((steps, sim.n))
@@ -186,9 +192,9 @@ def run_sampled(loop: ClosedLoop, sim, duration_s: float, delay_ticks: int = 1,
             finite = False
             break
         applied = sim.step(out.tau_nm)
-        history.append((sim.q_rad.tolist(), sim.qdot_rad_s.tolist()))
+        history.append(measured())
         del history[0]
-        y, _, _ = loop.error(history[-1][0])
+        y, _, _ = loop.error(sim.q_rad.tolist())
         if loop.task.has_position:
             pos[k] = np.linalg.norm(y[:3])
         ori[k] = np.linalg.norm(cl.orientation_part(y, loop.task))

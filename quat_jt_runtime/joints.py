@@ -5,9 +5,11 @@ Which joints of a URDF can move, choosing the controlled ones by name (one way),
 controller's tick input from a joint state: the controlled joints picked by name, the stamp
 checked, continuous joints unwrapped, and the velocities estimated when a driver sends none.
 """
-from math import exp, pi
+from math import exp, isfinite, pi
 from typing import Optional, Sequence
 from xml.etree import ElementTree
+
+import numpy as np
 
 MOVABLE_TYPES = ('revolute', 'continuous', 'prismatic')
 ROTATING_TYPES = ('revolute', 'continuous')
@@ -407,6 +409,100 @@ class VelocityEstimator:
         return list(self._v)
 
 
+# The longest window of WindowedVelocityEstimator, in states (16 ms at 1 kHz)
+VELOCITY_WINDOW_STATES = 16
+
+
+class WindowedVelocityEstimator:
+    """
+    Joint velocities from an encoder's positions, on the longest window they allow.
+
+    The end-fit first-order adaptive window (Janabi-Sharifi, Hayward and Chen, IEEE Trans.
+    Control Systems Technology 8(6), 2000): a joint's velocity is the slope of the line from
+    the newest position back to the one ``m`` states before, for the largest ``m`` (at most
+    ``window``) such that this line and every shorter one pass within the joint's
+    ``resolution_rad`` (one count) of each position in between. At rest or at a steady speed
+    the window grows and a step of one count moves the estimate by ``count / (m h)``, not by
+    the ``0.63 count / h`` of the one-period low-pass of :class:`VelocityEstimator`; where the
+    joint accelerates the window shrinks, down to the last difference (``m`` = 1), so the lag
+    stays at most what the count allows. A joint of resolution 0 (exact positions) gets the
+    last difference. Times are the states' own, so an irregular rate is allowed for.
+
+    As :class:`VelocityEstimator`: the first state, and the first after a gap longer than
+    ``max_gap_s``, give 0; a state whose time is not after the last one's leaves the estimate
+    as it is.
+    """
+
+    def __init__(self, resolution_rad: Sequence[float], max_gap_s: float,
+                 window: int = VELOCITY_WINDOW_STATES) -> None:
+        resolution = [float(r) for r in resolution_rad]
+        if not all(isfinite(r) and r >= 0.0 for r in resolution):
+            raise ValueError(f'resolution_rad must be finite and >= 0, got {resolution}')
+        if not max_gap_s > 0.0 or window < 1:
+            raise ValueError(f'max_gap_s {max_gap_s} must be > 0 and window {window} >= 1')
+        self.n = len(resolution)
+        # within one count, and a hair more: a position exactly one count off the line fits
+        self._band = np.array(resolution) * (1.0 + 1e-9)
+        self._max_gap_ns = int(max_gap_s * 1e9)
+        self._q = np.zeros((window + 1, self.n))  # the states, newest first
+        self._t_s = np.zeros(window + 1)
+        self._count = 0  # how many of them are filled
+        self._last_ns = 0
+        self._v = [0.0] * self.n
+        self._columns = np.arange(self.n)
+
+    def reset(self) -> None:
+        """Forget the positions: the next state restarts the estimate at 0."""
+        self._count = 0
+        self._v = [0.0] * self.n
+
+    def update(self, q: Sequence[float], t_ns: int) -> list[float]:
+        """Return the velocity estimate after the positions ``q`` measured at ``t_ns`` (a copy)."""
+        if self._count and t_ns - self._last_ns > self._max_gap_ns:
+            self.reset()
+        elif self._count and t_ns <= self._last_ns:
+            return list(self._v)
+        self._q[1:] = self._q[:-1]
+        self._t_s[1:] = self._t_s[:-1]
+        self._q[0] = q
+        self._t_s[0] = t_ns * 1e-9
+        self._last_ns = t_ns
+        self._count = min(self._count + 1, len(self._t_s))
+        k = self._count - 1  # the longest window the states allow now
+        if k == 0:
+            self._v = [0.0] * self.n
+            return list(self._v)
+        back_s = (self._t_s[0] - self._t_s[1:k + 1])[:, None]  # (k, 1): to the state i back
+        rise = self._q[0] - self._q[1:k + 1]  # (k, n)
+        slopes = rise / back_s  # (k, n): the line of window m = row + 1
+        # a line of slope s passes within the band of the state i back if s lies between
+        # (rise_i - band) / back_i and (rise_i + band) / back_i; window m needs that of every
+        # state inside it (i < m), the running bounds of the rows above
+        low = np.maximum.accumulate((rise - self._band) / back_s, axis=0)
+        high = np.minimum.accumulate((rise + self._band) / back_s, axis=0)
+        fits = np.ones((k, self.n), dtype=bool)  # window 1 has no state inside
+        fits[1:] = (slopes[1:] >= low[:-1]) & (slopes[1:] <= high[:-1])
+        longest = np.cumprod(fits, axis=0).sum(axis=0) - 1  # (n,): the first misfit ends it
+        self._v = slopes[longest, self._columns].tolist()
+        return list(self._v)
+
+
+def velocity_estimator(n: int, rate_hz: float, resolution_rad: Optional[Sequence[float]] = None):
+    """
+    Return the velocity estimator for states without velocities, as the controller uses it.
+
+    Positions of no given resolution: :class:`VelocityEstimator`, of time constant one period
+    of ``rate_hz``; an encoder's (``resolution_rad``, one count per joint, any > 0):
+    :class:`WindowedVelocityEstimator`. Either restarts after ten periods without a state.
+    """
+    rate = check_state_rate(rate_hz)
+    if resolution_rad is not None and len(resolution_rad) != n:
+        raise ValueError(f'position_resolution: expected {n} values, got {len(resolution_rad)}')
+    if resolution_rad is not None and any(r != 0.0 for r in resolution_rad):
+        return WindowedVelocityEstimator(resolution_rad, 10.0 / rate)
+    return VelocityEstimator(n, 1.0 / rate, 10.0 / rate)
+
+
 # Watchdog defaults of the controller (state_timeout, max_state_age), chosen with
 # experiments/soak.py on a loaded host (docs/ros.md, 'Watchdog timeouts'): 0.1 s tripped in
 # normal running there.
@@ -446,16 +542,17 @@ class StateCheck:
     Calling it returns (q, qdot) of the controlled joints, or raises ValueError saying why no
     command may be computed from the state (:class:`StaleState` if it is the stamp). Names may
     come in any order and with other joints (a gripper's). A state without velocities (an
-    empty ``velocity``, as some drivers publish) gets them from :class:`VelocityEstimator`
-    (time constant one period of ``rate_hz``), on the states' stamps, or on the time they
-    arrived when they are not stamped; :attr:`estimating` says so of the last state. The
-    angles of the joints flagged ``continuous`` (no stops) are unwrapped: a driver that
-    reports them within (-pi, pi] gives a q that does not jump by a turn.
+    empty ``velocity``, as some drivers publish) gets them from :func:`velocity_estimator`
+    (for ``position_resolution``, a count per joint, 0: exact), on the states' stamps, or on
+    the time they arrived when they are not stamped; :attr:`estimating` says so of the last
+    state. The angles of the joints flagged ``continuous`` (no stops) are unwrapped: a driver
+    that reports them within (-pi, pi] gives a q that does not jump by a turn.
     """
 
     def __init__(self, joint_names: Sequence[str], max_age_s: float,
                  rate_hz: float = DEFAULT_STATE_RATE_HZ,
-                 continuous: Optional[Sequence[bool]] = None) -> None:
+                 continuous: Optional[Sequence[bool]] = None,
+                 position_resolution: Optional[Sequence[float]] = None) -> None:
         rate = check_state_rate(rate_hz)
         self._layout = StateLayout(joint_names)
         self._max_age_ns = int(max_age_s * 1e9)
@@ -465,7 +562,7 @@ class StateCheck:
             raise ValueError(f'continuous: expected {n} flags, got {len(continuous)}')
         self._last_q: Optional[list[float]] = None
         # a gap of more than 10 periods restarts the estimate (a lost connection, a pause)
-        self._estimator = VelocityEstimator(n, 1.0 / rate, 10.0 / rate)
+        self._estimator = velocity_estimator(n, rate, position_resolution)
         self.estimating = False  # the last state came without velocities
 
     def __call__(self, names: Sequence[str], position: Sequence[float],

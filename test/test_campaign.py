@@ -204,7 +204,7 @@ def test_a_local_ray_cluster_gives_the_outcomes_of_a_serial_run():
 
 
 @pytest.mark.e2e
-@pytest.mark.parametrize('name', ['armature-wrong', 'no-velocities'])
+@pytest.mark.parametrize('name', ['armature-wrong', 'no-velocities', 'encoder'])
 def test_an_arm_from_its_urdf_runs_the_same_serial_or_parallel(tmp_path, name):
     """The design from the URDF, a MuJoCo plant with the condition's rotor inertia or states."""
     pytest.importorskip('mujoco')
@@ -276,6 +276,115 @@ def test_the_design_options_reach_the_design_and_a_bad_one_is_one_line(tmp_path,
         assert exit_info.value.code == 2
         err = capsys.readouterr().err
         assert f'error: design_gains: {words}' in err and 'Traceback' not in err, err
+
+
+class _Slide:
+    """A unit mass on a line, stepped at 1 kHz: the plant an encoder reads."""
+
+    n, dt_s = 1, 1e-3
+
+    def __init__(self, q_rad: float, qdot_rad_s: float) -> None:
+        self.q_rad, self.qdot_rad_s = np.array([q_rad]), np.array([qdot_rad_s])
+
+    def step(self, tau):
+        self.qdot_rad_s = self.qdot_rad_s + np.asarray(tau) * self.dt_s
+        self.q_rad = self.q_rad + self.qdot_rad_s * self.dt_s
+        return np.asarray(tau)
+
+
+@pytest.mark.unit
+def test_an_encoder_reads_whole_counts_and_the_velocities_come_from_them():
+    """The controller's positions are whole counts; the plant's stay exact, for the verdict."""
+    count = rx.encoder_resolution_rad(12)
+    assert count == pytest.approx(2.0 * np.pi / 4096) and rx.encoder_resolution_rad(0) == 0.0
+    speed = 0.25 * count / 1e-3  # a count every 4 ticks
+    worst = {}
+    for told in (True, False):
+        plant = rx.PositionsOnly(_Slide(0.3 * count, speed), count, told)
+        sensed, true, estimates = [], [], []
+        for _ in range(40):
+            plant.step([0.0])
+            sensed.append(float(plant.sensed_q_rad[0]))
+            true.append(float(plant.q_rad[0]))
+            estimates.append(float(plant.qdot_rad_s[0]))
+        counts = np.array(sensed) / count
+        np.testing.assert_allclose(counts, np.round(counts), atol=1e-9)
+        assert np.abs(np.array(sensed) - np.array(true)).max() <= 0.5 * count + 1e-12
+        assert len(set(sensed)) > 5 and true[-1] == pytest.approx(10.3 * count)
+        worst[told] = np.abs(np.array(estimates[20:]) - speed).max() / (count / 1e-3)
+    # told the count, the window spans the steps and finds the speed; not told, the low-pass
+    # of one period jumps by most of a count a tick at each step
+    assert worst[True] < 1e-9 and worst[False] > 0.3
+    exact = rx.PositionsOnly(_Slide(0.3 * count, speed))
+    exact.step([0.0])
+    assert exact.sensed_q_rad[0] == exact.q_rad[0]
+    for bits in (7, 33, -1):
+        with pytest.raises(ValueError, match=f'--encoder-bits must be 0 .exact. or in '
+                                             fr'\[8, 32\], got {bits}'):
+            rx.condition('encoder', encoder_bits=bits)
+    assert rx.condition('encoder', encoder_bits=16).describe() == (
+        'positions from 16-bit encoders, no velocities (estimated, the count told)')
+
+
+@pytest.mark.unit
+def test_the_last_second_tells_a_torque_that_flips_from_one_that_shakes():
+    """Sign changes above the floor count as a cycle; the ripple is the std, x effort."""
+
+    class Model:
+        n, effort_limits = 2, (10.0, 100.0)
+
+        def gravity(self, q):
+            return [1.0, 0.0]
+
+    t_s = np.arange(1, 2001) * 1e-3
+    wave = np.where(np.arange(2000) % 2 == 0, 1.0, -1.0)
+    # joint 0 holds its gravity torque exactly; joint 1 flips by +-1 N m every tick
+    run = dataclasses.make_dataclass('Run', ['t_s', 'q_rad', 'tau_nm'])(
+        t_s, np.zeros((2000, 2)), np.column_stack([np.ones(2000), wave]))
+    assert rx.torque_flips_per_s(Model(), run) == 1000.0  # 1001 samples from t = 1 s
+    assert rx.torque_ripple(Model(), run) == pytest.approx(1.0 / 100.0)
+    run.tau_nm[:, 1] = 0.05 * wave  # below the floor, 1e-3 x 100 N m: no sign, but a ripple
+    assert rx.torque_flips_per_s(Model(), run) == 0.0
+    assert rx.torque_ripple(Model(), run) == pytest.approx(0.05 / 100.0)
+
+
+@pytest.mark.unit
+def test_the_sampled_loop_regulates_what_the_encoder_reads_and_records_the_plant():
+    """An encoder off by 0.05 rad on one joint: the regulator ends there, the record shows it."""
+    from quat_jt_controller import paper
+    from quat_jt_controller import shaping as sh
+    from quat_jt_controller.reference_sim import ClosedLoop, run_sampled
+    from quat_jt_runtime.resources import default_urdf_xml
+    from wrist_sim.simulator import RobotSimulator
+
+    from robots import wrist_model
+
+    class Offset:
+        """The plant, read by an encoder mounted 0.05 rad off on the first joint."""
+
+        def __init__(self, sim) -> None:
+            self.sim, self.n, self.dt_s = sim, sim.n, sim.dt_s
+
+        q_rad = property(lambda self: self.sim.q_rad)
+        qdot_rad_s = property(lambda self: self.sim.qdot_rad_s)
+        sensed_q_rad = property(lambda self: self.sim.q_rad + np.array([0.05, 0.0, 0.0]))
+
+        def step(self, tau):
+            return self.sim.step(tau)
+
+    model = wrist_model()
+    ori = cl.Task.ORIENTATION
+    gains = cl.Gains.create('tanh', paper.KP, paper.KV, paper.LAMBDA, ori, 3)
+    finals = []
+    for wrap in (lambda sim: sim, Offset):
+        loop = ClosedLoop(model, gains, ori, paper.Q_DESIRED, shaping=sh.Shaping.create(3))
+        with RobotSimulator(default_urdf_xml(), model.joint_names, coulomb_nm=[0.0] * 3,
+                            viscous_nm_s_per_rad=[0.0] * 3) as sim:
+            run = run_sampled(loop, wrap(sim), 4.0, delay_ticks=1)
+        finals.append((run.q_rad[-1], run.orientation_error[-1]))
+    (q_exact, e_exact), (q_offset, e_offset) = finals
+    assert e_exact < 1e-3 < e_offset  # judged by the plant, not by what the encoder read
+    assert q_offset[0] - q_exact[0] == pytest.approx(-0.05, abs=5e-3)
 
 
 @pytest.mark.unit

@@ -323,6 +323,10 @@ def test_position_task_has_three_gains_and_a_position_error_topic(make_node):
     ({'armature': [0.1, -1.0, 0.0]}, ValueError, r'armature\[1\] must be finite and >= 0, got -1'),
     ({'armature': [0.1, 0.1]}, ValueError, r'armature must have 3 values \(one per joint\)'),
     ({'armature': [0.1, float('inf'), 0.0]}, ValueError, r'armature\[1\] must be finite'),
+    ({'position_resolution': [1e-4, -1e-4, 0.0]}, ValueError,
+     r'position_resolution\[1\] must be finite and >= 0, got -0.0001'),
+    ({'position_resolution': [1e-4]}, ValueError,
+     r'position_resolution must have 3 values \(one per joint\)'),
 ])
 def test_bad_start_up_configuration_raises_a_clear_error(make_node, overrides, error, words):
     with pytest.raises(error, match=words):

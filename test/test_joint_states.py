@@ -5,6 +5,7 @@ import numpy as np
 import pytest
 
 from quat_jt_runtime.joints import check_state_rate, StateCheck, VelocityEstimator, wrapped
+from quat_jt_runtime.joints import velocity_estimator, WindowedVelocityEstimator
 
 pytestmark = pytest.mark.unit
 
@@ -93,3 +94,71 @@ def test_a_rate_outside_its_range_is_refused_by_value(bad):
         check_state_rate(bad)
     with pytest.raises(ValueError, match='state_rate'):
         StateCheck(('a',), 0.5, rate_hz=bad)
+
+
+COUNT = 2.0 * math.pi / 2 ** 17  # a 17-bit encoder's count, rad
+
+
+def _counted(x: float) -> float:
+    return round(x / COUNT) * COUNT
+
+
+def test_an_encoder_count_at_rest_moves_the_windowed_estimate_by_a_sixteenth():
+    """One count after 20 states at rest: count / (16 h), not the low-pass's 0.63 count / h."""
+    windowed = WindowedVelocityEstimator([COUNT, COUNT], max_gap_s=0.01)
+    low_pass = VelocityEstimator(2, 1e-3, 0.01)
+    for k in range(21):
+        q = [0.0 if k < 20 else COUNT, 0.0]
+        v, w = windowed.update(q, k * 1_000_000), low_pass.update(q, k * 1_000_000)
+    assert v[0] == pytest.approx(COUNT / 16e-3) and v[1] == 0.0
+    assert w[0] == pytest.approx((1.0 - math.exp(-1.0)) * COUNT / 1e-3)
+    # back to the count before: every window fits the line through both ends, slope 0
+    assert windowed.update([0.0, 0.0], 21_000_000)[0] == pytest.approx(0.0, abs=1e-12)
+
+
+def test_the_windowed_estimate_follows_a_steady_speed_and_shortens_its_window_to_accelerate():
+    """
+    Counted positions: a steady speed is found within a count over the window.
+
+    A steady 3.3 counts a tick, within a count over 16 ticks; a start at 2000 rad/s^2 lags
+    half a tick, as the last difference does.
+    """
+    est = WindowedVelocityEstimator([COUNT], max_gap_s=0.01)
+    for k in range(40):
+        v = est.update([_counted((3.3 * k + 0.1) * COUNT)], k * 1_000_000)[0]
+    assert v == pytest.approx(3.3 * COUNT / 1e-3, abs=COUNT / 16e-3)
+    est.reset()
+    for k in range(40):
+        v = est.update([_counted(1000.0 * (k * 1e-3) ** 2)], k * 1_000_000)[0]
+    assert v == pytest.approx(2000.0 * 38.5e-3, rel=0.02)
+
+
+def test_the_windowed_estimate_restarts_after_a_gap_and_ignores_old_states():
+    est = WindowedVelocityEstimator([COUNT], max_gap_s=0.01)
+    assert est.update([0.0], 0) == [0.0]
+    v = est.update([COUNT], 1_000_000)
+    assert v == [pytest.approx(COUNT / 1e-3)]  # the one difference there is
+    assert est.update([5.0], 1_000_000) == v and est.update([5.0], 500_000) == v
+    assert est.update([0.2], 100_000_000) == [0.0]  # 99 ms later: restart at 0
+    # an irregular rate: the states' own times
+    assert est.update([0.2 + 2 * COUNT], 102_500_000)[0] == pytest.approx(2 * COUNT / 2.5e-3)
+
+
+def test_exact_positions_keep_the_low_pass_and_a_bad_resolution_is_refused():
+    assert isinstance(velocity_estimator(2, 1000.0), VelocityEstimator)
+    assert isinstance(velocity_estimator(2, 1000.0, [0.0, 0.0]), VelocityEstimator)
+    assert isinstance(velocity_estimator(2, 1000.0, [COUNT, 0.0]), WindowedVelocityEstimator)
+    with pytest.raises(ValueError, match='position_resolution: expected 2 values, got 1'):
+        velocity_estimator(2, 1000.0, [COUNT])
+    for bad in (-COUNT, math.nan, math.inf):
+        with pytest.raises(ValueError, match='resolution_rad must be finite and >= 0'):
+            WindowedVelocityEstimator([bad], 0.01)
+
+
+def test_the_state_check_estimates_on_the_window_its_resolution_allows():
+    check = StateCheck(('a', 'b'), max_age_s=0.0, rate_hz=1000.0,
+                       position_resolution=(COUNT, COUNT))
+    for k in range(21):
+        _, qdot = check(['b', 'a'], [0.0, 0.0 if k < 20 else COUNT], [], 0,
+                        NOW_NS + k * 1_000_000)
+    assert qdot == [pytest.approx(COUNT / 16e-3), 0.0] and check.estimating
