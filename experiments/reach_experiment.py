@@ -4,9 +4,9 @@ Reach any reachable goal from any start: the figures, from the package's configs
 For random (start, goal) pairs, seeded, the regulator of ``config/wrist_controller.yaml``,
 ``config/xarm6_controller.yaml`` or ``config/panda_controller.yaml`` runs as the nodes run it:
 on the PyBullet simulator core, with the friction of ``config/*_sim.yaml``, sampled at 1 kHz,
-one tick of delay, clamped to the effort limits (``reference_sim.run_sampled``). The goal
-configuration q* reaches the regulator 0.1 s after the goal, as from the node's goal-check
-worker.
+one tick of delay (``--delay``), clamped to the effort limits (``reference_sim.run_sampled``).
+The goal configuration q* reaches the regulator 0.1 s after the goal, as from the node's
+goal-check worker.
 
 * wrist (orientation): start and goal joint angles within 90% of the URDF ranges, |q2| >= 0.3
   at the goal; reached if ||e|| < 0.005 over the last 0.1 s of 4 s;
@@ -45,7 +45,7 @@ Any arm from its URDF plus what a user knows, instead of ``--robot`` (docs/reach
         [--condition ideal armature armature-wrong friction armature-friction no-velocities
          encoder] [--encoder-bits B] [--no-encoder-told]
         [--engine mujoco|pybullet] [--armature A] [--armature-told-scale S]
-        [--friction-fraction F] [--cases N] [--potential tanh]
+        [--friction-fraction F] [--delay TICKS] [--cases N] [--potential tanh]
 
 The gains are ``gain_design.design`` on the URDF with the armature the condition tells it and
 the rate; the plant is the same URDF in ``--engine`` with the condition's rotor inertia and
@@ -681,6 +681,9 @@ def run_dds(robot: Robot, count: int, seed: int, progress=print) -> str:
     return '\n'.join(lines)
 
 
+# The most ticks of delay an experiment takes (the design checks 1 to 3)
+MAX_DELAY_TICKS = 10
+
 CONDITIONS = ('ideal', 'armature', 'armature-wrong', 'friction', 'armature-friction',
               'no-velocities', 'encoder')
 
@@ -696,9 +699,11 @@ class Condition:
     no_velocities: bool = False
     encoder_bits: int = 0  # the positions read in whole counts of 2 pi / 2^bits (0: exact)
     encoder_told: bool = True  # ... and the controller told the count (position_resolution)
+    delay_ticks: int = 1  # the ticks between a state and the torque computed from it applied
 
     def describe(self) -> str:
         """Return the condition in words, for the table."""
+        delay = f', {self.delay_ticks} ticks of delay' if self.delay_ticks != 1 else ''
         return {
             'ideal': 'ideal plant',
             'armature': f'rotor inertia {self.plant_armature:g} kg m^2, given',
@@ -712,15 +717,17 @@ class Condition:
             'encoder': f'positions from {self.encoder_bits}-bit encoders, no velocities '
                        + ('(estimated, the count told)' if self.encoder_told else
                           '(estimated, the count not told)'),
-        }[self.name]
+        }[self.name] + delay
 
 
 def condition(name: str, armature: float = 0.1, told_scale: float = 0.5,
               friction_fraction: float = 0.01, encoder_bits: int = 17,
-              encoder_told: bool = True) -> Condition:
+              encoder_told: bool = True, delay_ticks: int = 1) -> Condition:
     """Return the condition ``name`` (``CONDITIONS``) with these plant figures."""
     encoder_resolution_rad(encoder_bits)  # ValueError names a bad count
-    return {
+    if not 0 <= delay_ticks <= MAX_DELAY_TICKS:
+        raise ValueError(f'--delay must be in [0, {MAX_DELAY_TICKS}] ticks, got {delay_ticks}')
+    return dataclasses.replace({
         'ideal': Condition('ideal'),
         'armature': Condition('armature', armature, armature),
         'armature-wrong': Condition('armature-wrong', armature, told_scale * armature),
@@ -730,7 +737,7 @@ def condition(name: str, armature: float = 0.1, told_scale: float = 0.5,
         'no-velocities': Condition('no-velocities', no_velocities=True),
         'encoder': Condition('encoder', no_velocities=True, encoder_bits=encoder_bits,
                              encoder_told=encoder_told),
-    }[name]
+    }[name], delay_ticks=delay_ticks)
 
 
 # An arm's case runs this long after its duration: its limit cycles are counted there (s)
@@ -825,7 +832,7 @@ def run_arm(robot: Robot, cond: Condition, potential: str, count: int, seed: int
                                        for e in model.effort_limits],
                   'enforce_velocity_limits': False}
     spec = model_spec(model, robot_urdf(robot))
-    jobs = [CaseJob(robot, spec, gains, shaping, sim_params, i, q0, qg, 1, engine,
+    jobs = [CaseJob(robot, spec, gains, shaping, sim_params, i, q0, qg, cond.delay_ticks, engine,
                     (cond.plant_armature,) * n, cond.no_velocities, 1.0 / rate_hz,
                     cond.encoder_bits, cond.encoder_told)
             for i, (q0, qg) in enumerate(cases(model, robot, count, seed))]
@@ -859,7 +866,8 @@ def main(argv: Optional[list] = None) -> int:
     parser.add_argument('--cases', type=int, help='cases per robot and potential (default: '
                         '200 wrist, 100 xArm6)')
     parser.add_argument('--seed', type=int, default=10)
-    parser.add_argument('--delay', type=int, default=1, help='ticks of delay')
+    parser.add_argument('--delay', type=int, default=1,
+                        help='ticks between a state and the torque computed from it (default 1)')
     parser.add_argument('--dds', type=int, default=0,
                         help='also run the first this many cases of each robot over DDS (real '
                         'nodes, lockstep)')
@@ -928,6 +936,8 @@ def main(argv: Optional[list] = None) -> int:
     args = parser.parse_args(argv)
     if args.workers is not None and args.workers < 1:
         parser.error(f'--workers must be >= 1, got {args.workers}')
+    if not 0 <= args.delay <= MAX_DELAY_TICKS:
+        parser.error(f'--delay must be in [0, {MAX_DELAY_TICKS}] ticks, got {args.delay}')
     overrides = {}
     for item in args.param:
         name, sep, value = item.partition(':=')
@@ -1000,7 +1010,7 @@ def main_arm(parser: argparse.ArgumentParser, args, overrides: dict) -> int:
     rows, text = [], []
     for name in args.condition:
         cond = condition(name, args.armature, args.armature_told_scale, args.friction_fraction,
-                         args.encoder_bits, args.encoder_told)
+                         args.encoder_bits, args.encoder_told, args.delay)
         for potential in args.potential:
             t0 = time.monotonic()
             try:  # design_gains may refuse the arm, and says why (cached: run_arm reuses it)

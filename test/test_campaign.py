@@ -222,6 +222,27 @@ def test_an_arm_from_its_urdf_runs_the_same_serial_or_parallel(tmp_path, name):
 
 
 @pytest.mark.e2e
+def test_an_arm_runs_with_the_ticks_of_delay_asked_for(tmp_path, capsys):
+    """``--delay`` reaches an arm's cases (it was 1 whatever was asked), and its table row."""
+    pytest.importorskip('mujoco')
+    path = tmp_path / 'arm.urdf'
+    path.write_text(small_arm_urdf(('revolute',) * 4))
+    robot = _short(rx.arm_robot('small', str(path), None, None, cl.Task.ORIENTATION))
+    finals = {}
+    for ticks in (1, 3):
+        cond = rx.condition('ideal', delay_ticks=ticks)
+        [outcome] = rx.run_arm(robot, cond, 'tanh', 1, seed=1, progress=None, workers=1)
+        finals[ticks] = outcome.q_final
+    assert not np.array_equal(finals[1], finals[3])
+    assert rx.table_row(robot, rx.condition('ideal', delay_ticks=3), [outcome]).startswith(
+        '| small | ideal plant, 3 ticks of delay | ')
+    with pytest.raises(SystemExit):
+        rx.main(['--urdf', str(path), '--task', 'orientation', '--cases', '1', '--workers',
+                 '1', '--delay', '11'])
+    assert '--delay must be in [0, 10] ticks, got 11' in capsys.readouterr().err
+
+
+@pytest.mark.e2e
 def test_an_arm_from_its_urdf_takes_parameter_overrides(tmp_path, capsys):
     """``--param`` replaces a parameter of the design (it was silently ignored for an arm)."""
     pytest.importorskip('mujoco')
