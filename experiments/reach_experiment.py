@@ -922,8 +922,8 @@ def main(argv: Optional[list] = None) -> int:
     arm.add_argument('--friction-fraction', type=float, default=0.01,
                      help="'friction': untold Coulomb friction, x each effort limit")
     arm.add_argument('--encoder-bits', type=int, default=17,
-                     help="'encoder': the positions in counts of 2 pi / 2^bits (8 to 32; "
-                     'default 17)')
+                     help="'encoder': the positions in counts of 2 pi / 2^bits (8 to 32, "
+                     'or 0 for exact ones; default 17)')
     arm.add_argument('--encoder-told', action=argparse.BooleanOptionalAction, default=True,
                      help="'encoder': the controller is told the count (position_resolution; "
                      'default) or not (--no-encoder-told)')

@@ -47,7 +47,7 @@ POSITION_RESOLUTION = Spec(
     'only where the states carry no velocities: any count > 0 estimates them on the longest '
     'window the counts allow (at rest a step of one count moves the estimate 16 times less '
     'than the one-period low-pass used for exact positions, so the damping shakes the '
-    'torque less; docs/ros.md, "Joint states without velocities").', read_only=True,
+    'torque less; docs/ros.md, "On a real robot").', read_only=True,
     size='n', bounds=(0.0, inf), default_text=JOINT_ZEROS_TEXT)
 PER_JOINT_STRUCTURE = (ARMATURE, POSITION_RESOLUTION)
 STRUCTURE = (

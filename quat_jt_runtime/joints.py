@@ -487,7 +487,9 @@ class WindowedVelocityEstimator:
         return list(self._v)
 
 
-def velocity_estimator(n: int, rate_hz: float, resolution_rad: Optional[Sequence[float]] = None):
+def velocity_estimator(
+        n: int, rate_hz: float, resolution_rad: Optional[Sequence[float]] = None,
+) -> 'VelocityEstimator | WindowedVelocityEstimator':
     """
     Return the velocity estimator for states without velocities, as the controller uses it.
 

@@ -203,14 +203,19 @@ def test_a_local_ray_cluster_gives_the_outcomes_of_a_serial_run():
         np.testing.assert_array_equal(a.q_final, b.q_final)
 
 
+def _small_arm(tmp_path) -> tuple:
+    """Return a 4-joint arm's URDF file in ``tmp_path`` and its short Robot (MuJoCo plant)."""
+    pytest.importorskip('mujoco')
+    path = tmp_path / 'arm.urdf'
+    path.write_text(small_arm_urdf(('revolute',) * 4))
+    return path, _short(rx.arm_robot('small', str(path), None, None, cl.Task.ORIENTATION))
+
+
 @pytest.mark.e2e
 @pytest.mark.parametrize('name', ['armature-wrong', 'no-velocities', 'encoder'])
 def test_an_arm_from_its_urdf_runs_the_same_serial_or_parallel(tmp_path, name):
     """The design from the URDF, a MuJoCo plant with the condition's rotor inertia or states."""
-    pytest.importorskip('mujoco')
-    path = tmp_path / 'arm.urdf'
-    path.write_text(small_arm_urdf(('revolute',) * 4))
-    robot = _short(rx.arm_robot('small', str(path), None, None, cl.Task.ORIENTATION))
+    path, robot = _small_arm(tmp_path)
     cond = rx.condition(name, armature=0.01)
     runs = [rx.run_arm(robot, cond, 'tanh', 2, seed=1, progress=None, workers=w)
             for w in (1, 2)]
@@ -224,10 +229,7 @@ def test_an_arm_from_its_urdf_runs_the_same_serial_or_parallel(tmp_path, name):
 @pytest.mark.e2e
 def test_an_arm_runs_with_the_ticks_of_delay_asked_for(tmp_path, capsys):
     """``--delay`` reaches an arm's cases (it was 1 whatever was asked), and its table row."""
-    pytest.importorskip('mujoco')
-    path = tmp_path / 'arm.urdf'
-    path.write_text(small_arm_urdf(('revolute',) * 4))
-    robot = _short(rx.arm_robot('small', str(path), None, None, cl.Task.ORIENTATION))
+    path, robot = _small_arm(tmp_path)
     finals = {}
     for ticks in (1, 3):
         cond = rx.condition('ideal', delay_ticks=ticks)
@@ -245,10 +247,7 @@ def test_an_arm_runs_with_the_ticks_of_delay_asked_for(tmp_path, capsys):
 @pytest.mark.e2e
 def test_an_arm_from_its_urdf_takes_parameter_overrides(tmp_path, capsys):
     """``--param`` replaces a parameter of the design (it was silently ignored for an arm)."""
-    pytest.importorskip('mujoco')
-    path = tmp_path / 'arm.urdf'
-    path.write_text(small_arm_urdf(('revolute',) * 4))
-    robot = _short(rx.arm_robot('small', str(path), None, None, cl.Task.ORIENTATION))
+    path, robot = _small_arm(tmp_path)
     cond = rx.condition('ideal')
     runs = [rx.run_arm(robot, cond, 'tanh', 1, seed=1, progress=None, workers=1,
                        overrides=overrides)
