@@ -226,6 +226,15 @@ def test_the_armature_is_in_the_inertia_the_controller_uses(make_node):
                                np.diag([0.1, 0.2, 0.3]), atol=1e-12)
 
 
+def test_the_position_resolution_reaches_the_state_check(make_node):
+    """A read-only count per joint; the node's controller estimates velocities with it."""
+    assert make_node().controller.position_resolution == (0.0, 0.0, 0.0)
+    node = make_node({'position_resolution': [1e-4, 2e-4, 0.0]})
+    assert node.controller.position_resolution == (1e-4, 2e-4, 0.0)
+    assert not node.set_parameters([Parameter('position_resolution',
+                                              value=[0.0] * 3)])[0].successful
+
+
 def test_a_config_without_gains_is_refused_by_name():
     from quat_jt_controller.controller_config import ConfigError, controller_from_config
     from quat_jt_runtime.resources import config_parameters
