@@ -339,8 +339,9 @@ def run_case(robot: Robot, model: RobotModel, gains: cl.Gains, shaping: sh.Shapi
     settle_tol = (robot.position_tol_m if math.isfinite(robot.position_tol_m) else math.inf)
     settled_s = run.settled_at_s(settle_tol, robot.orientation_tol)
     last = held.q_rad[int(np.searchsorted(held.t_s, held.t_s[-1] - 1.0)):]
+    rest = last_second_torques(model, held)
     outcome = Outcome(index, reached, gap < TOUCH_RAD, position, orientation, settled_s, speed,
-                      held.saturated_ticks, torque_flips_per_s(model, held),
+                      held.saturated_ticks, torque_flips_per_s(model, rest),
                       q0, qg, held.q_rad[-1].copy(),
                       final_speed_rad_s=float(np.abs(np.diff(last, axis=0)).max() / dt_s),
                       from_q_star_rad=(math.nan if q_star is None else
@@ -348,7 +349,7 @@ def run_case(robot: Robot, model: RobotModel, gains: cl.Gains, shaping: sh.Shapi
                       speed_ratio=float((qdot / limits).max()),
                       travel_s=(math.nan if q_star is None else
                                 float((np.abs(np.asarray(q_star) - q0) / limits).max())),
-                      ripple=torque_ripple(model, held))
+                      ripple=torque_ripple(model, rest))
     if not reached:
         outcome.cause = classify(model, loop, shaping, q_star, run)
     if outcome.flips_per_s > LIMIT_CYCLE_FLIPS_PER_S:
@@ -358,43 +359,43 @@ def run_case(robot: Robot, model: RobotModel, gains: cl.Gains, shaping: sh.Shapi
     return outcome
 
 
-def torque_flips_per_s(model: RobotModel, run) -> float:
-    """
-    Return the most sign changes of a joint's ``tau - g(q)`` in the case's last second.
+def last_second_torques(model: RobotModel, run) -> np.ndarray:
+    """Return each joint's ``tau - g(q)`` over the case's last second (samples x joints)."""
+    k0 = int(np.searchsorted(run.t_s, float(run.t_s[-1]) - 1.0))
+    q, tau = run.q_rad[k0:], run.tau_nm[k0:]
+    return tau - np.array([model.gravity(qi.tolist()) for qi in q])
 
-    More than ``LIMIT_CYCLE_FLIPS_PER_S`` there: the case ends in a limit cycle. Torques below
-    ``FLIP_FLOOR`` of the effort limit carry no sign (numerical dither at rest).
+
+def torque_flips_per_s(model: RobotModel, rest_nm: np.ndarray) -> float:
     """
-    rest = _last_second_torques(model, run)
+    Return the most sign changes of a joint's ``tau - g(q)`` (``last_second_torques``).
+
+    More than ``LIMIT_CYCLE_FLIPS_PER_S`` in the last second: the case ends in a limit cycle.
+    Torques below ``FLIP_FLOOR`` of the effort limit carry no sign (numerical dither at rest).
+    """
     floor = FLIP_FLOOR * _efforts(model)
     most = 0
     for j in range(model.n):
-        signs = np.sign(rest[:, j])
-        signs = signs[np.abs(rest[:, j]) > floor[j]]
+        signs = np.sign(rest_nm[:, j])
+        signs = signs[np.abs(rest_nm[:, j]) > floor[j]]
         most = max(most, int(np.count_nonzero(np.diff(signs))))
     return float(most)
 
 
-def torque_ripple(model: RobotModel, run) -> float:
+def torque_ripple(model: RobotModel, rest_nm: np.ndarray) -> float:
     """
     Return the largest standard deviation of a joint's ``tau - g(q)`` in the last second.
 
-    As a fraction of the joint's effort limit. In a case reached that second is the hold at
-    the goal: how hard the torque shakes there (a limit cycle, or the damping acting on the
-    count steps of an encoder's positions), whether or not its sign changes.
+    ``rest_nm`` from ``last_second_torques``; as a fraction of the joint's effort limit. In a
+    case reached that second is the hold at the goal: how hard the torque shakes there (a
+    limit cycle, or the damping acting on the count steps of an encoder's positions), whether
+    or not its sign changes.
     """
-    rest = _last_second_torques(model, run)
-    return float((rest.std(axis=0) / _efforts(model)).max())
+    return float((rest_nm.std(axis=0) / _efforts(model)).max())
 
 
 def _efforts(model: RobotModel) -> np.ndarray:
     return np.array([v if math.isfinite(v) else 1.0 for v in model.effort_limits])
-
-
-def _last_second_torques(model: RobotModel, run) -> np.ndarray:
-    k0 = int(np.searchsorted(run.t_s, float(run.t_s[-1]) - 1.0))
-    q, tau = run.q_rad[k0:], run.tau_nm[k0:]
-    return tau - np.array([model.gravity(qi.tolist()) for qi in q])
 
 
 def classify(model: RobotModel, loop: ClosedLoop, shaping: sh.Shaping, q_star,

@@ -173,9 +173,10 @@ def run_sampled(loop: ClosedLoop, sim, duration_s: float, delay_ticks: int = 1,
     """
     q_star_step = int(round(q_star_after_s / sim.dt_s)) if q_star is not None else -1
 
+    sensed = 'sensed_q_rad' if hasattr(sim, 'sensed_q_rad') else 'q_rad'
+
     def measured() -> tuple:
-        q = sim.sensed_q_rad if hasattr(sim, 'sensed_q_rad') else sim.q_rad
-        return q.tolist(), sim.qdot_rad_s.tolist()
+        return getattr(sim, sensed).tolist(), sim.qdot_rad_s.tolist()
     history = [measured()] * (delay_ticks + 1)
     steps = int(round(duration_s / sim.dt_s))
     pos, ori, tau_max = np.zeros(steps), np.empty(steps), np.empty(steps)

@@ -5,11 +5,10 @@ Which joints of a URDF can move, choosing the controlled ones by name (one way),
 controller's tick input from a joint state: the controlled joints picked by name, the stamp
 checked, continuous joints unwrapped, and the velocities estimated when a driver sends none.
 """
-from math import exp, isfinite, pi
+from collections import deque
+from math import exp, inf, isfinite, pi
 from typing import Optional, Sequence
 from xml.etree import ElementTree
-
-import numpy as np
 
 MOVABLE_TYPES = ('revolute', 'continuous', 'prismatic')
 ROTATING_TYPES = ('revolute', 'continuous')
@@ -426,7 +425,8 @@ class WindowedVelocityEstimator:
     the ``0.63 count / h`` of the one-period low-pass of :class:`VelocityEstimator`; where the
     joint accelerates the window shrinks, down to the last difference (``m`` = 1), so the lag
     stays at most what the count allows. A joint of resolution 0 (exact positions) gets the
-    last difference. Times are the states' own, so an irregular rate is allowed for.
+    last difference. Times are the states' own, so an irregular rate is allowed for. Plain
+    floats: on the tick's path, numpy's call overhead on a few joints costs more.
 
     As :class:`VelocityEstimator`: the first state, and the first after a gap longer than
     ``max_gap_s``, give 0; a state whose time is not after the last one's leaves the estimate
@@ -442,49 +442,54 @@ class WindowedVelocityEstimator:
             raise ValueError(f'max_gap_s {max_gap_s} must be > 0 and window {window} >= 1')
         self.n = len(resolution)
         # within one count, and a hair more: a position exactly one count off the line fits
-        self._band = np.array(resolution) * (1.0 + 1e-9)
+        self._band = [r * (1.0 + 1e-9) for r in resolution]
         self._max_gap_ns = int(max_gap_s * 1e9)
-        self._q = np.zeros((window + 1, self.n))  # the states, newest first
-        self._t_s = np.zeros(window + 1)
-        self._count = 0  # how many of them are filled
+        self._q: deque = deque(maxlen=window + 1)  # the states' positions, newest first
+        self._t_s: deque = deque(maxlen=window + 1)  # ... and their times
         self._last_ns = 0
         self._v = [0.0] * self.n
-        self._columns = np.arange(self.n)
 
     def reset(self) -> None:
         """Forget the positions: the next state restarts the estimate at 0."""
-        self._count = 0
+        self._q.clear()
+        self._t_s.clear()
         self._v = [0.0] * self.n
 
     def update(self, q: Sequence[float], t_ns: int) -> list[float]:
         """Return the velocity estimate after the positions ``q`` measured at ``t_ns`` (a copy)."""
-        if self._count and t_ns - self._last_ns > self._max_gap_ns:
+        if self._q and t_ns - self._last_ns > self._max_gap_ns:
             self.reset()
-        elif self._count and t_ns <= self._last_ns:
+        elif self._q and t_ns <= self._last_ns:
             return list(self._v)
-        self._q[1:] = self._q[:-1]
-        self._t_s[1:] = self._t_s[:-1]
-        self._q[0] = q
-        self._t_s[0] = t_ns * 1e-9
+        states, times = self._q, self._t_s
+        states.appendleft(list(q))
+        times.appendleft(t_ns * 1e-9)
         self._last_ns = t_ns
-        self._count = min(self._count + 1, len(self._t_s))
-        k = self._count - 1  # the longest window the states allow now
-        if k == 0:
-            self._v = [0.0] * self.n
-            return list(self._v)
-        back_s = (self._t_s[0] - self._t_s[1:k + 1])[:, None]  # (k, 1): to the state i back
-        rise = self._q[0] - self._q[1:k + 1]  # (k, n)
-        slopes = rise / back_s  # (k, n): the line of window m = row + 1
-        # a line of slope s passes within the band of the state i back if s lies between
-        # (rise_i - band) / back_i and (rise_i + band) / back_i; window m needs that of every
-        # state inside it (i < m), the running bounds of the rows above
-        low = np.maximum.accumulate((rise - self._band) / back_s, axis=0)
-        high = np.minimum.accumulate((rise + self._band) / back_s, axis=0)
-        fits = np.ones((k, self.n), dtype=bool)  # window 1 has no state inside
-        fits[1:] = (slopes[1:] >= low[:-1]) & (slopes[1:] <= high[:-1])
-        longest = np.cumprod(fits, axis=0).sum(axis=0) - 1  # (n,): the first misfit ends it
-        self._v = slopes[longest, self._columns].tolist()
-        return list(self._v)
+        k = len(states) - 1  # the longest window the states allow now
+        newest, now = states[0], times[0]
+        back_s = [now - times[i] for i in range(1, k + 1)]  # to the state i back
+        v = self._v
+        for j in range(self.n):
+            band, x = self._band[j], newest[j]
+            # a line of slope s passes within the band of the state i back if s lies between
+            # (rise_i - band) / back_i and (rise_i + band) / back_i; window m needs that of
+            # every state inside it (i < m): the running bounds of the states before
+            low, high, slope_j = -inf, inf, 0.0
+            for i in range(k):
+                back = back_s[i]
+                rise = x - states[i + 1][j]
+                slope = rise / back
+                if not low <= slope <= high:
+                    break  # the first misfit ends the window (window 1 always fits)
+                slope_j = slope
+                bound = (rise - band) / back
+                if bound > low:
+                    low = bound
+                bound = (rise + band) / back
+                if bound < high:
+                    high = bound
+            v[j] = slope_j
+        return list(v)
 
 
 def velocity_estimator(
