@@ -317,10 +317,30 @@ class RobotModel:
         alone accelerates first, and what bounds the damping the sampled loop tolerates on it
         (docs/gain_design.md). The armature is included in both.
         """
+        own, seen, _ = self.inertias_and_inverse(q)
+        return own, seen
+
+    def inertias_and_inverse(
+            self, q: Sequence[float]) -> tuple[list[float], list[float], list[list[float]]]:
+        """
+        Return :meth:`inertias` and :meth:`inverse_inertia` at ``q`` from one factorisation.
+
+        The tick's inertial damping needs all three: ``M_jj``, ``I_j`` and, where its modes are
+        capped or the speed guard acts, the whole ``M(q)^-1`` (Regulator.update).
+        """
         qv = self._set_q(q)
         own = pin.crba(self.model, self.data, qv).diagonal().tolist()
-        seen = pin.computeMinverse(self.model, self.data, qv).diagonal().tolist()
-        return [own[i] for i in self._idx], [1.0 / seen[i] for i in self._idx]
+        minv = pin.computeMinverse(self.model, self.data, qv)  # its upper triangle is filled
+        rows = minv.tolist()
+        for a in range(len(rows)):  # the lower triangle from the upper, in Pinocchio's order
+            row = rows[a]
+            for b in range(a):
+                row[b] = rows[b][a]
+        if self._identity_order:
+            return own, [1.0 / rows[i][i] for i in range(self.n)], rows
+        idx = self._idx
+        rows = [[rows[i][k] for k in idx] for i in idx]
+        return [own[i] for i in idx], [1.0 / rows[j][j] for j in range(self.n)], rows
 
     def inverse_inertia(self, q: Sequence[float]) -> list[list[float]]:
         """
@@ -331,19 +351,7 @@ class RobotModel:
         other joints give a joint within a stop's clearance (Regulator.update,
         docs/lyapunov.md, section 6).
         """
-        qv = self._set_q(q)
-        minv = pin.computeMinverse(self.model, self.data, qv)  # its upper triangle is filled
-        if not self._identity_order:
-            minv = minv[np.ix_(self._idx, self._idx)]
-        rows = minv.tolist()
-        idx = self._idx
-        for a in range(self.n):  # the lower triangle from the upper, in Pinocchio's order
-            for b in range(a):
-                if idx[a] > idx[b]:
-                    rows[a][b] = rows[b][a]
-                else:
-                    rows[b][a] = rows[a][b]
-        return rows
+        return self.inertias_and_inverse(q)[2]
 
     def forward_dynamics(self, q: Sequence[float], qdot: Sequence[float],
                          tau: Sequence[float]) -> np.ndarray:

@@ -205,8 +205,10 @@ SHAPING = (
          'inertia and I_j(q) = 1 / (M(q)^-1)_jj the inertia it sees while the others move '
          'freely, at the measured configuration (armature included): it keeps the damping '
          'ratio zeta of a stiffness k_j (c_j = 2 zeta sqrt(k_j)) where the arm is heavy, within '
-         'what the sampled loop tolerates where it is light (docs/lyapunov.md, section 10). '
-         'Zeros = k_v alone. Live.', default_text=JOINT_ZEROS_TEXT, **PER_JOINT),
+         'what the sampled loop tolerates where it is light; with it on, no mode of '
+         'M(q)^-1 times the damping (k_v included) is faster than inertial_damping_rate '
+         '(docs/lyapunov.md, section 10). Zeros = k_v alone. Live.',
+         default_text=JOINT_ZEROS_TEXT, **PER_JOINT),
     Spec('inertial_damping_rate', Kind.DOUBLE, DEFAULT_INERTIAL_DAMPING_RATE,
          'beta (1/s): the inertial damping of a joint is at most beta I_j(q), half the damping '
          'per kg m^2 of seen inertia that the sampled loop tolerates (design_gains writes it '

@@ -10,8 +10,9 @@ docs/lyapunov.md) it is
     clamped
 
 (``K_v(q)``: ``K_v`` with its cubic part and, per joint, at least ``min(c_j sqrt(M_jj(q)),
-beta I_j(q))``, docs/lyapunov.md, section 10; ``psi alpha M(q)``: the settling damping near
-the goal, section 11.)
+beta I_j(q))``, each mode of ``M(q)^-1 K_v(q)`` faster than ``beta`` brought down to it,
+docs/lyapunov.md, section 10; ``psi alpha M(q)``: the settling damping near the goal,
+section 11.)
 
 :class:`Regulator` owns the robot model, the task, the effort limits and immutable snapshots of
 the gains (:class:`~quat_jt_controller.control_law.Gains`) and of the goal (:class:`Goal`).
@@ -19,7 +20,8 @@ the gains (:class:`~quat_jt_controller.control_law.Gains`) and of the goal (:cla
 chosen potential (Eq. 24/32, orientation task Eq. 37/38, position task the position rows of
 Eq. 24/32), gravity, the finite check and the
 clamp. The controller node, the reference and sampled loops, the benchmark and the tests all
-call it, so what is simulated and timed is what ships. ROS-free (numpy-free in the tick too).
+call it, so what is simulated and timed is what ships. ROS-free, and numpy-free in the tick
+but where a mode of the damping is capped (an eigenvalue problem of the joints' size).
 
 A parameter or goal change builds a new immutable object and swaps one reference; a tick reads
 each reference once, so it never sees half an update.
@@ -27,6 +29,8 @@ each reference once, so it never sees half an update.
 from dataclasses import dataclass
 from math import inf, isfinite, sqrt
 from typing import NamedTuple, Optional, Sequence
+
+import numpy as np
 
 from quat_jt_controller import control_law as cl
 from quat_jt_controller import quaternion as quat
@@ -233,6 +237,43 @@ def _cancel_push(minv: Sequence[Sequence[float]], tau: list[float], guarded: lis
             a += m * t
         if a * over > 0.0:  # it drives the joint on towards its stop
             tau[j] -= a / row[j]
+
+
+def _fast_modes(minv: Sequence[Sequence[float]], damping: Sequence[float],
+                beta: float) -> Optional[list[tuple[float, list[float]]]]:
+    """
+    Return the modes of ``M(q)^-1 D`` faster than ``beta`` and how much of each to take away.
+
+    ``D = diag(damping)`` is the inertial damping of docs/lyapunov.md, section 10. Each
+    entry of ``M^-1 D`` on its diagonal is at most ``beta``, but ``M(q)`` couples the joints
+    and a mode can be faster: the sampled, delayed loop rings on it (docs/reach.md, "the
+    modes of the damping"). ``A = D^(1/2) M^-1 D^(1/2)`` has the rates of ``M^-1 D`` as its
+    eigenvalues; for each eigenpair ``(w, u)`` with ``w > beta``, ``y = D^(1/2) u``, the
+    damping ``D - sum (1 - beta / w) y y^T`` has the same modes, each at ``min(w, beta)``:
+    still positive definite, so still a dissipation. Returns ``[(1 - beta / w, y)]``, or None
+    when the row sums of ``|A|`` (Gershgorin) already keep every mode within ``beta``, as on
+    an arm whose joints are weakly coupled: no eigenvalue problem then.
+    """
+    n = len(damping)
+    root = [sqrt(d) for d in damping]
+    for j in range(n):
+        row, rj = minv[j], root[j]
+        total = 0.0
+        for k in range(n):
+            m = row[k]
+            total += root[k] * (m if m > 0.0 else -m)
+        if rj * total > beta:
+            break
+    else:
+        return None
+    r = np.array(root)
+    w, u = np.linalg.eigh(r[:, None] * np.array(minv) * r)
+    out = []
+    for i in range(n - 1, -1, -1):  # eigh sorts them ascending
+        if w[i] <= beta:
+            break
+        out.append((1.0 - beta / float(w[i]), (r * u[:, i]).tolist()))
+    return out or None
 
 
 class Regulator:
@@ -547,17 +588,17 @@ class Regulator:
                 tau[j] += kv[j] * g_v * qdot_goal[j]
         own = None  # M_jj(q), where the inertial damping computed it
         guarded = None  # (j, speed over the guard, within the stop's clearance) where it acts
-        minv = None  # M(q)^-1, where the guard acts
+        minv = None  # M(q)^-1, with the inertial damping
         if shaping.inertial_damping_on:  # docs/lyapunov.md, section 10: on the same velocity
             caps = self._caps
             own = self._own
             stop_rate = sh.STOP_GUARD_SHARE * shaping.inertial_damping_rate_per_s
             clearance = sh.STOP_CLEARANCE_SHARE * shaping.joint_limit_margin_rad
-            for j, d in enumerate(self._inertial_damping(q, kv, shaping, caps, own,
-                                                         self._seen)):
+            damping, minv = self._inertial_damping(q, kv, shaping, caps, own, self._seen)
+            damped = qdot if g_v <= 0.0 else [qdot[j] - g_v * qdot_goal[j] for j in range(n)]
+            for j, d in enumerate(damping):
                 if d > kv[j]:
-                    tau[j] -= (d - kv[j]) * (qdot[j] - g_v * qdot_goal[j] if g_v > 0.0
-                                             else qdot[j])
+                    tau[j] -= (d - kv[j]) * damped[j]
                 # the speed guard, docs/lyapunov.md s. 6: above 0.8 v_lim, or what the cap
                 # stops in the room left before the stop it moves to
                 v = qdot[j]
@@ -571,8 +612,16 @@ class Regulator:
                     if guarded is None:
                         guarded = []
                     guarded.append((j, over, room <= 0.0))
+            modes = _fast_modes(minv, damping, shaping.inertial_damping_rate_per_s)
+            if modes is not None:  # each mode of M^-1 D at most beta, K_v included
+                for c, y in modes:
+                    along = 0.0
+                    for j in range(n):
+                        along += y[j] * damped[j]
+                    along *= c
+                    for j in range(n):
+                        tau[j] += along * y[j]
             if guarded is not None:
-                minv = self.model.inverse_inertia(q)
                 _guard_damping(minv, qdot, tau, guarded, shaping.inertial_damping_rate_per_s)
         settled = None  # (psi alpha, v, M(q) v) of the settling damping, if it acts
         k = _settling_gain(y, gains, shaping)  # docs/lyapunov.md, section 11
@@ -669,7 +718,12 @@ class Regulator:
         gains, shaping, _ = self._law
         if not shaping.inertial_damping_on:
             return list(gains.kv)
-        return self._inertial_damping(q, gains.kv, shaping)
+        damping, minv = self._inertial_damping(q, gains.kv, shaping)
+        modes = _fast_modes(minv, damping, shaping.inertial_damping_rate_per_s)
+        for c, y in modes or ():
+            for j in range(self.n):
+                damping[j] -= c * y[j] * y[j]
+        return damping
 
     def settling_damping(self, q: Sequence[float], y_tilde: Sequence[float]) -> list[float]:
         """
@@ -688,14 +742,15 @@ class Regulator:
                           shaping: sh.Shaping,
                           caps_out: Optional[list[float]] = None,
                           own_out: Optional[list[float]] = None,
-                          seen_out: Optional[list[float]] = None) -> list[float]:
+                          seen_out: Optional[list[float]] = None
+                          ) -> tuple[list[float], list[list[float]]]:
         """
-        ``max(k_v,j, min(c_j sqrt(M_jj(q)), beta I_j(q)))`` per joint (N m s/rad).
+        ``max(k_v,j, min(c_j sqrt(M_jj(q)), beta I_j(q)))`` per joint (N m s/rad), and M(q)^-1.
 
         ``caps_out``, if given, receives ``beta I_j(q)`` per joint, ``own_out`` ``M_jj(q)``,
         ``seen_out`` ``I_j(q) = 1 / (M(q)^-1)_jj``.
         """
-        own, seen = self.model.inertias(q)
+        own, seen, minv = self.model.inertias_and_inverse(q)
         if own_out is not None:
             own_out[:] = own
         if seen_out is not None:
@@ -709,7 +764,7 @@ class Regulator:
                 caps_out[j] = cap
             b = b if b < cap else cap
             out.append(b if b > kv[j] else kv[j])
-        return out
+        return out, minv
 
     def potential_energy(self, q: Sequence[float]) -> float:
         """

@@ -232,6 +232,61 @@ def test_a_far_new_q_star_fades_in_and_a_near_one_keeps_its_share():
     np.testing.assert_allclose(guide(reg), [2.0 * share, 2.0 * share, 3.0 * share], atol=1e-12)
 
 
+def modes_capped(M, D, beta):
+    """
+    D with every rate of M^-1 D above beta brought down to beta, by hand (the oracle).
+
+    M = L L^T; the rates are the eigenvalues of L^-1 D L^-T = Z W Z^T, so D = L Z W Z^T L^T,
+    and the capped damping is L Z min(W, beta) Z^T L^T.
+    """
+    L = np.linalg.cholesky(M)
+    Li = np.linalg.inv(L)
+    w, Z = np.linalg.eigh(Li @ D @ Li.T)
+    return L @ Z @ np.diag(np.minimum(w, beta)) @ Z.T @ L.T
+
+
+@pytest.mark.parametrize('seed', range(6))
+def test_no_mode_of_the_inertial_damping_is_faster_than_its_rate(seed):
+    """
+    docs/lyapunov.md, section 10: each mode of M^-1 D faster than beta is brought down to it.
+
+    M(q) couples the joints, so a mode can be faster than beta though each joint's own entry
+    is within it. The tick brings each such mode down to beta (K_v included) and leaves the
+    others as they are.
+    """
+    model = xarm6_model()
+    rng = np.random.default_rng(seed)
+    q, qdot = random_q(model, rng).tolist(), (0.1 * rng.normal(size=model.n)).tolist()
+    gains = cl.Gains.create('tanh', [50.0] * 3 + [2.0] * 3, [0.5] * 6, [20.0] * 3 + [4.0] * 3,
+                            POSE, 6)
+    unlimited = [math.inf] * model.n
+    goal = Regulator(model, POSE, gains).pose(random_q(model, rng).tolist())
+    M = np.array(model.mass_matrix(q))
+    own, seen = np.diag(M), 1.0 / np.diag(np.linalg.inv(M))
+    beta = 50.0
+    c = (2.0 * beta * seen / np.sqrt(own)).tolist()  # every joint on its cap beta I_j
+    reg = Regulator(model, POSE, gains, unlimited, goal,
+                    sh.Shaping.create(model.n, inertial_damping=c, inertial_damping_rate=beta))
+    D = np.diag(np.maximum(0.5, beta * seen))
+    rates = np.linalg.eigvals(np.linalg.solve(M, D)).real
+    assert rates.max() > 1.05 * beta, 'the coupling must make a mode faster than beta'
+    capped = modes_capped(M, D, beta)
+    capped_rates = np.sort(np.linalg.eigvals(np.linalg.solve(M, capped)).real)
+    np.testing.assert_allclose(capped_rates, np.minimum(np.sort(rates), beta), rtol=1e-9)
+    assert np.linalg.eigvalsh(capped).min() > 0.0, 'still a dissipation'
+    plain = Regulator(model, POSE, gains, unlimited, goal)
+    want = np.array(plain.update(q, qdot).tau_nm) - (capped - 0.5 * np.eye(6)) @ qdot
+    np.testing.assert_allclose(reg.update(q, qdot).tau_nm, want, rtol=1e-9, atol=1e-9)
+    np.testing.assert_allclose(reg.linear_damping(q), np.diag(capped), rtol=1e-9)
+    # at a rate no mode reaches, nothing is taken away: the diagonal damping as it was
+    high = float(1.01 * rates.max())
+    reg.set_shaping(sh.Shaping.create(model.n, inertial_damping=c, inertial_damping_rate=high))
+    D_high = np.diag(np.maximum(0.5, np.minimum(c * np.sqrt(own), high * seen)))
+    np.testing.assert_allclose(reg.linear_damping(q), np.diag(D_high), rtol=1e-12)
+    want = np.array(plain.update(q, qdot).tau_nm) - (D_high - 0.5 * np.eye(6)) @ qdot
+    np.testing.assert_allclose(reg.update(q, qdot).tau_nm, want, rtol=1e-9, atol=1e-9)
+
+
 @pytest.mark.parametrize('seed', range(4))
 def test_the_inertial_damping_follows_the_joints_inertia_within_the_sampled_cap(seed):
     """
@@ -261,9 +316,11 @@ def test_the_inertial_damping_follows_the_joints_inertia_within_the_sampled_cap(
     assert np.any(damping == 0.5), 'k_v must win somewhere'
     assert np.any((damping > 0.5) & (damping == c * np.sqrt(own))), 'c sqrt(M_jj) somewhere'
     assert np.any((damping > 0.5) & (damping == beta * seen)), 'the cap somewhere'
-    np.testing.assert_allclose(reg.linear_damping(q), damping, rtol=1e-12)
+    capped = modes_capped(M, np.diag(damping), beta)  # and no mode of M^-1 D above beta
+    np.testing.assert_allclose(reg.linear_damping(q), np.diag(capped), rtol=1e-9)
     assert plain.linear_damping(q) == [0.5] * 6
-    want = np.array(plain.update(q, qdot).tau_nm) - (damping - 0.5) * np.array(qdot)
+    extra = capped - 0.5 * np.eye(model.n)
+    want = np.array(plain.update(q, qdot).tau_nm) - extra @ np.array(qdot)
     np.testing.assert_allclose(reg.update(q, qdot).tau_nm, want, rtol=1e-9, atol=1e-12)
     # towards a streamed goal's velocity it damps qdot - g_v qdot*_d, as k_v does
     reg.set_shaping(sh.Shaping.create(model.n, inertial_damping=c.tolist(),
@@ -272,7 +329,7 @@ def test_the_inertial_damping_follows_the_joints_inertia_within_the_sampled_cap(
     half = (0.5 * np.array(qdot)).tolist()
     np.testing.assert_allclose(reg.update(q, qdot).tau_nm,
                                np.array(plain.update(q, half).tau_nm)
-                               - (damping - 0.5) * np.array(half), rtol=1e-9, atol=1e-9)
+                               - extra @ np.array(half), rtol=1e-9, atol=1e-9)
     for values, match in (({'inertial_damping': [-1.0] * 6}, 'inertial_damping'),
                           ({'inertial_damping': [1.0] * 5}, 'inertial_damping'),
                           ({'inertial_damping': [math.nan] * 6}, 'inertial_damping'),
@@ -368,8 +425,9 @@ def test_the_learning_counts_only_a_joints_own_share_of_the_settling_damping():
     M = model.mass_matrix(q)
     np.testing.assert_allclose(reg.settling_damping(q, out.y_tilde), 40.0 * np.diag(M),
                                rtol=1e-9)
-    # joint 1 creeping along its push, with the inertial damping on (c tiny: k_v wins): its
-    # own share, 40 M_11 qdot_1, counts as a damping, as the same k_v more would
+    # joint 1 creeping along its push, with the inertial damping on (c tiny: k_v wins; beta
+    # high: no mode capped): its own share, 40 M_11 qdot_1, counts as a damping, as the same
+    # k_v more would
     creep = [0.02 * np.sign(out.tau_potential_nm[0])] + qdot[1:]
     own = {}
     for alpha, kv0 in ((40.0, 0.5), (0.0, 0.5 + 40.0 * M[0, 0])):
@@ -377,7 +435,7 @@ def test_the_learning_counts_only_a_joints_own_share_of_the_settling_damping():
         reg = Regulator(model, POSE, g, [math.inf] * 6, goal, sh.Shaping.create(
             6, settling_damping_rate=alpha, friction_learning_limit=[1.0] * 6,
             configuration_gain=[2.0] * 6, configuration_radius=0.0,
-            inertial_damping=[1e-6] * 6))
+            inertial_damping=[1e-6] * 6, inertial_damping_rate=1e6))
         reg.set_goal_configuration(goal, q_goal.tolist())
         for _ in range(600):
             reg.update(q, creep, 1e-3)
