@@ -18,7 +18,7 @@ import numpy as np
 
 from quat_jt_controller import control_law as cl
 from quat_jt_controller.model import RobotModel
-from quat_jt_controller.shaping import Shaping
+from quat_jt_controller.shaping import fast_damping_modes, Shaping
 
 DELAY_MARGIN = 1  # the loop must also be stable with this many ticks more than asked for
 GAIN_MARGIN = 1.5  # ... and with the gains (stiffness and damping) this many times larger
@@ -154,6 +154,11 @@ def sigma_min(rows: np.ndarray) -> float:
     return float(np.linalg.svd(rows, compute_uv=False)[-1])
 
 
+def _inertial_on(inertial: Optional[np.ndarray], rate_per_s: float) -> bool:
+    """Return True if the inertial damping acts (``Shaping.inertial_damping_on``'s test)."""
+    return inertial is not None and rate_per_s > 0.0 and bool(np.any(np.asarray(inertial) > 0.0))
+
+
 def damping_at(kv: np.ndarray, inertial: Optional[np.ndarray], rate_per_s: float,
                M: np.ndarray) -> np.ndarray:
     """
@@ -164,21 +169,41 @@ def damping_at(kv: np.ndarray, inertial: Optional[np.ndarray], rate_per_s: float
     ``inertial_damping_rate``: ``beta``; None or zeros: ``k_v`` alone).
     """
     kv = np.asarray(kv, dtype=float)
-    if inertial is None or rate_per_s <= 0.0 or not np.any(np.asarray(inertial) > 0.0):
+    if not _inertial_on(inertial, rate_per_s):
         return kv
     own = np.asarray(inertial, dtype=float) * np.sqrt(np.diag(M))
     return np.maximum(kv, np.minimum(own, rate_per_s * seen_inertia(M)))
 
 
+def joint_damping_matrix(kv: np.ndarray, inertial: Optional[np.ndarray], rate_per_s: float,
+                         M: np.ndarray) -> np.ndarray:
+    """
+    Return the tick's linear joint damping at a configuration of mass matrix ``M`` (N m s/rad).
+
+    ``diag(damping_at(...))`` with each mode of ``M^-1 D`` faster than ``beta`` brought down
+    to it (``shaping.fast_damping_modes``, the tick's own; docs/lyapunov.md, section 10);
+    ``K_v`` alone where the inertial damping is off.
+    """
+    d = damping_at(kv, inertial, rate_per_s, M)
+    D = np.diag(d)
+    if not _inertial_on(inertial, rate_per_s):  # k_v alone, as the tick: nothing capped
+        return D
+    modes = fast_damping_modes(np.linalg.inv(M).tolist(), d.tolist(), rate_per_s)
+    for c, y in modes or ():
+        y = np.asarray(y)
+        D -= c * np.outer(y, y)
+    return D
+
+
 def damping_matrix(kv: np.ndarray, inertial: Optional[np.ndarray], rate_per_s: float,
                    M: np.ndarray, settling_per_s: float = 0.0) -> np.ndarray:
     """
-    Return the linear damping matrix near the goal (N m s/rad): :func:`damping_at` + alpha M.
+    Return the linear damping matrix near the goal (N m s/rad): the joint damping + alpha M.
 
-    ``diag(damping_at(...)) + settling_per_s M``: the joint damping and the settling damping
-    ``alpha M(q)`` (docs/lyapunov.md, section 11), which acts in full near the goal.
+    :func:`joint_damping_matrix` ``+ settling_per_s M``: the joint damping and the settling
+    damping ``alpha M(q)`` (docs/lyapunov.md, section 11), which acts in full near the goal.
     """
-    D = np.diag(damping_at(kv, inertial, rate_per_s, M))
+    D = joint_damping_matrix(kv, inertial, rate_per_s, M)
     return D + settling_per_s * M if settling_per_s > 0.0 else D
 
 

@@ -41,10 +41,9 @@ import numpy as np
 from quat_jt_controller import control_law as cl
 from quat_jt_controller import parameter_table as table
 from quat_jt_controller.gain_analysis import (
-    carried_speed, checked_delays, configuration_stiffness, coupled_damper_spectral_radius,
-    cruising_speed, damping_at, joint_spectral_radius, joint_stiffness,
-    largest_stable_damping, margin_cases, median_damping_ratio, QO, seen_inertia,
-    settling_rate, sigma_min, time_to_goal_s, worst_rho)
+    carried_speed, checked_delays, configuration_stiffness, cruising_speed, damping_at,
+    joint_spectral_radius, joint_stiffness, largest_stable_damping, median_damping_ratio, QO,
+    seen_inertia, settling_rate, sigma_min, time_to_goal_s, worst_rho)
 from quat_jt_controller.model import GRAVITY_RESERVE_SHARE, RobotModel
 from quat_jt_controller.shaping import (
     DEFAULT_SPEED_CAP_RAD_S, FADE_DELAY_TICKS, FADE_FLOOR_FRACTION, FULL_TURN_RAD, Shaping)
@@ -321,23 +320,6 @@ def _joint_unstable(inertia: float, stiffness: float, kv: float, b_max: float, d
                joint_spectral_radius(inertia, stiffness, b_max, delays, dt_s)) >= 1.0
 
 
-def _coupled_damping_unstable(configs, kv: np.ndarray, inertial: np.ndarray, beta: float,
-                              delays, dt_s: float) -> bool:
-    """
-    Return True if the damping alone is unstable with the inertial damping, not without it.
-
-    The arm's speeds under the tick's damping at each configuration (:func:`damping_at`,
-    with the margins of the sampled-loop check): each joint's damping is within what the loop
-    tolerates on the inertia that joint sees, but ``M^-1 D`` couples them.
-    """
-    def worst(damping) -> float:
-        return max(coupled_damper_spectral_radius(M, scale * np.diag(damping(M)), [d], dt_s)
-                   for _, _, M in configs for scale, d in margin_cases(delays))
-    if worst(lambda M: damping_at(kv, inertial, beta, M)) < 1.0:
-        return False
-    return worst(lambda M: np.asarray(kv, dtype=float)) < 1.0
-
-
 def inertial_damping_rate(delays: Sequence[int], dt_s: float) -> float:
     """
     Return ``beta`` (1/s): DAMPER_SAFETY x the damping per kg m^2 the sampled loop tolerates.
@@ -541,8 +523,9 @@ def design(model: RobotModel, task: cl.Task, rate_hz: float = 1000.0,
     b_max = np.array([DAMPER_SAFETY * largest_stable_damping(inertia[j],
                                                              checked_delays(delays), dt_s)
                       for j in range(n)])
-    beta_tolerated = inertial_damping_rate(delays, dt_s)  # b_max per kg m^2 ...
-    beta = beta_tolerated  # ... for the inertial damping, lowered where M(q) couples it
+    # b_max per kg m^2, for the inertial damping: the tick brings every mode of its damping,
+    # coupled through M(q), down to it, so the damping alone is stable with the margins
+    beta = inertial_damping_rate(delays, dt_s)
     limited_speed = np.array([isfinite(v) and v > 0.0 for v in model.velocity_limits])
     ceiling = np.where(limited_speed, SPEED_MARGIN * velocity, velocity)
     push_max = np.minimum(budget, np.where(limited_speed,
@@ -640,25 +623,12 @@ def design(model: RobotModel, task: cl.Task, rate_hz: float = 1000.0,
         if max(rho.values()) < 1.0 and own.any():
             guide_cap = np.where(own, guide * SHRINK, guide_cap)
             continue
-        # The damping alone unstable, through the coupling of M(q) (each joint's cap, beta on
-        # the inertia it sees, holds for that joint alone): lowering K_p cannot cure that, only
-        # as far as it lowers c; lower the inertial damping's cap beta instead.
-        if max(rho.values()) >= 1.0 and _coupled_damping_unstable(
-                configs, kv, inertial, beta, delays, dt_s):
-            beta *= SHRINK
-            continue
         if lam.min() > 1.0:
             lam = np.maximum(lam * SHRINK, 1.0)
         else:
             kp = kp * SHRINK
     else:
         raise ValueError(f'no stable gains found (spectral radius {rho})')
-    if beta < beta_tolerated:  # lowered for gains since shrunk: back up, if the loop takes it
-        if (max(worst_rho(configs, kp, kv, lam, extra, delays, dt_s, task, inertial,
-                          beta_tolerated).values()) < 1.0
-                and not _coupled_damping_unstable(configs, kv, inertial, beta_tolerated, delays,
-                                                  dt_s)):
-            beta = beta_tolerated
     weak = [model.joint_names[j] for j in range(n) if guide[j] <= bound[j]]
     if weak:
         raise ValueError(

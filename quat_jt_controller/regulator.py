@@ -30,8 +30,6 @@ from dataclasses import dataclass
 from math import inf, isfinite, sqrt
 from typing import NamedTuple, Optional, Sequence
 
-import numpy as np
-
 from quat_jt_controller import control_law as cl
 from quat_jt_controller import quaternion as quat
 from quat_jt_controller import shaping as sh
@@ -237,43 +235,6 @@ def _cancel_push(minv: Sequence[Sequence[float]], tau: list[float], guarded: lis
             a += m * t
         if a * over > 0.0:  # it drives the joint on towards its stop
             tau[j] -= a / row[j]
-
-
-def _fast_modes(minv: Sequence[Sequence[float]], damping: Sequence[float],
-                beta: float) -> Optional[list[tuple[float, list[float]]]]:
-    """
-    Return the modes of ``M(q)^-1 D`` faster than ``beta`` and how much of each to take away.
-
-    ``D = diag(damping)`` is the inertial damping of docs/lyapunov.md, section 10. Each
-    entry of ``M^-1 D`` on its diagonal is at most ``beta``, but ``M(q)`` couples the joints
-    and a mode can be faster: the sampled, delayed loop rings on it (docs/reach.md, "the
-    modes of the damping"). ``A = D^(1/2) M^-1 D^(1/2)`` has the rates of ``M^-1 D`` as its
-    eigenvalues; for each eigenpair ``(w, u)`` with ``w > beta``, ``y = D^(1/2) u``, the
-    damping ``D - sum (1 - beta / w) y y^T`` has the same modes, each at ``min(w, beta)``:
-    still positive definite, so still a dissipation. Returns ``[(1 - beta / w, y)]``, or None
-    when the row sums of ``|A|`` (Gershgorin) already keep every mode within ``beta``, as on
-    an arm whose joints are weakly coupled: no eigenvalue problem then.
-    """
-    n = len(damping)
-    root = [sqrt(d) for d in damping]
-    for j in range(n):
-        row, rj = minv[j], root[j]
-        total = 0.0
-        for k in range(n):
-            m = row[k]
-            total += root[k] * (m if m > 0.0 else -m)
-        if rj * total > beta:
-            break
-    else:
-        return None
-    r = np.array(root)
-    w, u = np.linalg.eigh(r[:, None] * np.array(minv) * r)
-    out = []
-    for i in range(n - 1, -1, -1):  # eigh sorts them ascending
-        if w[i] <= beta:
-            break
-        out.append((1.0 - beta / float(w[i]), (r * u[:, i]).tolist()))
-    return out or None
 
 
 class Regulator:
@@ -592,7 +553,8 @@ class Regulator:
         if shaping.inertial_damping_on:  # docs/lyapunov.md, section 10: on the same velocity
             caps = self._caps
             own = self._own
-            stop_rate = sh.STOP_GUARD_SHARE * shaping.inertial_damping_rate_per_s
+            beta = shaping.inertial_damping_rate_per_s
+            stop_rate = sh.STOP_GUARD_SHARE * beta
             clearance = sh.STOP_CLEARANCE_SHARE * shaping.joint_limit_margin_rad
             damping, minv = self._inertial_damping(q, kv, shaping, caps, own, self._seen)
             damped = qdot if g_v <= 0.0 else [qdot[j] - g_v * qdot_goal[j] for j in range(n)]
@@ -612,7 +574,7 @@ class Regulator:
                     if guarded is None:
                         guarded = []
                     guarded.append((j, over, room <= 0.0))
-            modes = _fast_modes(minv, damping, shaping.inertial_damping_rate_per_s)
+            modes = sh.fast_damping_modes(minv, damping, beta)
             if modes is not None:  # each mode of M^-1 D at most beta, K_v included
                 for c, y in modes:
                     along = 0.0
@@ -622,7 +584,7 @@ class Regulator:
                     for j in range(n):
                         tau[j] += along * y[j]
             if guarded is not None:
-                _guard_damping(minv, qdot, tau, guarded, shaping.inertial_damping_rate_per_s)
+                _guard_damping(minv, qdot, tau, guarded, beta)
         settled = None  # (psi alpha, v, M(q) v) of the settling damping, if it acts
         k = _settling_gain(y, gains, shaping)  # docs/lyapunov.md, section 11
         if k > 0.0:
@@ -719,7 +681,7 @@ class Regulator:
         if not shaping.inertial_damping_on:
             return list(gains.kv)
         damping, minv = self._inertial_damping(q, gains.kv, shaping)
-        modes = _fast_modes(minv, damping, shaping.inertial_damping_rate_per_s)
+        modes = sh.fast_damping_modes(minv, damping, shaping.inertial_damping_rate_per_s)
         for c, y in modes or ():
             for j in range(self.n):
                 damping[j] -= c * y[j] * y[j]

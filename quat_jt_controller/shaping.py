@@ -50,6 +50,8 @@ from functools import cached_property
 from math import isfinite, pi, sqrt, tanh
 from typing import Any, Mapping, Optional, Sequence
 
+import numpy as np
+
 from quat_jt_controller import parameter_table as table
 from quat_jt_runtime.errors import QuatJtError
 from quat_jt_runtime.param_table import check_all, names
@@ -680,3 +682,42 @@ def describe(shaping: Shaping) -> str:
         parts.append(f'learning up to {list(shaping.friction_learning_limit_nm)} N m more at '
                      f'rest or creeping in {shaping.friction_learning_time_s:g} s')
     return '; '.join(parts) if parts else "off (the paper's law)"
+
+
+def fast_damping_modes(minv: Sequence[Sequence[float]], damping: Sequence[float],
+                       beta: float) -> Optional[list[tuple[float, list[float]]]]:
+    """
+    Return the modes of ``M(q)^-1 D`` faster than ``beta`` and how much of each to take away.
+
+    ``D = diag(damping)`` is the inertial damping of docs/lyapunov.md, section 10. Each
+    entry of ``M^-1 D`` on its diagonal is at most ``beta``, but ``M(q)`` couples the joints
+    and a mode can be faster: the sampled, delayed loop rings on it (docs/reach.md, "the
+    modes of the damping"). ``A = D^(1/2) M^-1 D^(1/2)`` has the rates of ``M^-1 D`` as its
+    eigenvalues; for each eigenpair ``(w, u)`` with ``w > beta``, ``y = D^(1/2) u``, the
+    damping ``D - sum (1 - beta / w) y y^T`` has the same modes, each at ``min(w, beta)``:
+    still positive definite, so still a dissipation. Returns ``[(1 - beta / w, y)]``, or None
+    when the row sums of ``|A|`` (Gershgorin) already keep every mode within ``beta``, as on
+    an arm whose joints are weakly coupled: no eigenvalue problem then. The tick
+    (Regulator.update) and the design's model of it (gain_analysis.damping_matrix) both call
+    it.
+    """
+    n = len(damping)
+    root = [sqrt(d) for d in damping]
+    for j in range(n):
+        row, rj = minv[j], root[j]
+        total = 0.0
+        for k in range(n):
+            m = row[k]
+            total += root[k] * (m if m > 0.0 else -m)
+        if rj * total > beta:
+            break
+    else:
+        return None
+    r = np.array(root)
+    w, u = np.linalg.eigh(r[:, None] * np.array(minv) * r)
+    out = []
+    for i in range(n - 1, -1, -1):  # eigh sorts them ascending
+        if w[i] <= beta:
+            break
+        out.append((1.0 - beta / float(w[i]), (r * u[:, i]).tolist()))
+    return out or None

@@ -122,6 +122,37 @@ def test_lyapunov_never_increases_through_the_speed_guard():
     assert traj.lyapunov[-1] < 0.5 * traj.lyapunov[0]
 
 
+@pytest.mark.parametrize('potential', ['quadratic', 'tanh'])
+def test_lyapunov_never_increases_where_a_mode_of_the_damping_is_capped(potential):
+    """
+    docs/lyapunov.md, section 10: the damping with its fast modes brought down to beta.
+
+    Every joint's inertial damping at its cap beta I_j: M(q) couples them into a mode faster
+    than beta, which the tick brings down to it. What is left is still positive definite, a
+    dissipation, so V never increases.
+    """
+    model = wrist_model()
+    gains = cl.Gains.create(potential, (8.0, 8.0, 8.0), (0.3, 0.3, 0.3), (4.0, 4.0, 4.0), ORI,
+                            3)
+    q_goal = (0.5, 1.2, -0.4)
+    _, R = model.forward_kinematics(list(q_goal))
+    values = dict(EVERYTHING, inertial_damping=(500.0, 500.0, 500.0),
+                  damping_speed=(0.0, 0.0, 0.0))
+    loop = ClosedLoop(model, gains, ORI, quat.from_rotation_matrix(R),
+                      shaping=sh.Shaping.create(3, **values), q_star=q_goal)
+    q0 = (2.5, 0.4, 1.4)
+    traj = loop.run(q0, 2.0, dt_s=5e-4, qdot0=(1.0, -1.0, 1.0))
+    dV = np.diff(traj.lyapunov)
+    assert dV.max() <= 1e-9 * traj.lyapunov[0], f'V increased by {dV.max()}'
+    capped = 0
+    for q in traj.q_rad[::100]:
+        caps = values['inertial_damping_rate'] * np.array(model.inertias(q.tolist())[1])
+        capped += bool(np.any(np.array(loop.regulator.linear_damping(q.tolist()))
+                              < 0.999 * caps))
+    assert capped > len(traj.q_rad[::100]) // 2, 'a mode must be capped along the way'
+    assert traj.lyapunov[-1] < 0.5 * traj.lyapunov[0]  # heavily damped, but on its way
+
+
 def test_lyapunov_never_increases_through_the_stop_guard(monkeypatch):
     """
     Moving fast at a stop, below the speed guard, the stop guard brakes it short of the stop.
