@@ -211,10 +211,10 @@ SHAPING = (
          default_text=JOINT_ZEROS_TEXT, **PER_JOINT),
     Spec('inertial_damping_rate', Kind.DOUBLE, DEFAULT_INERTIAL_DAMPING_RATE,
          'beta (1/s): the inertial damping of a joint is at most beta I_j(q), half the damping '
-         'per kg m^2 of seen inertia that the sampled loop tolerates (design_gains writes it '
-         'for the rate and delays designed for, lower where M(q) couples the damped joints '
-         'too strongly for it; the default is for 1 kHz and up to 2 ticks of delay, checked '
-         'with 3). Live.', bounds=(1.0, 1e6),
+         'per kg m^2 of seen inertia that the sampled loop tolerates, and no mode of the '
+         'damping coupled through M(q) is faster than beta (design_gains writes it for the '
+         'rate and delays designed for; the default is for 1 kHz and up to 2 ticks of delay, '
+         'checked with 3). Live.', bounds=(1.0, 1e6),
          field='inertial_damping_rate_per_s'),
     Spec('settling_damping_rate', Kind.DOUBLE, 0.0,
          'alpha (1/s): near the goal, the damping torque -psi alpha M(q) qdot on top of the '

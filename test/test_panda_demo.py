@@ -12,8 +12,8 @@ pytestmark = pytest.mark.e2e
 
 def test_panda_demo_reaches_each_goal_holds_the_elbow_and_writes_its_files(tmp_path):
     out = subprocess.run([sys.executable, '-m', 'experiments.panda_demo', '--out',
-                          str(tmp_path), '--hold', '3.5'], capture_output=True, text=True,
-                         timeout=300)
+                          str(tmp_path), '--hold', '4'], capture_output=True, text=True,
+                         timeout=300)  # the demo's own 4 s a goal
     assert out.returncode == 0, out.stdout[-3000:] + out.stderr[-3000:]
     goals = [x for x in out.stdout.splitlines() if x.strip().startswith('goal ')]
     assert len(goals) == 4
@@ -33,10 +33,10 @@ def test_panda_demo_reaches_each_goal_holds_the_elbow_and_writes_its_files(tmp_p
             if ch.topic == '/tf':
                 goal_frames += sum(t.child_frame_id == 'goal' for t in msg.transforms)
     tf = counts.pop('/tf')
-    assert counts == {'/joint_states': 14000, '/robot_description': 1, '/tf_static': 1}
-    assert tf in (1400, 1401)  # at 100 Hz; the bins follow the wall-clock start
+    assert counts == {'/joint_states': 16000, '/robot_description': 1, '/tf_static': 1}
+    assert tf in (1600, 1601)  # at 100 Hz; the bins follow the wall-clock start
     assert goal_frames == tf  # the goal in force, on /tf with the arm
     with Image.open(tmp_path / 'panda_tanh.gif') as gif:
-        assert gif.n_frames == 281 and gif.size == (320, 240)
+        assert gif.n_frames == 321 and gif.size == (320, 240)
     assert (tmp_path / 'panda_tanh.png').stat().st_size > 20_000
     assert 'argv[0]' not in out.stdout + out.stderr  # PyBullet's banner silenced
