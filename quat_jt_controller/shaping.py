@@ -697,9 +697,10 @@ def fast_damping_modes(minv: Sequence[Sequence[float]], damping: Sequence[float]
     damping ``D - sum (1 - beta / w) y y^T`` has the same modes, each at ``min(w, beta)``:
     still positive definite, so still a dissipation. Returns ``[(1 - beta / w, y)]``, or None
     when the row sums of ``|A|`` (Gershgorin) already keep every mode within ``beta``, as on
-    an arm whose joints are weakly coupled: no eigenvalue problem then. The tick
-    (Regulator.update) and the design's model of it (gain_analysis.damping_matrix) both call
-    it.
+    an arm whose joints are weakly coupled: no eigenvalue problem then. None too where
+    ``M^-1`` or the damping is not finite (a singular ``M(q)``): the tick's finite check then
+    decides, never an exception here. The tick (Regulator.update) and the design's model of
+    it (gain_analysis.damping_matrix) both call it.
     """
     n = len(damping)
     root = [sqrt(d) for d in damping]
@@ -709,12 +710,20 @@ def fast_damping_modes(minv: Sequence[Sequence[float]], damping: Sequence[float]
         for k in range(n):
             m = row[k]
             total += root[k] * (m if m > 0.0 else -m)
+        if not isfinite(rj * total):
+            return None
         if rj * total > beta:
             break
     else:
         return None
     r = np.array(root)
-    w, u = np.linalg.eigh(r[:, None] * np.array(minv) * r)
+    a = r[:, None] * np.array(minv) * r
+    if not np.isfinite(a).all():
+        return None
+    try:
+        w, u = np.linalg.eigh(a)
+    except np.linalg.LinAlgError:  # no convergence: keep the diagonal damping this tick
+        return None
     out = []
     for i in range(n - 1, -1, -1):  # eigh sorts them ascending
         if w[i] <= beta:

@@ -66,6 +66,25 @@ def test_lyapunov_never_increases_with_every_term_on(potential):
     assert traj.lyapunov[-1] < 1e-3 * traj.lyapunov[0]
 
 
+def soft_wrist_run(potential: str, values: dict, duration_s: float):
+    """
+    Run the wrist with K_v 0.3 and the shaping ``values`` from afar towards a fixed goal.
+
+    Returns ``(model, gains, loop, trajectory)`` once it is checked that V never increased.
+    """
+    model = wrist_model()
+    gains = cl.Gains.create(potential, (8.0, 8.0, 8.0), (0.3, 0.3, 0.3), (4.0, 4.0, 4.0), ORI,
+                            3)
+    q_goal = (0.5, 1.2, -0.4)
+    _, R = model.forward_kinematics(list(q_goal))
+    loop = ClosedLoop(model, gains, ORI, quat.from_rotation_matrix(R),
+                      shaping=sh.Shaping.create(3, **values), q_star=q_goal)
+    traj = loop.run((2.5, 0.4, 1.4), duration_s, dt_s=5e-4, qdot0=(1.0, -1.0, 1.0))
+    dV = np.diff(traj.lyapunov)
+    assert dV.max() <= 1e-9 * traj.lyapunov[0], f'V increased by {dV.max()}'
+    return model, gains, loop, traj
+
+
 @pytest.mark.parametrize('potential', ['quadratic', 'tanh'])
 def test_lyapunov_never_increases_with_the_settling_damping(potential):
     """
@@ -74,19 +93,9 @@ def test_lyapunov_never_increases_with_the_settling_damping(potential):
     From far (psi = 0) into the linear range of the tanh (psi = 1): V never increases, with a
     settling damping strong enough that the opposite sign would feed the loop.
     """
-    model = wrist_model()
-    gains = cl.Gains.create(potential, (8.0, 8.0, 8.0), (0.3, 0.3, 0.3), (4.0, 4.0, 4.0), ORI,
-                            3)
-    q_goal = (0.5, 1.2, -0.4)
-    _, R = model.forward_kinematics(list(q_goal))
     values = dict(EVERYTHING, settling_damping_rate=40.0, inertial_damping=(0.0, 0.0, 0.0),
                   damping_speed=(0.0, 0.0, 0.0))
-    loop = ClosedLoop(model, gains, ORI, quat.from_rotation_matrix(R),
-                      shaping=sh.Shaping.create(3, **values), q_star=q_goal)
-    q0 = (2.5, 0.4, 1.4)
-    traj = loop.run(q0, 3.0, dt_s=5e-4, qdot0=(1.0, -1.0, 1.0))
-    dV = np.diff(traj.lyapunov)
-    assert dV.max() <= 1e-9 * traj.lyapunov[0], f'V increased by {dV.max()}'
+    model, gains, loop, traj = soft_wrist_run(potential, values, 3.0)
     psi = [sh.settling_fade(loop.regulator.update(q.tolist(), [0.0] * 3).y_tilde, gains.lam)
            for q in traj.q_rad[::100]]
     assert psi[0] == 0.0 and psi[-1] == 1.0  # from far into the linear range
@@ -131,19 +140,9 @@ def test_lyapunov_never_increases_where_a_mode_of_the_damping_is_capped(potentia
     than beta, which the tick brings down to it. What is left is still positive definite, a
     dissipation, so V never increases.
     """
-    model = wrist_model()
-    gains = cl.Gains.create(potential, (8.0, 8.0, 8.0), (0.3, 0.3, 0.3), (4.0, 4.0, 4.0), ORI,
-                            3)
-    q_goal = (0.5, 1.2, -0.4)
-    _, R = model.forward_kinematics(list(q_goal))
     values = dict(EVERYTHING, inertial_damping=(500.0, 500.0, 500.0),
                   damping_speed=(0.0, 0.0, 0.0))
-    loop = ClosedLoop(model, gains, ORI, quat.from_rotation_matrix(R),
-                      shaping=sh.Shaping.create(3, **values), q_star=q_goal)
-    q0 = (2.5, 0.4, 1.4)
-    traj = loop.run(q0, 2.0, dt_s=5e-4, qdot0=(1.0, -1.0, 1.0))
-    dV = np.diff(traj.lyapunov)
-    assert dV.max() <= 1e-9 * traj.lyapunov[0], f'V increased by {dV.max()}'
+    model, _, loop, traj = soft_wrist_run(potential, values, 2.0)
     capped = 0
     for q in traj.q_rad[::100]:
         caps = values['inertial_damping_rate'] * np.array(model.inertias(q.tolist())[1])

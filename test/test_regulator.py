@@ -232,6 +232,17 @@ def test_a_far_new_q_star_fades_in_and_a_near_one_keeps_its_share():
     np.testing.assert_allclose(guide(reg), [2.0 * share, 2.0 * share, 3.0 * share], atol=1e-12)
 
 
+def xarm6_case(seed: int, speed: float):
+    """Return an xArm6 at a random q and qdot (``speed`` x normal), gains, no clamp, a goal."""
+    model = xarm6_model()
+    rng = np.random.default_rng(seed)
+    q, qdot = random_q(model, rng).tolist(), (speed * rng.normal(size=model.n)).tolist()
+    gains = cl.Gains.create('tanh', [50.0] * 3 + [2.0] * 3, [0.5] * 6, [20.0] * 3 + [4.0] * 3,
+                            POSE, 6)
+    goal = Regulator(model, POSE, gains).pose(random_q(model, rng).tolist())
+    return model, rng, q, qdot, gains, [math.inf] * model.n, goal
+
+
 def modes_capped(M, D, beta):
     """
     D with every rate of M^-1 D above beta brought down to beta, by hand (the oracle).
@@ -254,13 +265,7 @@ def test_no_mode_of_the_inertial_damping_is_faster_than_its_rate(seed):
     is within it. The tick brings each such mode down to beta (K_v included) and leaves the
     others as they are.
     """
-    model = xarm6_model()
-    rng = np.random.default_rng(seed)
-    q, qdot = random_q(model, rng).tolist(), (0.1 * rng.normal(size=model.n)).tolist()
-    gains = cl.Gains.create('tanh', [50.0] * 3 + [2.0] * 3, [0.5] * 6, [20.0] * 3 + [4.0] * 3,
-                            POSE, 6)
-    unlimited = [math.inf] * model.n
-    goal = Regulator(model, POSE, gains).pose(random_q(model, rng).tolist())
+    model, rng, q, qdot, gains, unlimited, goal = xarm6_case(seed, 0.1)
     M = np.array(model.mass_matrix(q))
     own, seen = np.diag(M), 1.0 / np.diag(np.linalg.inv(M))
     beta = 50.0
@@ -287,6 +292,16 @@ def test_no_mode_of_the_inertial_damping_is_faster_than_its_rate(seed):
     np.testing.assert_allclose(reg.update(q, qdot).tau_nm, want, rtol=1e-9, atol=1e-9)
 
 
+def test_a_non_finite_inverse_inertia_caps_nothing_and_raises_nothing():
+    """A singular M(q) (inf or NaN in M^-1): no mode is capped; the tick's finite check acts."""
+    coupled = [[1.0, 0.9], [0.9, 1.0]]  # rates 0.1 and 1.9: one above beta = 1.5
+    capped = sh.fast_damping_modes(coupled, [1.0, 1.0], 1.5)
+    assert len(capped) == 1 and capped[0][0] == pytest.approx(1.0 - 1.5 / 1.9)
+    for bad in (math.inf, math.nan):
+        assert sh.fast_damping_modes([[1.0, 0.9], [0.9, bad]], [1.0, 1.0], 1.5) is None
+        assert sh.fast_damping_modes(coupled, [1.0, bad], 1.5) is None
+
+
 @pytest.mark.parametrize('seed', range(4))
 def test_the_inertial_damping_follows_the_joints_inertia_within_the_sampled_cap(seed):
     """
@@ -295,13 +310,7 @@ def test_the_inertial_damping_follows_the_joints_inertia_within_the_sampled_cap(
     I_j = 1 / (M^-1)_jj. The case has joints on each of the three sides: k_v, c sqrt(M_jj),
     and the cap beta I_j.
     """
-    model = xarm6_model()
-    rng = np.random.default_rng(seed)
-    q, qdot = random_q(model, rng).tolist(), (0.01 * rng.normal(size=model.n)).tolist()
-    gains = cl.Gains.create('tanh', [50.0] * 3 + [2.0] * 3, [0.5] * 6, [20.0] * 3 + [4.0] * 3,
-                            POSE, 6)
-    unlimited = [math.inf] * model.n
-    goal = Regulator(model, POSE, gains).pose(random_q(model, rng).tolist())
+    model, rng, q, qdot, gains, unlimited, goal = xarm6_case(seed, 0.01)
     M = model.mass_matrix(q)  # the inertias, by hand
     own, seen = np.diag(M), 1.0 / np.diag(np.linalg.inv(M))
     np.testing.assert_allclose(model.inertias(q), [own, seen], rtol=1e-9)
