@@ -348,8 +348,9 @@ class RobotModel:
 
         Row j maps the joints' torques to joint j's acceleration: the speed guard's damping of
         the guarded joints through their block of it, and its cancellation of the push the
-        other joints give a joint within a stop's clearance (Regulator.update,
-        docs/lyapunov.md, section 6).
+        other joints give a joint within a stop's clearance, and the cap on the damping's modes
+        (Regulator.update, docs/lyapunov.md, sections 6 and 10; the tick takes it with the
+        inertias from :meth:`inertias_and_inverse`).
         """
         return self.inertias_and_inverse(q)[2]
 

@@ -705,14 +705,15 @@ def fast_damping_modes(minv: Sequence[Sequence[float]], damping: Sequence[float]
     n = len(damping)
     root = [sqrt(d) for d in damping]
     for j in range(n):
-        row, rj = minv[j], root[j]
+        row = minv[j]
         total = 0.0
         for k in range(n):
             m = row[k]
             total += root[k] * (m if m > 0.0 else -m)
-        if not isfinite(rj * total):
+        total *= root[j]  # the row sum of |A|
+        if not isfinite(total):
             return None
-        if rj * total > beta:
+        if total > beta:
             break
     else:
         return None
