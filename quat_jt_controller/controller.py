@@ -252,7 +252,7 @@ class Controller:
         rate = self.state_rate_hz
         if any(r > 0.0 for r in self.position_resolution):
             how = (f'on the longest window of up to {VELOCITY_WINDOW_STATES} states that '
-                   'position_resolution allows')
+                   'position_resolution allows, 0 while a joint stays within one count')
         else:
             how = (f'finite differences, low-pass of time constant {1e3 / rate:g} ms = one '
                    f'period at state_rate {rate:g} Hz; from an encoder, give its count as '

@@ -45,9 +45,10 @@ POSITION_RESOLUTION = Spec(
     "One count of each joint's position as joint_states report it ({n} values), rad (m for "
     'a prismatic joint), e.g. 2 pi / 2^17 for a 17-bit encoder on the joint; 0 = exact. Read '
     'only where the states carry no velocities: any count > 0 estimates them on the longest '
-    'window the counts allow (at rest a step of one count moves the estimate 16 times less '
-    'than the one-period low-pass used for exact positions, so the damping shakes the '
-    'torque less; docs/ros.md, "On a real robot").', read_only=True,
+    'window the counts allow, and 0 while a joint stays within one count of its last 16 '
+    'states (the one-period low-pass used for exact positions moves by 0.63 count per period '
+    'at each step of a count, and the damping shakes the torque with it; docs/ros.md, "On a '
+    'real robot").', read_only=True,
     size='n', bounds=(0.0, inf), default_text=JOINT_ZEROS_TEXT)
 PER_JOINT_STRUCTURE = (ARMATURE, POSITION_RESOLUTION)
 STRUCTURE = (

@@ -424,9 +424,14 @@ class WindowedVelocityEstimator:
     the window grows and a step of one count moves the estimate by ``count / (m h)``, not by
     the ``0.63 count / h`` of the one-period low-pass of :class:`VelocityEstimator`; where the
     joint accelerates the window shrinks, down to the last difference (``m`` = 1), so the lag
-    stays at most what the count allows. A joint of resolution 0 (exact positions) gets the
-    last difference. Times are the states' own, so an irregular rate is allowed for. Plain
-    floats: on the tick's path, numpy's call overhead on a few joints costs more.
+    stays at most what the count allows. A joint whose newest position is within one count of
+    every state of the window reads 0: a joint at rest explains those counts, as one hopping
+    between two counts about a goal between them (the end-fit line would read
+    ``count / (m h)`` on each hop, and the damping turn that into a torque that shakes at
+    rest); a creep slower than a count a window reads 0 with it. A joint of resolution 0
+    (exact positions) gets the last difference. Times are the states' own, so an irregular rate
+    is allowed for. Plain floats: on the tick's path, numpy's call overhead on a few joints
+    costs more.
 
     As :class:`VelocityEstimator`: the first state, and the first after a gap longer than
     ``max_gap_s``, give 0; a state whose time is not after the last one's leaves the estimate
@@ -471,6 +476,12 @@ class WindowedVelocityEstimator:
         v = self._v
         for j in range(self.n):
             band, x = self._band[j], newest[j]
+            for i in range(1, k + 1):
+                if not -band <= x - states[i][j] <= band:
+                    break  # a count or more from the newest: it may move
+            else:
+                v[j] = 0.0  # at rest as far as the counts tell (and the first state)
+                continue
             # a line of slope s passes within the band of the state i back if s lies between
             # (rise_i - band) / back_i and (rise_i + band) / back_i; window m needs that of
             # every state inside it (i < m): the running bounds of the states before

@@ -139,16 +139,19 @@ def test_states_without_velocities_are_estimated_and_said_once():
 
 
 def test_an_encoders_count_is_estimated_on_its_window_and_said_so():
-    """With position_resolution one count at rest moves the estimate count / (16 h)."""
+    """With position_resolution a count from rest reads 0, two in 16 states count / (8 h)."""
     count = 1e-4
     ctl = controller(position_resolution=(count,) * 3)
     logs = []
     for k in range(21):
-        logs += tick(ctl, (0.0, 0.5 + (count if k == 20 else 0.0), 0.0), (k + 1) * MS, qdot=(),
+        steps = 0 if k < 12 else 1 if k < 20 else 2
+        logs += tick(ctl, (0.0, 0.5 + steps * count, 0.0), (k + 1) * MS, qdot=(),
                      stamp_ns=1_000_000_000 + MS * k).logs
+        if k == 12:
+            assert ctl.last_qdot[1] == 0.0  # one count: at rest, as far as the count tells
     [line] = texts(logs, Severity.WARN)
     assert 'on the longest window of up to 16 states that position_resolution allows' in line
-    assert ctl.last_qdot[1] == pytest.approx(count / 16e-3) and ctl.last_qdot[0] == 0.0
+    assert ctl.last_qdot[1] == pytest.approx(count / 8e-3) and ctl.last_qdot[0] == 0.0
 
 
 def test_the_watchdog_trips_once_and_states_coming_back_say_so():

@@ -103,17 +103,30 @@ def _counted(x: float) -> float:
     return round(x / COUNT) * COUNT
 
 
-def test_an_encoder_count_at_rest_moves_the_windowed_estimate_by_a_sixteenth():
-    """One count after 20 states at rest: count / (16 h), not the low-pass's 0.63 count / h."""
+def test_a_count_from_rest_reads_0_and_a_creep_of_two_counts_a_window_is_found():
+    """
+    A count from rest reads 0 (a joint at rest explains it); two in the window: their slope.
+
+    The one-period low-pass moves by 0.63 count / h on the first count. A joint hopping
+    between two counts, as about a goal that lies between them, reads 0 throughout.
+    """
     windowed = WindowedVelocityEstimator([COUNT, COUNT], max_gap_s=0.01)
     low_pass = VelocityEstimator(2, 1e-3, 0.01)
     for k in range(21):
         q = [0.0 if k < 20 else COUNT, 0.0]
         v, w = windowed.update(q, k * 1_000_000), low_pass.update(q, k * 1_000_000)
-    assert v[0] == pytest.approx(COUNT / 16e-3) and v[1] == 0.0
+    assert v == [0.0, 0.0]
     assert w[0] == pytest.approx((1.0 - math.exp(-1.0)) * COUNT / 1e-3)
-    # back to the count before: every window fits the line through both ends, slope 0
-    assert windowed.update([0.0, 0.0], 21_000_000)[0] == pytest.approx(0.0, abs=1e-12)
+    for k in range(21, 60):  # hops between the two counts, at irregular ticks
+        hop = COUNT if k % 3 == 0 or k % 7 == 0 else 0.0
+        assert windowed.update([hop, 0.0], k * 1_000_000) == [0.0, 0.0]
+    for k in range(60, 88):  # at rest, then a creep of a count every 8 ticks
+        windowed.update([0.0 if k < 80 else COUNT, 0.0], k * 1_000_000)
+    v = windowed.update([2.0 * COUNT, 0.0], 88_000_000)
+    assert v[0] == pytest.approx(COUNT / 8e-3) and v[1] == 0.0  # two counts in 16 ticks
+    for k in range(89, 105):  # ... and once the rest has left the window, a creep of a
+        windowed.update([2.0 * COUNT, 0.0], k * 1_000_000)  # count every 17 ticks reads 0
+    assert windowed.update([3.0 * COUNT, 0.0], 105_000_000) == [0.0, 0.0]
 
 
 def test_the_windowed_estimate_follows_a_steady_speed_and_shortens_its_window_to_accelerate():
@@ -136,9 +149,10 @@ def test_the_windowed_estimate_follows_a_steady_speed_and_shortens_its_window_to
 def test_the_windowed_estimate_restarts_after_a_gap_and_ignores_old_states():
     est = WindowedVelocityEstimator([COUNT], max_gap_s=0.01)
     assert est.update([0.0], 0) == [0.0]
-    v = est.update([COUNT], 1_000_000)
-    assert v == [pytest.approx(COUNT / 1e-3)]  # the one difference there is
-    assert est.update([5.0], 1_000_000) == v and est.update([5.0], 500_000) == v
+    assert est.update([COUNT], 1_000_000) == [0.0]  # a count: at rest as far as it tells
+    v = est.update([3 * COUNT], 2_000_000)
+    assert v == [pytest.approx(1.5 * COUNT / 1e-3)]  # the line to the first state
+    assert est.update([5.0], 2_000_000) == v and est.update([5.0], 500_000) == v
     assert est.update([0.2], 100_000_000) == [0.0]  # 99 ms later: restart at 0
     # an irregular rate: the states' own times
     assert est.update([0.2 + 2 * COUNT], 102_500_000)[0] == pytest.approx(2 * COUNT / 2.5e-3)
@@ -158,7 +172,7 @@ def test_exact_positions_keep_the_low_pass_and_a_bad_resolution_is_refused():
 def test_the_state_check_estimates_on_the_window_its_resolution_allows():
     check = StateCheck(('a', 'b'), max_age_s=0.0, rate_hz=1000.0,
                        position_resolution=(COUNT, COUNT))
-    for k in range(21):
-        _, qdot = check(['b', 'a'], [0.0, 0.0 if k < 20 else COUNT], [], 0,
+    for k in range(21):  # 'a' creeps a count every 8 states
+        _, qdot = check(['b', 'a'], [0.0, COUNT * (0 if k < 12 else 1 if k < 20 else 2)], [], 0,
                         NOW_NS + k * 1_000_000)
-    assert qdot == [pytest.approx(COUNT / 16e-3), 0.0] and check.estimating
+    assert qdot == [pytest.approx(COUNT / 8e-3), 0.0] and check.estimating
