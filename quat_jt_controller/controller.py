@@ -257,7 +257,12 @@ class Controller:
             how = (f'finite differences, low-pass of time constant {1e3 / rate:g} ms = one '
                    f'period at state_rate {rate:g} Hz; from an encoder, give its count as '
                    'position_resolution')
-        return ('joint_states carry no velocities: estimating them from the positions and '
+        unmeasured = self._check_state.unmeasured
+        what = (f"joint_states carry NaN velocities for {list(unmeasured)} (ros2_control's "
+                'joint_state_broadcaster publishes NaN where the hardware has no velocity '
+                'state interface): estimating them' if unmeasured else
+                'joint_states carry no velocities: estimating them')
+        return (what + ' from the positions and '
                 + ('their stamps' if stamp_ns else 'their arrival times (no stamps)')
                 + f' ({how}); a driver that publishes velocities gives better damping')
 

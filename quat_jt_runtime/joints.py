@@ -6,7 +6,7 @@ controller's tick input from a joint state: the controlled joints picked by name
 checked, continuous joints unwrapped, and the velocities estimated when a driver sends none.
 """
 from collections import deque
-from math import exp, inf, isfinite, pi
+from math import exp, inf, isfinite, isinf, pi
 from typing import Optional, Sequence
 from xml.etree import ElementTree
 
@@ -309,7 +309,10 @@ class StateLayout:
         Return (q, qdot) of the controlled joints, in ``joint_names`` order.
 
         With ``velocity_required`` False, a state without velocities (an empty list) gives
-        qdot None; a velocity list of another length is still refused.
+        qdot None, and a NaN velocity is passed on as NaN: ros2_control's
+        joint_state_broadcaster publishes NaN for a joint whose hardware has no velocity state
+        interface, so NaN there means "not measured", for the caller to estimate. A velocity
+        list of another length, or an infinite velocity, is still refused.
         """
         index = self._index(names)
         if isinstance(index, str):
@@ -321,15 +324,17 @@ class StateLayout:
                              + ('velocities' if velocity_required else 'velocities, if any')
                              + ', one per name)')
         q = [position[i] for i in index]
+        total = sum(q)
+        if total - total != 0.0:
+            raise ValueError(f'non-finite position: q = {q}')
         if not len(velocity):
-            total = sum(q)
-            if total - total != 0.0:
-                raise ValueError(f'non-finite position: q = {q}')
             return q, None
         qdot = [velocity[i] for i in index]
-        total = sum(q) + sum(qdot)
-        if total - total != 0.0:
-            raise ValueError(f'non-finite position or velocity: q = {q}, qdot = {qdot}')
+        total = sum(qdot)
+        if total - total != 0.0 and (velocity_required or any(isinf(v) for v in qdot)):
+            raise ValueError(f'non-finite velocity: qdot = {qdot}'
+                             + ('' if velocity_required else
+                                ' (NaN marks a velocity not measured; Inf is refused)'))
         return q, qdot
 
 
@@ -560,11 +565,14 @@ class StateCheck:
     Calling it returns (q, qdot) of the controlled joints, or raises ValueError saying why no
     command may be computed from the state (:class:`StaleState` if it is the stamp). Names may
     come in any order and with other joints (a gripper's). A state without velocities (an
-    empty ``velocity``, as some drivers publish) gets them from :func:`velocity_estimator`
-    (for ``position_resolution``, a count per joint, 0: exact), on the states' stamps, or on
-    the time they arrived when they are not stamped; :attr:`estimating` says so of the last
-    state. The angles of the joints flagged ``continuous`` (no stops) are unwrapped: a driver
-    that reports them within (-pi, pi] gives a q that does not jump by a turn.
+    empty ``velocity``, as some drivers publish, or NaN for a joint, as ros2_control's
+    joint_state_broadcaster publishes where the hardware has no velocity interface) gets them
+    from :func:`velocity_estimator` (for ``position_resolution``, a count per joint, 0:
+    exact), on the states' stamps, or on the time they arrived when they are not stamped;
+    :attr:`estimating` says so of the last state, and :attr:`unmeasured` names the joints
+    whose velocities came as NaN (empty where none came at all). The angles of the joints
+    flagged ``continuous`` (no stops) are unwrapped: a driver that reports them within
+    (-pi, pi] gives a q that does not jump by a turn.
     """
 
     def __init__(self, joint_names: Sequence[str], max_age_s: float,
@@ -581,7 +589,8 @@ class StateCheck:
         self._last_q: Optional[list[float]] = None
         # a gap of more than 10 periods restarts the estimate (a lost connection, a pause)
         self._estimator = velocity_estimator(n, rate, position_resolution)
-        self.estimating = False  # the last state came without velocities
+        self.estimating = False  # the last state came without velocities, or with NaN ones
+        self.unmeasured: tuple[str, ...] = ()  # ... the joints whose velocities were NaN
 
     def __call__(self, names: Sequence[str], position: Sequence[float],
                  velocity: Sequence[float], stamp_ns: int,
@@ -598,9 +607,18 @@ class StateCheck:
                     q[j] = last[j] + wrapped(q[j] - last[j])
             self._last_q = q
         if qdot is None:
+            self.estimating, self.unmeasured = True, ()
+            return q, self._estimator.update(q, stamp_ns or now_ns)
+        total = sum(qdot)
+        if total != total:  # NaN: velocities the hardware does not measure (no Inf here)
             self.estimating = True
-            qdot = self._estimator.update(q, stamp_ns or now_ns)
+            estimate = self._estimator.update(q, stamp_ns or now_ns)
+            missing = [j for j, v in enumerate(qdot) if v != v]
+            for j in missing:
+                qdot[j] = estimate[j]
+            names = self._layout.joint_names
+            self.unmeasured = tuple(names[j] for j in missing)
         elif self.estimating:  # velocities again: the next state without starts afresh
-            self.estimating = False
+            self.estimating, self.unmeasured = False, ()
             self._estimator.reset()
         return q, qdot

@@ -138,6 +138,22 @@ def test_states_without_velocities_are_estimated_and_said_once():
     assert 0.0 < ctl.last_qdot[1] <= 0.5 and ctl.last_qdot[0] == 0.0
 
 
+def test_nan_velocities_of_ros2_control_are_estimated_and_said_once_by_joint():
+    """joint_state_broadcaster's NaN for a joint without a velocity interface: estimated."""
+    ctl = controller(state_rate_hz=500.0)
+    logs = []
+    for k in range(10):
+        logs += tick(ctl, (0.0, 0.5 + 0.001 * k, 0.0), (k + 1) * MS,
+                     qdot=(0.0, math.nan, math.nan), stamp_ns=1_000_000_000 + 2 * MS * k).logs
+    [line] = texts(logs, Severity.WARN)
+    assert line.startswith("joint_states carry NaN velocities for ['joint2', 'joint3'] "
+                           "(ros2_control's joint_state_broadcaster publishes NaN where the "
+                           'hardware has no velocity state interface): estimating them from '
+                           'the positions and their stamps')
+    assert 0.0 < ctl.last_qdot[1] <= 0.5 and ctl.last_qdot[0] == 0.0
+    assert ctl.counters.rejected_states == 0
+
+
 def test_an_encoders_count_is_estimated_on_its_window_and_said_so():
     """With position_resolution a count from rest reads 0, two in 16 states count / (8 h)."""
     count = 1e-4

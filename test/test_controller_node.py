@@ -424,6 +424,19 @@ def test_bad_joint_states_are_rejected(rig, model, case):
                  'a rejection log')
 
 
+def test_nan_velocities_from_ros2_control_are_estimated_not_rejected(rig, model):
+    """joint_state_broadcaster's NaN velocities (no velocity interface): commands, said once."""
+    h, plant = rig
+    set_potential(h, 'tanh')
+    send_goal(h, plant, model, GOAL_XYZW, gains())
+    n0 = len(plant.commands)
+    q, nan = (0.2, 0.3, 0.1), float('nan')
+    plant.command_for(q, v=(nan, nan, nan))
+    assert close(plant.command_for(q, v=(nan, nan, nan)), expected(model, q))  # at rest: 0
+    assert len(plant.commands) == n0 + 2
+    h.wait_log("joint_states carry NaN velocities for ['joint1', 'joint2', 'joint3']")
+
+
 def test_state_timeout_zeroes_the_command_and_resumes(rig, model):
     h, plant = rig
     set_potential(h, 'tanh')

@@ -69,6 +69,30 @@ def test_the_state_check_estimates_velocities_when_a_driver_sends_none():
         check(['a', 'b'], [1.0, math.nan], [], NOW_NS, NOW_NS)
 
 
+def test_nan_velocities_as_ros2_control_publishes_them_are_estimated_joint_by_joint():
+    """
+    joint_state_broadcaster fills a velocity the hardware has no interface for with NaN.
+
+    Those joints get the estimate, the others keep what the driver measured; Inf is refused.
+    """
+    check = StateCheck(('a', 'b'), max_age_s=0.5, rate_hz=100.0)
+    nan = math.nan
+    q, qdot = check(['b', 'gripper', 'a'], [2.0, 0.0, 1.0], [nan, nan, nan], NOW_NS, NOW_NS)
+    assert (q, qdot) == ([1.0, 2.0], [0.0, 0.0]) and check.estimating
+    assert check.unmeasured == ('a', 'b')
+    q, qdot = check(['b', 'gripper', 'a'], [2.01, 0.0, 1.0], [nan, nan, 0.7],
+                    NOW_NS + 10_000_000, NOW_NS + 10_000_000)
+    assert qdot[0] == 0.7 and qdot[1] == pytest.approx(1.0 * (1.0 - math.exp(-1.0)))
+    assert check.unmeasured == ('b',) and check.estimating
+    q, qdot = check(['a', 'b'], [1.0, 2.0], [0.5, 0.25], NOW_NS, NOW_NS)  # all measured again
+    assert qdot == [0.5, 0.25] and not check.estimating and check.unmeasured == ()
+    with pytest.raises(ValueError, match=r'non-finite velocity: qdot = \[0.5, inf\] \(NaN '
+                                         'marks a velocity not measured; Inf is refused'):
+        check(['a', 'b'], [1.0, 2.0], [0.5, math.inf], NOW_NS, NOW_NS)
+    with pytest.raises(ValueError, match='non-finite position'):
+        check(['a', 'b'], [1.0, nan], [nan, nan], NOW_NS, NOW_NS)
+
+
 def test_unstamped_states_without_velocities_use_their_arrival_time():
     check = StateCheck(('a',), max_age_s=0.0, rate_hz=1000.0)
     check(['a'], [0.0], [], 0, NOW_NS)

@@ -92,10 +92,20 @@ def test_state_layout_maps_names_and_rejects_bad_states():
             (['joint1', 'joint1', 'joint2', 'joint3'], [0.0] * 4, [0.0] * 4, 'repeat'),
             (['joint1', 'joint3'], [0.0] * 2, [0.0] * 2, "missing controlled joint(s) ['joint2']"),
             (['joint1', 'joint2', 'joint3'], [0.0] * 3, [], '3 names but 3 positions and 0'),
-            (['joint1', 'joint2', 'joint3'], [0.0, math.nan, 0.0], [0.0] * 3, 'non-finite')):
+            (['joint1', 'joint2', 'joint3'], [0.0, math.nan, 0.0], [0.0] * 3,
+             'non-finite position'),
+            (['joint1', 'joint2', 'joint3'], [0.0] * 3, [0.0, math.nan, 0.0],
+             'non-finite velocity')):
         with pytest.raises(ValueError) as exc:
             layout.extract(names, pos, vel)
         assert words in str(exc.value)
+    # velocities not required: NaN (not measured) passes for the caller to estimate, Inf not
+    q, v = layout.extract(['joint1', 'joint2', 'joint3'], [0.0] * 3, [0.1, math.nan, 0.3],
+                          velocity_required=False)
+    assert v[0] == 0.1 and math.isnan(v[1]) and v[2] == 0.3
+    with pytest.raises(ValueError, match='Inf is refused'):
+        layout.extract(['joint1', 'joint2', 'joint3'], [0.0] * 3, [0.1, -math.inf, 0.3],
+                       velocity_required=False)
 
 
 def test_movable_joints_one_definition():
