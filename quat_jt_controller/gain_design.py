@@ -500,7 +500,9 @@ def design(model: RobotModel, task: cl.Task, rate_hz: float = 1000.0,
             f'{[round(100.0 * unheld[j]) for j in weak]}% of {SURVEY} random configurations '
             f'within the limits (up to {np.round(data["gravity_max"][weak], 3).tolist()} N m): '
             'check the effort limits of the URDF, and that gravity is along -z of the base '
-            f'link {model.base_link!r} (give --base-link a level link)')
+            f'link {model.base_link!r} (give --base-link a level link). An arm that a spring '
+            "or a counterweight holds up (the PR2's) needs that in its URDF: this design and "
+            "the controller's g(q) take the drives to carry the arm's weight")
     # gravity is spoken for, up to GRAVITY_RESERVE_SHARE of the effort (gravity_warnings)
     reserve = np.minimum(data['gravity_max'], GRAVITY_RESERVE_SHARE * effort)
     budget = TORQUE_SHARE * (effort - reserve - friction - learning)

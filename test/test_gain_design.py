@@ -253,8 +253,9 @@ def test_an_arm_that_cannot_hold_itself_everywhere_is_designed_with_a_warning():
         20.0 * (1.0 - gd.GRAVITY_RESERVE_SHARE))
     np.testing.assert_allclose(weak.figures['budget_nm'][2:], stock.figures['budget_nm'][2:])
     with pytest.raises(ValueError, match=r'cannot hold itself up in most of its configurations: '
-                       r"joints \['joint2'\] need more"):
+                       r"joints \['joint2'\] need more") as refused:
         gd.design(model, cl.Task.POSE, effort_limits_nm=[50.0, 5.0, 32.0, 32.0, 32.0, 20.0])
+    assert 'An arm that a spring or a counterweight holds up' in str(refused.value)
 
 
 def test_a_goal_configuration_gain_held_below_the_factor_is_named():
