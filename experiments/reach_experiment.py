@@ -783,13 +783,13 @@ def arm_robot(name: str, urdf_path: str, base_link: Optional[str], tip_link: Opt
 def arm_design(robot: Robot, told_armature: float, rate_hz: float,
                friction_effort_share: Optional[float] = None,
                approach_time_s: Optional[float] = None,
-               cruise_fraction: Optional[float] = None):
+               cruise_fraction: Optional[float] = None, delays: tuple = (1,)):
     """
     Return ``(model, design)``: ``design_gains``' Python API on the URDF + the armature.
 
     ``friction_effort_share`` is design_gains' ``--friction-effort-share`` (None: its default),
     ``approach_time_s`` its ``--approach-time`` (None: none), ``cruise_fraction`` its
-    ``--cruise-fraction`` (None: its default).
+    ``--cruise-fraction`` (None: its default), ``delays`` its ``--delays`` (ticks).
     """
     from quat_jt_controller import gain_design
     urdf = robot_urdf(robot)
@@ -798,7 +798,8 @@ def arm_design(robot: Robot, told_armature: float, rate_hz: float,
     share = (gain_design.DEFAULT_FRICTION_EFFORT_SHARE if friction_effort_share is None
              else friction_effort_share)
     fraction = gain_design.CRUISE_FRACTION if cruise_fraction is None else cruise_fraction
-    return model, gain_design.design(model, robot.task, rate_hz, friction_effort_share=share,
+    return model, gain_design.design(model, robot.task, rate_hz, delays=tuple(delays),
+                                     friction_effort_share=share,
                                      approach_time_s=approach_time_s, cruise_fraction=fraction)
 
 
@@ -808,7 +809,7 @@ def run_arm(robot: Robot, cond: Condition, potential: str, count: int, seed: int
             friction_effort_share: Optional[float] = None,
             overrides: Optional[dict] = None,
             approach_time_s: Optional[float] = None,
-            cruise_fraction: Optional[float] = None) -> list:
+            cruise_fraction: Optional[float] = None, design_delays: tuple = (1,)) -> list:
     """
     Run ``count`` cases of an arm from its URDF in condition ``cond``; their outcomes.
 
@@ -817,11 +818,11 @@ def run_arm(robot: Robot, cond: Condition, potential: str, count: int, seed: int
     hidden), with ``cond``'s rotor inertia and Coulomb friction; the control period is
     1 / ``rate_hz``. ``overrides`` replace parameters of the design, by their ROS names
     (validated as the node does; ShapingError or GainsError names a bad one);
-    ``friction_effort_share``, ``approach_time_s`` and ``cruise_fraction`` are design_gains'
-    options (:func:`arm_design`).
+    ``friction_effort_share``, ``approach_time_s``, ``cruise_fraction`` and ``design_delays``
+    (its ``--delays``) are design_gains' options (:func:`arm_design`).
     """
     model, d = arm_design(robot, cond.told_armature, float(rate_hz), friction_effort_share,
-                          approach_time_s, cruise_fraction)
+                          approach_time_s, cruise_fraction, tuple(design_delays))
     n = model.n
     gains, shaping = d.gains(potential), d.shaping
     if overrides:  # as a node would take the design's file with these values
@@ -934,6 +935,10 @@ def main(argv: Optional[list] = None) -> int:
                      help="design_gains' --approach-time, s (default: none)")
     arm.add_argument('--cruise-fraction', type=float, default=None,
                      help="design_gains' --cruise-fraction (default: its default)")
+    arm.add_argument('--design-delays', type=int, nargs='+', default=[1],
+                     help="design_gains' --delays: the ticks of delay the design checks its "
+                     'sampled loop with, and one more (default: 1; --delay is the '
+                     "plant's)")
     args = parser.parse_args(argv)
     if args.workers is not None and args.workers < 1:
         parser.error(f'--workers must be >= 1, got {args.workers}')
@@ -1002,6 +1007,9 @@ def main_arm(parser: argparse.ArgumentParser, args, overrides: dict) -> int:
             if not (math.isfinite(value) and value >= 0.0):
                 raise ValueError(f'{name} must be finite and >= 0, got {value}')
         encoder_resolution_rad(args.encoder_bits)
+        if not all(0 <= d <= MAX_DELAY_TICKS for d in args.design_delays):
+            raise ValueError(f'--design-delays must be in [0, {MAX_DELAY_TICKS}] ticks, got '
+                             f'{args.design_delays}')
         robot = arm_robot(args.name or args.example_robot or Path(path).stem, str(path),
                           args.base_link, args.tip_link, cl.Task(args.task),
                           args.fraction if args.fraction is not None else 0.8,
@@ -1016,7 +1024,8 @@ def main_arm(parser: argparse.ArgumentParser, args, overrides: dict) -> int:
             t0 = time.monotonic()
             try:  # design_gains may refuse the arm, and says why (cached: run_arm reuses it)
                 arm_design(robot, cond.told_armature, float(args.rate),
-                           args.friction_effort_share, args.approach_time, args.cruise_fraction)
+                           args.friction_effort_share, args.approach_time, args.cruise_fraction,
+                           tuple(args.design_delays))
             except ValueError as exc:
                 parser.error(f'design_gains: {exc}')
             try:
@@ -1025,7 +1034,8 @@ def main_arm(parser: argparse.ArgumentParser, args, overrides: dict) -> int:
                                    ray_address=args.ray_address,
                                    friction_effort_share=args.friction_effort_share,
                                    overrides=overrides, approach_time_s=args.approach_time,
-                                   cruise_fraction=args.cruise_fraction)
+                                   cruise_fraction=args.cruise_fraction,
+                                   design_delays=tuple(args.design_delays))
             except (cl.GainsError, sh.ShapingError) as exc:
                 parser.error(f'--param: {exc}')
             label = ', '.join([potential, cond.describe(), args.engine]

@@ -280,22 +280,29 @@ def test_an_arm_the_design_refuses_is_one_line_not_a_traceback(tmp_path, capsys)
 
 @pytest.mark.unit
 def test_the_design_options_reach_the_design_and_a_bad_one_is_one_line(tmp_path, capsys):
-    """``--approach-time`` and ``--cruise-fraction`` are design_gains', checked by it."""
+    """``--approach-time``, ``--cruise-fraction``, ``--design-delays``: design_gains'."""
     path = tmp_path / 'arm.urdf'
     path.write_text(small_arm_urdf(('revolute',) * 4))  # 3 rad/s: a cruise of 1.8 rad/s
     robot = rx.arm_robot('small', str(path), None, None, cl.Task.ORIENTATION)
-    assert rx.arm_design(robot, 0.0, 1000.0)[1].shaping.configuration_ramp_rad == 0.25
+    one = rx.arm_design(robot, 0.0, 1000.0)[1]
+    assert one.shaping.configuration_ramp_rad == 0.25 and one.figures['delays'] == (1,)
     assert rx.arm_design(robot, 0.0, 1000.0, None, 0.1)[1].shaping.configuration_ramp_rad == (
         pytest.approx(0.18))
+    three = rx.arm_design(robot, 0.0, 1000.0, None, None, None, (3,))[1]
+    assert three.figures['delays'] == (3,)  # checked at 3 and 4 ticks: less damping allowed
+    assert three.shaping.inertial_damping_rate_per_s < one.shaping.inertial_damping_rate_per_s
     for option, value, words in (
-            ('--approach-time', '-1', 'approach_time_s must be finite and > 0, got -1.0'),
-            ('--cruise-fraction', '1.5', 'cruise_fraction must be in (0, 1], got 1.5')):
+            ('--approach-time', '-1', 'design_gains: approach_time_s must be finite and > 0, '
+                                      'got -1.0'),
+            ('--cruise-fraction', '1.5', 'design_gains: cruise_fraction must be in (0, 1], '
+                                         'got 1.5'),
+            ('--design-delays', '-1', '--design-delays must be in [0, 10] ticks, got [-1]')):
         with pytest.raises(SystemExit) as exit_info:
             rx.main(['--urdf', str(path), '--task', 'orientation', '--cases', '1',
                      '--workers', '1', option, value])
         assert exit_info.value.code == 2
         err = capsys.readouterr().err
-        assert f'error: design_gains: {words}' in err and 'Traceback' not in err, err
+        assert f'error: {words}' in err and 'Traceback' not in err, err
 
 
 class _Slide:
