@@ -156,6 +156,7 @@ class Controller:
         self.last_qdot: Optional[list[float]] = None
         self.last_state_ns = 0  # the last valid state (steady_ns); 0: none yet
         self.stopped = False  # commanding zeros after a state timeout
+        self.command_refusal = ''  # why no command is published, if one is not (refuse_commands)
         self._tick_clock = 0  # the clock of the last state's time: 1 its stamp, 2 its arrival
         self._tick_ns = 0  # ... and that time (ns)
         self._said_estimating = False
@@ -246,7 +247,7 @@ class Controller:
             self._decimation = 0
             feedback = self._published_quaternion(out.R_tip_base)
         due, self._diagnostics_due = self._diagnostics_due, False
-        return Command(out.tau_nm, out, feedback, due, logs)
+        return Command(None if self.command_refusal else out.tau_nm, out, feedback, due, logs)
 
     def _estimating(self, stamp_ns: int) -> str:
         rate = self.state_rate_hz
@@ -316,6 +317,30 @@ class Controller:
         return Command(list(self._zero), logs=(LogLine(Severity.ERROR, (
             f'no valid joint_states for {silent_ns * 1e-9:.3f} s (> state_timeout '
             f'{self.state_timeout_s} s): published zero torque, waiting for states')),))
+
+    def refuse_commands(self, reason: str) -> Optional[Command]:
+        """
+        Stop commanding torque for ``reason`` (a receiver that would misapply it).
+
+        Returns a zero command, once, with an ERROR: a receiver that holds its last command
+        (ros2_control's JointGroupEffortController has no timeout) holds zero. The ticks go
+        on (feedback, /diagnostics, the watchdog) but publish nothing until
+        :meth:`allow_commands`. A new reason is logged again, with no second zero.
+        """
+        if reason == self.command_refusal:
+            return None
+        first = not self.command_refusal
+        self.command_refusal = reason
+        return Command(list(self._zero) if first else None,
+                       logs=(LogLine(Severity.ERROR, reason),))
+
+    def allow_commands(self) -> tuple[LogLine, ...]:
+        """Command torque again after :meth:`refuse_commands`; say so (nothing if not refused)."""
+        if not self.command_refusal:
+            return NO_LOGS
+        self.command_refusal = ''
+        return (LogLine(Severity.INFO, 'the command receivers now take the joints in this '
+                        "controller's order: commanding torque again"),)
 
     def no_state_yet(self, steady_ns: int) -> Optional[float]:
         """
@@ -453,7 +478,8 @@ class Controller:
         ready = checker is not None and checker.ready
         return [
             ('control loop', *diagnostics.loop_status(
-                figures, not self.last_state_ns, self.stopped, self.counters, graph_warnings)),
+                figures, not self.last_state_ns, self.stopped, self.counters, graph_warnings,
+                self.command_refusal)),
             ('goal', *diagnostics.goal_status(
                 self.goal_source, regulator.goal, self.goal_warning, self.last, self.last_qdot,
                 self.has_position, self.counters, unavailable, ready,

@@ -21,7 +21,7 @@ from quat_jt_controller.controller import Command, Controller, GoalRequest, LogL
 from quat_jt_controller.goal_check import GoalCheckWorker, ModelSpec
 from quat_jt_controller.model import ModelError, RobotModel
 from quat_jt_controller.regulator import Regulator
-from quat_jt_controller.reports import Diagnostics, Feedback, GoalPose
+from quat_jt_controller.reports import CommandReceivers, Diagnostics, Feedback, GoalPose
 from quat_jt_runtime import lifecycle
 from quat_jt_runtime.loop_stats import TickStats
 from quat_jt_runtime.params import declare_realtime, history_qos
@@ -76,6 +76,8 @@ class QuatJtController(Node):
         self._goal_pose = GoalPose(self, cfg.base_link, cfg.task.has_position)
         self._diagnostics = Diagnostics(self, cfg.tip_link, self._cmd_pub.topic_name, ctl,
                                         self.stats)
+        self._receivers = CommandReceivers(self, self._cmd_pub.topic_name, model.joint_names,
+                                           self._on_receivers)
         self._state_sub = self.create_subscription(
             JointState, 'joint_states', self._on_joint_state, 10)
         self.create_subscription(PoseStamped, '~/target_pose', self._on_target_pose, 10)
@@ -159,9 +161,22 @@ class QuatJtController(Node):
         if cmd is not None:
             self._publish(cmd)
 
+    def _on_receivers(self, problems: list) -> None:
+        """Stop commanding while a receiver would apply torques to the wrong joints."""
+        if problems:
+            cmd = self.controller.refuse_commands('; '.join(problems))
+            if cmd is not None:
+                if cmd.tau_nm is not None:
+                    self._publish(cmd)
+                else:
+                    self._log(cmd.logs)
+        else:
+            self._log(self.controller.allow_commands())
+
     def _on_diagnostics_timer(self) -> None:
-        """Read the graph; publish /diagnostics now, or after the next command."""
+        """Read the graph (and the command receivers' joints); publish /diagnostics."""
         self._diagnostics.check_graph()
+        self._receivers.check()
         if self.controller.on_diagnostics_timer(steady_ns()):
             self._diagnostics.publish()
 

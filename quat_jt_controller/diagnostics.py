@@ -48,6 +48,30 @@ def graph_warnings(command_topic: str, command_publishers: int, node_name: str,
     return warnings
 
 
+def command_order_problem(joints: Sequence[str], receiver: str,
+                          theirs: Sequence[str]) -> str:
+    """
+    Say why ``receiver``'s joints cannot take this controller's commands ('' if they can).
+
+    A command is one torque per joint, in the order of the controller's ``joints``; a receiver
+    (ros2_control's JointGroupEffortController, the simulator) applies the i-th torque to the
+    i-th joint of its own ``joints`` parameter. Any other list sends torques to the wrong
+    joints.
+    """
+    ours, theirs = list(joints), list(theirs)
+    if theirs == ours:
+        return ''
+    if sorted(theirs) == sorted(ours):
+        how = 'the same joints in another order'
+    else:
+        missing = [j for j in ours if j not in theirs]
+        extra = [j for j in theirs if j not in ours]
+        how = f'other joints (without {missing}, with {extra})'
+    return (f'{receiver} applies the commands to joints {theirs}, this controller computes them '
+            f'for {ours}: {how}, so torques would go to the wrong joints. Commands stopped '
+            '(zero torque published once): give both the same joints in the same order')
+
+
 def no_state_warning(state_topic: str, waited_s: float, publishers: int, rejected: int) -> str:
     """
     Say that no valid joint state has come since start: on which topic, from how many publishers.
@@ -71,12 +95,20 @@ def no_state_warning(state_topic: str, waited_s: float, publishers: int, rejecte
 
 
 def loop_status(figures: dict, waiting: bool, stopped: bool, counters: Counters,
-                graph_warnings: Sequence[str] = ()) -> Status:
-    """Report the control loop: rate, timing, saturation, timeouts (TickStats.window figures)."""
+                graph_warnings: Sequence[str] = (), refusal: str = '') -> Status:
+    """
+    Report the control loop: rate, timing, saturation, timeouts (TickStats.window figures).
+
+    ``refusal``: why commands are stopped ('' when they are not): an ERROR.
+    """
     messages = []
     level = OK
+    if refusal:
+        level = ERROR
+        messages.append(refusal)
     if waiting:
-        level, messages = WARN, ['waiting for joint_states']
+        level = max(level, WARN)
+        messages.append('waiting for joint_states')
     elif stopped:
         level = ERROR
         messages.append('joint_states timed out: commanding zero torque')

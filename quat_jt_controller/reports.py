@@ -8,7 +8,7 @@ position tasks, ``~/position_error``; :class:`GoalPose` the goal in force on ``~
 the robot.
 """
 import time
-from typing import Optional, Sequence
+from typing import Callable, Optional, Sequence
 
 from diagnostic_msgs.msg import DiagnosticArray
 from geometry_msgs.msg import PoseStamped, Vector3Stamped
@@ -20,6 +20,9 @@ from quat_jt_runtime.description import LATCHED_QOS
 from quat_jt_runtime.loop_stats import TickStats
 from quat_jt_runtime.messages import diagnostic_array
 from quat_jt_runtime.throttle import cause, Throttle
+from rcl_interfaces.msg import ParameterType
+from rcl_interfaces.srv import GetParameters
+from rclpy.exceptions import InvalidServiceNameException
 from rclpy.node import Node
 
 
@@ -138,3 +141,80 @@ class Diagnostics:
             if self._graph_log(cause(warning)) is not None:
                 node.get_logger().warn(warning)
         self._graph_warnings = warnings
+
+
+class CommandReceivers:
+    """
+    Ask each node that subscribes to the command topic which joints it applies them to.
+
+    A command is one torque per joint in the controller's ``joints`` order; ros2_control's
+    JointGroupEffortController (and the simulator) apply the i-th torque to the i-th of their
+    own ``joints`` parameter. :meth:`check` runs on the graph timer, never in the state
+    callback: it lists the topic's subscribers and asks each new one for its ``joints`` (one
+    GetParameters client per node, its answer in a callback). A node without that parameter,
+    or without parameter services (a recorder, ``ros2 topic echo``), is left alone.
+    ``on_change`` gets the problems (``diagnostics.command_order_problem``) whenever they
+    change, and the receivers that agree are logged once.
+    """
+
+    def __init__(self, node: Node, command_topic: str, joints: Sequence[str],
+                 on_change: Callable[[list[str]], None]) -> None:
+        self._node, self._topic, self._joints = node, command_topic, tuple(joints)
+        self._on_change = on_change
+        self._clients: dict[str, object] = {}  # receiver -> its GetParameters client (or None)
+        self._asked: set[str] = set()  # ... asked, an answer pending or in
+        self._problems: dict[str, str] = {}  # ... answered, '' where its joints agree
+
+    def check(self) -> None:
+        """Read the topic's subscribers; ask the new ones; forget the ones gone."""
+        node = self._node
+        here = {_full_name(info.node_namespace, info.node_name)
+                for info in node.get_subscriptions_info_by_topic(self._topic)}
+        for name in here - set(self._clients):
+            try:
+                self._clients[name] = node.create_client(GetParameters,
+                                                         f'{name}/get_parameters')
+            except InvalidServiceNameException:  # a reader the graph names oddly (not ROS)
+                self._clients[name] = None
+        for name, client in self._clients.items():
+            if (name in here and name not in self._asked and client is not None
+                    and client.service_is_ready()):
+                self._asked.add(name)
+                request = GetParameters.Request(names=['joints'])
+                client.call_async(request).add_done_callback(
+                    lambda future, name=name: self._answered(name, future))
+        gone = set(self._clients) - here
+        for name in gone:
+            client = self._clients.pop(name)
+            if client is not None:
+                node.destroy_client(client)
+            self._asked.discard(name)
+        if gone & set(self._problems):
+            for name in gone:
+                self._problems.pop(name, None)
+            self._report()
+
+    def _answered(self, name: str, future) -> None:
+        """Compare a receiver's ``joints`` with the controller's."""
+        response = future.result() if future.done() and not future.cancelled() else None
+        if response is None or name not in self._clients or len(response.values) != 1:
+            return
+        value = response.values[0]
+        if value.type != ParameterType.PARAMETER_STRING_ARRAY:
+            return  # no joints parameter: not a receiver this check knows
+        problem = diagnostics.command_order_problem(self._joints, name,
+                                                    value.string_array_value)
+        if not problem:
+            self._node.get_logger().info(
+                f'{name} applies the commands to joints {list(value.string_array_value)}, '
+                "this controller's joints in its order")
+        self._problems[name] = problem
+        self._report()
+
+    def _report(self) -> None:
+        self._on_change([p for p in self._problems.values() if p])
+
+
+def _full_name(namespace: str, name: str) -> str:
+    """Return a node's fully qualified name from its namespace and name."""
+    return (namespace.rstrip('/') + '/' + name) if namespace else '/' + name

@@ -239,6 +239,38 @@ def test_the_statuses_report_the_loop_the_goal_and_the_stall():
     assert stall[1] == diagnostics.OK
 
 
+def test_a_receiver_with_other_joints_stops_the_commands_until_it_agrees():
+    """
+    A receiver that applies the torques to its joints in another order: zeros once, then none.
+
+    The ticks go on (the watchdog, the feedback); /diagnostics says why, as an ERROR.
+    """
+    assert diagnostics.command_order_problem(JOINTS, '/effort_controller', JOINTS) == ''
+    swapped = diagnostics.command_order_problem(JOINTS, '/effort_controller',
+                                                ['joint2', 'joint1', 'joint3'])
+    assert swapped.startswith("/effort_controller applies the commands to joints ['joint2', "
+                              "'joint1', 'joint3'], this controller computes them for "
+                              "['joint1', 'joint2', 'joint3']: the same joints in another order")
+    other = diagnostics.command_order_problem(JOINTS, '/sim', ['joint1', 'joint2', 'finger'])
+    assert "other joints (without ['joint3'], with ['finger'])" in other
+    ctl = controller()
+    assert tick(ctl, (0.0, 0.5, 0.0), MS).tau_nm is not None
+    stop = ctl.refuse_commands(swapped)
+    assert stop.tau_nm == [0.0, 0.0, 0.0] and texts(stop.logs, Severity.ERROR) == [swapped]
+    assert ctl.refuse_commands(swapped) is None  # the same problem: nothing more
+    refused = tick(ctl, (0.0, 0.5, 0.0), 2 * MS)
+    assert refused.tau_nm is None and refused.out is not None and ctl.has_state
+    figures = {'control_rate_hz': 0.0, 'ticks_in_window': 0, 'saturated_ticks': 0}
+    loop = ctl.statuses(figures)[0]
+    assert loop[1] == diagnostics.ERROR and swapped in loop[2]
+    again = ctl.refuse_commands(other)  # another problem: said, no second zero
+    assert again.tau_nm is None and texts(again.logs, Severity.ERROR) == [other]
+    [back] = texts(ctl.allow_commands(), Severity.INFO)
+    assert 'commanding torque again' in back and ctl.allow_commands() == ()
+    assert tick(ctl, (0.0, 0.5, 0.0), 3 * MS).tau_nm is not None
+    assert ctl.statuses(figures)[0][1] == diagnostics.OK
+
+
 def test_the_published_quaternion_keeps_its_hemisphere():
     ctl = controller(divider=1)
     ctl.on_goal(request(Goal(paper.Q_DESIRED)), 0)

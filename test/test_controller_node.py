@@ -437,6 +437,36 @@ def test_nan_velocities_from_ros2_control_are_estimated_not_rejected(rig, model)
     h.wait_log("joint_states carry NaN velocities for ['joint1', 'joint2', 'joint3']")
 
 
+def test_a_receiver_with_the_joints_in_another_order_stops_the_commands(rig, model):
+    """
+    An effort controller whose ``joints`` are in another order: zero torque once, an ERROR.
+
+    The controller asks each subscriber of its command topic for its ``joints`` parameter (as
+    ros2_control's JointGroupEffortController has one); once that receiver is gone it
+    commands again.
+    """
+    h, plant = rig
+    receiver = rclpy.create_node(
+        'effort_controller', context=h.context,
+        parameter_overrides=[Parameter('joints', value=['joint2', 'joint1', 'joint3'])],
+        automatically_declare_parameters_from_overrides=True)
+    receiver.create_subscription(Float64MultiArray, '/effort_controller/commands',
+                                 lambda msg: None, 10)
+    h.executor.add_node(receiver)
+    z0 = len(plant.zeros)
+    try:
+        line = h.wait_log("/effort_controller applies the commands to joints ['joint2', "
+                          "'joint1', 'joint3']", timeout=10.0)
+        assert 'the same joints in another order' in line and 'Commands stopped' in line
+        h.spin_until(lambda: len(plant.zeros) > z0, 5.0, 'the zero command')
+    finally:
+        h.executor.remove_node(receiver)
+        receiver.destroy_node()
+    h.wait_log('the command receivers now take the joints', timeout=10.0)
+    q = (0.2, 0.3, 0.1)
+    assert close(plant.command_for(q), expected(model, q))
+
+
 def test_state_timeout_zeroes_the_command_and_resumes(rig, model):
     h, plant = rig
     set_potential(h, 'tanh')
