@@ -151,10 +151,12 @@ class CommandReceivers:
     JointGroupEffortController (and the simulator) apply the i-th torque to the i-th of their
     own ``joints`` parameter. :meth:`check` runs on the graph timer, never in the state
     callback: it lists the topic's subscribers and asks each new one for its ``joints`` (one
-    GetParameters client per node, its answer in a callback). A node without that parameter,
-    or without parameter services (a recorder, ``ros2 topic echo``), is left alone.
-    ``on_change`` gets the problems (``diagnostics.command_order_problem``) whenever they
-    change, and the receivers that agree are logged once.
+    GetParameters client per node, its answer in a callback), and asks again each time a
+    receiver whose joints disagreed (reloaded with others under the same name, it may agree
+    now). A node without that parameter, or without parameter services (a recorder,
+    ``ros2 topic echo``), is left alone. ``on_change`` gets the problems
+    (``diagnostics.command_order_problem``) whenever they change, and the receivers that agree
+    are logged once.
     """
 
     def __init__(self, node: Node, command_topic: str, joints: Sequence[str],
@@ -162,8 +164,9 @@ class CommandReceivers:
         self._node, self._topic, self._joints = node, command_topic, tuple(joints)
         self._on_change = on_change
         self._clients: dict[str, object] = {}  # receiver -> its GetParameters client (or None)
-        self._asked: set[str] = set()  # ... asked, an answer pending or in
-        self._problems: dict[str, str] = {}  # ... answered, '' where its joints agree
+        self._pending: set[str] = set()  # ... asked, its answer not in yet
+        self._problems: dict[str, str] = {}  # ... answered: '' where its joints agree or it
+        # has none
 
     def check(self) -> None:
         """Read the topic's subscribers; ask the new ones; forget the ones gone."""
@@ -177,9 +180,9 @@ class CommandReceivers:
             except InvalidServiceNameException:  # a reader the graph names oddly (not ROS)
                 self._clients[name] = None
         for name, client in self._clients.items():
-            if (name in here and name not in self._asked and client is not None
-                    and client.service_is_ready()):
-                self._asked.add(name)
+            if (name in here and name not in self._pending and self._problems.get(name) != ''
+                    and client is not None and client.service_is_ready()):
+                self._pending.add(name)
                 request = GetParameters.Request(names=['joints'])
                 client.call_async(request).add_done_callback(
                     lambda future, name=name: self._answered(name, future))
@@ -188,7 +191,7 @@ class CommandReceivers:
             client = self._clients.pop(name)
             if client is not None:
                 node.destroy_client(client)
-            self._asked.discard(name)
+            self._pending.discard(name)
         if gone & set(self._problems):
             for name in gone:
                 self._problems.pop(name, None)
@@ -196,20 +199,24 @@ class CommandReceivers:
 
     def _answered(self, name: str, future) -> None:
         """Compare a receiver's ``joints`` with the controller's."""
+        self._pending.discard(name)
         response = future.result() if future.done() and not future.cancelled() else None
         if response is None or name not in self._clients or len(response.values) != 1:
-            return
+            return  # no answer: asked again at the next check
         value = response.values[0]
         if value.type != ParameterType.PARAMETER_STRING_ARRAY:
-            return  # no joints parameter: not a receiver this check knows
+            self._problems[name] = ''  # no joints parameter: not a receiver this check knows
+            return
         problem = diagnostics.command_order_problem(self._joints, name,
                                                     value.string_array_value)
         if not problem:
             self._node.get_logger().info(
                 f'{name} applies the commands to joints {list(value.string_array_value)}, '
                 "this controller's joints in its order")
+        changed = self._problems.get(name) != problem
         self._problems[name] = problem
-        self._report()
+        if changed:
+            self._report()
 
     def _report(self) -> None:
         self._on_change([p for p in self._problems.values() if p])

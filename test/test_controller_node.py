@@ -442,8 +442,8 @@ def test_a_receiver_with_the_joints_in_another_order_stops_the_commands(rig, mod
     An effort controller whose ``joints`` are in another order: zero torque once, an ERROR.
 
     The controller asks each subscriber of its command topic for its ``joints`` parameter (as
-    ros2_control's JointGroupEffortController has one); once that receiver is gone it
-    commands again.
+    ros2_control's JointGroupEffortController has one), again while it disagrees: once it
+    lists them in order (or is gone) the controller commands again.
     """
     h, plant = rig
     receiver = rclpy.create_node(
@@ -459,10 +459,13 @@ def test_a_receiver_with_the_joints_in_another_order_stops_the_commands(rig, mod
                           "'joint1', 'joint3']", timeout=10.0)
         assert 'the same joints in another order' in line and 'Commands stopped' in line
         h.spin_until(lambda: len(plant.zeros) > z0, 5.0, 'the zero command')
+        receiver.set_parameters([Parameter('joints', value=list(JOINTS))])
+        h.wait_log('the command receivers now take the joints', timeout=10.0)
+        h.wait_log("/effort_controller applies the commands to joints ['joint1', 'joint2', "
+                   "'joint3'], this controller's joints in its order", timeout=5.0)
     finally:
         h.executor.remove_node(receiver)
         receiver.destroy_node()
-    h.wait_log('the command receivers now take the joints', timeout=10.0)
     q = (0.2, 0.3, 0.1)
     assert close(plant.command_for(q), expected(model, q))
 
