@@ -39,7 +39,8 @@ from quat_jt_controller.goal_frames import GoalFrames
 from quat_jt_controller.goal_motion import GoalVelocityEstimator
 from quat_jt_controller.regulator import Goal, Regulator, TickOutput
 from quat_jt_controller.stall import StallDetector
-from quat_jt_runtime.joints import DEFAULT_STATE_RATE_HZ, StaleState, StateCheck
+from quat_jt_runtime.joints import (DEFAULT_STATE_RATE_HZ, ForeignState, StaleState,
+                                    StateCheck)
 from quat_jt_runtime.joints import VELOCITY_WINDOW_STATES
 from quat_jt_runtime.throttle import cause, Throttle
 
@@ -208,6 +209,13 @@ class Controller:
         self._steady_ns = steady_ns
         try:
             q, qdot = self._check_state(names, positions, velocities, stamp_ns, now_ns)
+        except ForeignState as exc:  # another publisher's (a gripper's): ignored, said once
+            self.counters.foreign_states += 1
+            if self.counters.foreign_states > 1:
+                return Command(None)
+            return Command(None, logs=(LogLine(Severity.INFO, (
+                f'joint_states from another publisher: it {exc}; such states are ignored '
+                '(counted as foreign_states_total on /diagnostics)')),))
         except ValueError as exc:
             self.counters.rejected_states += 1
             self.counters.stale_states += isinstance(exc, StaleState)

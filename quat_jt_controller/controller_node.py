@@ -153,7 +153,8 @@ class QuatJtController(Node):
         if waited_s is not None:
             topic = self._state_sub.topic_name
             self.get_logger().warn(diagnostics.no_state_warning(
-                topic, waited_s, self.count_publishers(topic), self.counters.rejected_states))
+                topic, waited_s, self.count_publishers(topic), self.counters.rejected_states,
+                self.counters.foreign_states))
 
     def _on_watchdog(self) -> None:
         """Zero the command once when valid joint states stop for longer than state_timeout."""

@@ -29,6 +29,7 @@ class Counters:
 
     rejected_states: int = 0
     stale_states: int = 0  # of the rejected: unstamped, too old or in the future
+    foreign_states: int = 0  # not rejected but ignored: naming none of the controlled joints
     rejected_goals: int = 0
     accepted_goals: int = 0
     nonfinite_torques: int = 0
@@ -72,7 +73,8 @@ def command_order_problem(joints: Sequence[str], receiver: str,
             '(zero torque published once): give both the same joints in the same order')
 
 
-def no_state_warning(state_topic: str, waited_s: float, publishers: int, rejected: int) -> str:
+def no_state_warning(state_topic: str, waited_s: float, publishers: int, rejected: int,
+                     foreign: int = 0) -> str:
     """
     Say that no valid joint state has come since start: on which topic, from how many publishers.
 
@@ -83,8 +85,12 @@ def no_state_warning(state_topic: str, waited_s: float, publishers: int, rejecte
     if not publishers:
         detail = ('is the robot driver or simulator running, and publishing on this topic? '
                   '(remap with -r joint_states:=<its topic>)')
-    elif rejected:
-        detail = f'{rejected} received and rejected (see the warnings logged)'
+    elif rejected or foreign:
+        detail = ', '.join(
+            ([f'{rejected} received and rejected (see the warnings logged)'] if rejected else [])
+            + ([f'{foreign} received naming none of the controlled joints (another '
+                "publisher's, or the driver names the joints otherwise: compare the "
+                "controller's joints with the names it logged)"] if foreign else []))
     elif waited_s < NO_STATE_CONNECTING_S:
         detail = 'none received yet (still connecting?)'
     else:
@@ -130,6 +136,7 @@ def loop_status(figures: dict, waiting: bool, stopped: bool, counters: Counters,
     values = [(k, f'{v:.1f}' if isinstance(v, float) else str(v)) for k, v in figures.items()]
     values += [('rejected_states_total', str(counters.rejected_states)),
                ('stale_states_total', str(counters.stale_states)),
+               ('foreign_states_total', str(counters.foreign_states)),
                ('nonfinite_torques_total', str(counters.nonfinite_torques)),
                ('prewarm_passes_total', str(counters.prewarm_passes)),
                ('state_timeout', str(stopped))]

@@ -265,13 +265,19 @@ def chain_joints(urdf_xml: str, base_link: str, tip_link: str) -> list[str]:
     return out[::-1]
 
 
+class ForeignState(ValueError):
+    """A joint state that names none of the controlled joints: another publisher's."""
+
+
 class StateLayout:
     """
     Pick the controlled joints out of joint states whose name lists come in any order.
 
     The index map of a name list is built once and cached (a sensor_msgs/JointState usually
     repeats the same list every tick). :meth:`extract` raises ValueError saying why a state is
-    unusable: a controlled joint missing, a name repeated, lengths that differ, NaN or Inf.
+    unusable: a controlled joint missing, a name repeated, lengths that differ, NaN or Inf;
+    :class:`ForeignState` where it names none of the controlled joints (a gripper's driver
+    publishing on the same topic).
     """
 
     def __init__(self, joint_names: Sequence[str]) -> None:
@@ -293,9 +299,12 @@ class StateLayout:
             else:
                 where = {name: i for i, name in enumerate(key)}
                 missing = [j for j in self.joint_names if j not in where]
-                index = (f'missing controlled joint(s) {missing}: have {list(key)}, need '
-                         f'{list(self.joint_names)}' if missing
-                         else [where[j] for j in self.joint_names])
+                if len(missing) == len(self.joint_names):  # another publisher's: a tuple
+                    index = (f'names none of the controlled joints: {list(key)}',)
+                else:
+                    index = (f'missing controlled joint(s) {missing}: have {list(key)}, need '
+                             f'{list(self.joint_names)}' if missing
+                             else [where[j] for j in self.joint_names])
             if len(self._cache) < 64:
                 self._cache[key] = index
         self._last_names = list(names)
@@ -317,6 +326,8 @@ class StateLayout:
         index = self._index(names)
         if isinstance(index, str):
             raise ValueError(index)
+        if isinstance(index, tuple):
+            raise ForeignState(index[0])
         if len(position) != len(names) or (len(velocity) != len(names) and (
                 velocity_required or len(velocity))):
             raise ValueError(f'{len(names)} names but {len(position)} positions and '

@@ -126,6 +126,27 @@ def test_a_refused_state_gives_no_torque_and_says_why():
     assert tick(ctl, (0.0, 0.5, 0.0), 3 * MS, stamp_ns=now).tau_nm is not None
 
 
+def test_a_state_naming_none_of_the_joints_is_ignored_and_said_once():
+    """Another publisher on joint_states (a gripper's driver): not a rejection, one INFO."""
+    ctl = controller()
+    first = ctl.on_state(('finger_left', 'finger_right'), (0.01, 0.01), (0.0, 0.0), 0, 0, MS)
+    assert first.tau_nm is None
+    [line] = texts(first.logs, Severity.INFO)
+    assert line.startswith('joint_states from another publisher: it names none of the '
+                           "controlled joints: ['finger_left', 'finger_right']; such states "
+                           'are ignored')
+    again = ctl.on_state(('finger_left', 'finger_right'), (0.01, 0.01), (0.0, 0.0), 0, 0,
+                         2 * MS)
+    assert again.tau_nm is None and again.logs == ()
+    assert ctl.counters.foreign_states == 2 and ctl.counters.rejected_states == 0
+    assert not ctl.has_state and tick(ctl, (0.0, 0.5, 0.0), 3 * MS).tau_nm is not None
+    figures = {'control_rate_hz': 0.0, 'ticks_in_window': 0, 'saturated_ticks': 0}
+    assert ('foreign_states_total', '2') in ctl.statuses(figures)[0][3]
+    # no valid state at all: the start-up warning says what came instead
+    warning = diagnostics.no_state_warning('/joint_states', 6.0, 1, 0, 2)
+    assert '2 received naming none of the controlled joints' in warning
+
+
 def test_states_without_velocities_are_estimated_and_said_once():
     ctl = controller(state_rate_hz=500.0)
     logs = []

@@ -424,6 +424,22 @@ def test_bad_joint_states_are_rejected(rig, model, case):
                  'a rejection log')
 
 
+def test_a_state_of_another_publisher_is_ignored_not_rejected(rig, model):
+    """A gripper's driver on joint_states: its states name none of the joints: one INFO."""
+    h, plant = rig
+    n0 = len(h.logs)
+    msg = JointState()
+    msg.header.stamp = h.node.get_clock().now().to_msg()
+    msg.name, msg.position, msg.velocity = ['finger'], [0.01], [0.0]
+    plant.pub.publish(msg)
+    h.wait_log('joint_states from another publisher: it names none of the controlled '
+               "joints: ['finger']")
+    q = (0.2, 0.3, 0.1)
+    plant.command_for(q)  # the arm's states are commanded as before
+    assert not any('joint_states rejected' in line and 'finger' in line
+                   for line in h.logs[n0:])
+
+
 def test_nan_velocities_from_ros2_control_are_estimated_not_rejected(rig, model):
     """joint_state_broadcaster's NaN velocities (no velocity interface): commands, said once."""
     h, plant = rig

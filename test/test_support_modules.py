@@ -11,7 +11,7 @@ import pytest
 from quat_jt_controller import paper
 from quat_jt_controller.control_law import Task
 from quat_jt_controller.goal_check import check_goal, GoalCheckWorker, ModelSpec
-from quat_jt_runtime.joints import movable_joints, StateLayout
+from quat_jt_runtime.joints import ForeignState, movable_joints, StateLayout
 from quat_jt_runtime.loop_stats import LoopStats, Ring, TickStats
 from quat_jt_runtime.resources import default_urdf_xml
 from quat_jt_runtime.throttle import cause, Throttle
@@ -99,6 +99,9 @@ def test_state_layout_maps_names_and_rejects_bad_states():
         with pytest.raises(ValueError) as exc:
             layout.extract(names, pos, vel)
         assert words in str(exc.value)
+    # a state naming none of the controlled joints is another publisher's (a gripper's)
+    with pytest.raises(ForeignState, match=r"names none of the controlled joints: \['finger'\]"):
+        layout.extract(['finger'], [0.0], [0.0])
     # velocities not required: NaN (not measured) passes for the caller to estimate, Inf not
     q, v = layout.extract(['joint1', 'joint2', 'joint3'], [0.0] * 3, [0.1, math.nan, 0.3],
                           velocity_required=False)
