@@ -150,13 +150,13 @@ class CommandReceivers:
     A command is one torque per joint in the controller's ``joints`` order; ros2_control's
     JointGroupEffortController (and the simulator) apply the i-th torque to the i-th of their
     own ``joints`` parameter. :meth:`check` runs on the graph timer, never in the state
-    callback: it lists the topic's subscribers and asks each new one for its ``joints`` (one
-    GetParameters client per node, its answer in a callback), and asks again each time a
-    receiver whose joints disagreed (reloaded with others under the same name, it may agree
-    now). A node without that parameter, or without parameter services (a recorder,
-    ``ros2 topic echo``), is left alone. ``on_change`` gets the problems
-    (``diagnostics.command_order_problem``) whenever they change, and the receivers that agree
-    are logged once.
+    callback: it lists the topic's subscribers and asks each for its ``joints`` (one
+    GetParameters client per node, its answer in a callback), again at every check: a
+    controller reloaded under the same name between two checks may list other joints now. A
+    node without that parameter, or without parameter services (a recorder,
+    ``ros2 topic echo``), has nothing to check. ``on_change`` gets the problems
+    (``diagnostics.command_order_problem``) whenever they change, and a receiver that agrees is
+    logged when it first does.
     """
 
     def __init__(self, node: Node, command_topic: str, joints: Sequence[str],
@@ -165,8 +165,8 @@ class CommandReceivers:
         self._on_change = on_change
         self._clients: dict[str, object] = {}  # receiver -> its GetParameters client (or None)
         self._pending: set[str] = set()  # ... asked, its answer not in yet
-        self._problems: dict[str, str] = {}  # ... answered: '' where its joints agree or it
-        # has none
+        self._problems: dict[str, str] = {}  # ... its last answer: '' where its joints agree
+        # or it has none
 
     def check(self) -> None:
         """Read the topic's subscribers; ask the new ones; forget the ones gone."""
@@ -180,8 +180,8 @@ class CommandReceivers:
             except InvalidServiceNameException:  # a reader the graph names oddly (not ROS)
                 self._clients[name] = None
         for name, client in self._clients.items():
-            if (name in here and name not in self._pending and self._problems.get(name) != ''
-                    and client is not None and client.service_is_ready()):
+            if (name in here and name not in self._pending and client is not None
+                    and client.service_is_ready()):
                 self._pending.add(name)
                 request = GetParameters.Request(names=['joints'])
                 client.call_async(request).add_done_callback(
@@ -205,14 +205,14 @@ class CommandReceivers:
             return  # no answer: asked again at the next check
         value = response.values[0]
         if value.type != ParameterType.PARAMETER_STRING_ARRAY:
-            self._problems[name] = ''  # no joints parameter: not a receiver this check knows
-            return
-        problem = diagnostics.command_order_problem(self._joints, name,
-                                                    value.string_array_value)
-        if not problem:
-            self._node.get_logger().info(
-                f'{name} applies the commands to joints {list(value.string_array_value)}, '
-                "this controller's joints in its order")
+            problem = ''  # no joints parameter: not a receiver this check knows
+        else:
+            problem = diagnostics.command_order_problem(self._joints, name,
+                                                        value.string_array_value)
+            if not problem and self._problems.get(name) != '':
+                self._node.get_logger().info(
+                    f'{name} applies the commands to joints {list(value.string_array_value)}, '
+                    "this controller's joints in its order")
         changed = self._problems.get(name) != problem
         self._problems[name] = problem
         if changed:

@@ -458,8 +458,8 @@ def test_a_receiver_with_the_joints_in_another_order_stops_the_commands(rig, mod
     An effort controller whose ``joints`` are in another order: zero torque once, an ERROR.
 
     The controller asks each subscriber of its command topic for its ``joints`` parameter (as
-    ros2_control's JointGroupEffortController has one), again while it disagrees: once it
-    lists them in order (or is gone) the controller commands again.
+    ros2_control's JointGroupEffortController has one), again each second: once it lists them
+    in order (or is gone) the controller commands again, and a reconfigured one is caught.
     """
     h, plant = rig
     receiver = rclpy.create_node(
@@ -479,9 +479,18 @@ def test_a_receiver_with_the_joints_in_another_order_stops_the_commands(rig, mod
         h.wait_log('the command receivers now take the joints', timeout=10.0)
         h.wait_log("/effort_controller applies the commands to joints ['joint1', 'joint2', "
                    "'joint3'], this controller's joints in its order", timeout=5.0)
+        # reconfigured under the same name: asked again each second, caught again
+        n_logs = len(h.logs)
+        receiver.set_parameters([Parameter('joints', value=['joint3', 'joint2', 'joint1'])])
+        h.spin_until(lambda: any("applies the commands to joints ['joint3', 'joint2', "
+                                 "'joint1']" in line for line in h.logs[n_logs:]), 10.0,
+                     'the refusal of the reconfigured receiver')
     finally:
+        n_logs = len(h.logs)
         h.executor.remove_node(receiver)
         receiver.destroy_node()
+    h.spin_until(lambda: any('the command receivers now take the joints' in line
+                             for line in h.logs[n_logs:]), 10.0, 'commands again once it is gone')
     q = (0.2, 0.3, 0.1)
     assert close(plant.command_for(q), expected(model, q))
 
