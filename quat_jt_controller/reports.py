@@ -169,7 +169,7 @@ class CommandReceivers:
         # or it has none
 
     def check(self) -> None:
-        """Read the topic's subscribers; ask the new ones; forget the ones gone."""
+        """Read the topic's subscribers; ask each whose last answer is in; forget the gone."""
         node = self._node
         here = {_full_name(info.node_namespace, info.node_name)
                 for info in node.get_subscriptions_info_by_topic(self._topic)}
