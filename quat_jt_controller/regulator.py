@@ -673,7 +673,8 @@ class Regulator:
         Return the linear damping per joint at ``q`` (N m s/rad), as :meth:`update` applies it.
 
         ``K_v``, or with ``inertial_damping`` ``max(k_v,j, min(c_j sqrt(M_jj(q)), beta
-        I_j(q)))``, ``I_j(q) = 1 / (M(q)^-1)_jj`` (docs/lyapunov.md, section 10); the cubic
+        I_j(q)))``, ``I_j(q) = 1 / (M(q)^-1)_jj``, less the diagonal of what the cap on the
+        modes faster than ``beta`` takes away (docs/lyapunov.md, section 10); the cubic
         part and the settling damping near the goal (section 11, which couples the joints:
         :meth:`settling_damping` gives its diagonal) apart.
         """

@@ -602,6 +602,7 @@ class StateCheck:
         self._estimator = velocity_estimator(n, rate, position_resolution)
         self.estimating = False  # the last state came without velocities, or with NaN ones
         self.unmeasured: tuple[str, ...] = ()  # ... the joints whose velocities were NaN
+        self._missing: list[int] = []  # ... their indices
 
     def __call__(self, names: Sequence[str], position: Sequence[float],
                  velocity: Sequence[float], stamp_ns: int,
@@ -618,7 +619,7 @@ class StateCheck:
                     q[j] = last[j] + wrapped(q[j] - last[j])
             self._last_q = q
         if qdot is None:
-            self.estimating, self.unmeasured = True, ()
+            self.estimating, self.unmeasured, self._missing = True, (), []
             return q, self._estimator.update(q, stamp_ns or now_ns)
         total = sum(qdot)
         if total != total:  # NaN: velocities the hardware does not measure (no Inf here)
@@ -627,9 +628,10 @@ class StateCheck:
             missing = [j for j, v in enumerate(qdot) if v != v]
             for j in missing:
                 qdot[j] = estimate[j]
-            names = self._layout.joint_names
-            self.unmeasured = tuple(names[j] for j in missing)
+            if missing != self._missing:  # the same joints, state after state: named once
+                self._missing = missing
+                self.unmeasured = tuple(self._layout.joint_names[j] for j in missing)
         elif self.estimating:  # velocities again: the next state without starts afresh
-            self.estimating, self.unmeasured = False, ()
+            self.estimating, self.unmeasured, self._missing = False, (), []
             self._estimator.reset()
         return q, qdot
