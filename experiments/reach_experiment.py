@@ -90,6 +90,7 @@ from quat_jt_controller.model import RobotModel
 from quat_jt_controller.reference_sim import ClosedLoop, run_sampled
 from quat_jt_controller.stall import StallDetector
 from quat_jt_runtime.param_table import names
+from quat_jt_runtime.payload import with_payload
 from quat_jt_runtime.resources import config_parameters, default_urdf_xml
 import yaml
 
@@ -292,14 +293,17 @@ def run_case(robot: Robot, model: RobotModel, gains: cl.Gains, shaping: sh.Shapi
              sim_params: dict, index: int, q0: np.ndarray, qg: np.ndarray,
              delay_ticks: int = 1, q_star_after_s: float = Q_STAR_AFTER_S,
              engine: str = 'pybullet', sim_armature=None, no_velocities: bool = False,
-             dt_s: float = 1e-3, encoder_bits: int = 0, encoder_told: bool = True) -> Outcome:
+             dt_s: float = 1e-3, encoder_bits: int = 0, encoder_told: bool = True,
+             sim_payload_kg: float = 0.0) -> Outcome:
     """
     Run one case on the simulator core (``engine``); classify it.
 
     ``sim_armature`` is the plant's rotor inertia (kg m^2 per joint; the model's may differ),
     ``no_velocities`` gives the controller estimated velocities (``PositionsOnly``), from
     positions read by encoders of ``encoder_bits`` bits a turn (0: exact), their count told
-    to the controller if ``encoder_told``, ``dt_s`` the plant's step and the control period.
+    to the controller if ``encoder_told``, ``dt_s`` the plant's step and the control period,
+    ``sim_payload_kg`` a payload the plant's tip carries (at ``PAYLOAD_COM_TIP_M``; the model's
+    may differ).
     """
     from wrist_sim.simulator import RobotSimulator
 
@@ -312,7 +316,9 @@ def run_case(robot: Robot, model: RobotModel, gains: cl.Gains, shaping: sh.Shapi
               if shaping.configuration_on else None)
     loop = ClosedLoop(model, gains, robot.task, q_d, p_d, shaping=shaping)
     with quiet():
-        sim = RobotSimulator(robot_urdf(robot), model.joint_names, initial_positions_rad=q0,
+        sim = RobotSimulator(with_payload(robot_urdf(robot), model.tip_link, sim_payload_kg,
+                                          PAYLOAD_COM_TIP_M),
+                             model.joint_names, initial_positions_rad=q0,
                              viscous_nm_s_per_rad=sim_params.get('viscous_friction'),
                              coulomb_nm=sim_params.get('coulomb_friction'),
                              enforce_velocity_limits=sim_params.get('enforce_velocity_limits',
@@ -553,6 +559,7 @@ class CaseJob:
     dt_s: float = 1e-3
     encoder_bits: int = 0
     encoder_told: bool = True
+    sim_payload_kg: float = 0.0  # at the tip, PAYLOAD_COM_TIP_M in its frame
 
 
 @functools.lru_cache(maxsize=8)
@@ -573,7 +580,7 @@ def run_job(job: CaseJob) -> Outcome:
                     job.index, job.q_start, job.q_goal, job.delay_ticks, engine=job.engine,
                     sim_armature=job.sim_armature, no_velocities=job.no_velocities,
                     dt_s=job.dt_s, encoder_bits=job.encoder_bits,
-                    encoder_told=job.encoder_told)
+                    encoder_told=job.encoder_told, sim_payload_kg=job.sim_payload_kg)
 
 
 def run_jobs(jobs: list, label: str, progress=print, workers: Optional[int] = None,
@@ -686,7 +693,9 @@ def run_dds(robot: Robot, count: int, seed: int, progress=print) -> str:
 MAX_DELAY_TICKS = 10
 
 CONDITIONS = ('ideal', 'armature', 'armature-wrong', 'friction', 'armature-friction',
-              'no-velocities', 'encoder')
+              'no-velocities', 'encoder', 'payload', 'payload-told')
+# Where the payload conditions put the payload: 5 cm along the tip link's z, in its frame
+PAYLOAD_COM_TIP_M = (0.0, 0.0, 0.05)
 
 
 @dataclass(frozen=True)
@@ -701,6 +710,8 @@ class Condition:
     encoder_bits: int = 0  # the positions read in whole counts of 2 pi / 2^bits (0: exact)
     encoder_told: bool = True  # ... and the controller told the count (position_resolution)
     delay_ticks: int = 1  # the ticks between a state and the torque computed from it applied
+    payload_share: float = 0.0  # a payload at the tip, x the mass the arm's joints move
+    payload_told: bool = False  # ... and the design and the controller told it
 
     def describe(self) -> str:
         """Return the condition in words, for the table."""
@@ -718,14 +729,19 @@ class Condition:
             'encoder': f'positions from {self.encoder_bits}-bit encoders, no velocities '
                        + ('(estimated, the count told)' if self.encoder_told else
                           '(estimated, the count not told)'),
+            'payload': f'untold payload {self.payload_share:g} x the link mass',
+            'payload-told': f'payload {self.payload_share:g} x the link mass, given',
         }[self.name] + delay
 
 
 def condition(name: str, armature: float = 0.1, told_scale: float = 0.5,
               friction_fraction: float = 0.01, encoder_bits: int = 17,
-              encoder_told: bool = True, delay_ticks: int = 1) -> Condition:
+              encoder_told: bool = True, delay_ticks: int = 1,
+              payload_share: float = 0.1) -> Condition:
     """Return the condition ``name`` (``CONDITIONS``) with these plant figures."""
     encoder_resolution_rad(encoder_bits)  # ValueError names a bad count
+    if not (math.isfinite(payload_share) and payload_share >= 0.0):
+        raise ValueError(f'--payload-share must be finite and >= 0, got {payload_share}')
     if not 0 <= delay_ticks <= MAX_DELAY_TICKS:
         raise ValueError(f'--delay must be in [0, {MAX_DELAY_TICKS}] ticks, got {delay_ticks}')
     return dataclasses.replace({
@@ -738,6 +754,9 @@ def condition(name: str, armature: float = 0.1, told_scale: float = 0.5,
         'no-velocities': Condition('no-velocities', no_velocities=True),
         'encoder': Condition('encoder', no_velocities=True, encoder_bits=encoder_bits,
                              encoder_told=encoder_told),
+        'payload': Condition('payload', payload_share=payload_share),
+        'payload-told': Condition('payload-told', payload_share=payload_share,
+                                  payload_told=True),
     }[name], delay_ticks=delay_ticks)
 
 
@@ -779,22 +798,37 @@ def arm_robot(name: str, urdf_path: str, base_link: Optional[str], tip_link: Opt
                  base_link=base, tip_link=tip, joints=tuple(joints))
 
 
+def link_mass_kg(robot: Robot) -> float:
+    """Return the mass the arm's joints move (kg): its links past the first controlled joint."""
+    model = _model(robot_urdf(robot), robot.base_link, robot.tip_link, tuple(robot.joints),
+                   (0.0,) * len(robot.joints))
+    return float(sum(inertia.mass for inertia in model.model.inertias[1:]))
+
+
+def payload_kg(robot: Robot, cond: 'Condition') -> float:
+    """Return the plant's payload of ``cond`` on ``robot``, kg (its share of the link mass)."""
+    return cond.payload_share * link_mass_kg(robot) if cond.payload_share else 0.0
+
+
 @functools.lru_cache(maxsize=16)
 def arm_design(robot: Robot, told_armature: float, rate_hz: float,
                friction_effort_share: Optional[float] = None,
                approach_time_s: Optional[float] = None,
-               cruise_fraction: Optional[float] = None, delays: tuple = (1,)):
+               cruise_fraction: Optional[float] = None, delays: tuple = (1,),
+               told_payload_kg: float = 0.0):
     """
     Return ``(model, design)``: ``design_gains``' Python API on the URDF + the armature.
 
     ``friction_effort_share`` is design_gains' ``--friction-effort-share`` (None: its default),
     ``approach_time_s`` its ``--approach-time`` (None: none), ``cruise_fraction`` its
-    ``--cruise-fraction`` (None: its default), ``delays`` its ``--delays`` (ticks).
+    ``--cruise-fraction`` (None: its default), ``delays`` its ``--delays`` (ticks),
+    ``told_payload_kg`` its ``--payload-mass`` (at ``PAYLOAD_COM_TIP_M``).
     """
     from quat_jt_controller import gain_design
     urdf = robot_urdf(robot)
     model = RobotModel(urdf, robot.base_link, robot.tip_link, list(robot.joints),
-                       [told_armature] * len(robot.joints))
+                       [told_armature] * len(robot.joints), told_payload_kg,
+                       PAYLOAD_COM_TIP_M)
     share = (gain_design.DEFAULT_FRICTION_EFFORT_SHARE if friction_effort_share is None
              else friction_effort_share)
     fraction = gain_design.CRUISE_FRACTION if cruise_fraction is None else cruise_fraction
@@ -821,8 +855,10 @@ def run_arm(robot: Robot, cond: Condition, potential: str, count: int, seed: int
     ``friction_effort_share``, ``approach_time_s``, ``cruise_fraction`` and ``design_delays``
     (its ``--delays``) are design_gains' options (:func:`arm_design`).
     """
+    plant_payload_kg = payload_kg(robot, cond)
     model, d = arm_design(robot, cond.told_armature, float(rate_hz), friction_effort_share,
-                          approach_time_s, cruise_fraction, tuple(design_delays))
+                          approach_time_s, cruise_fraction, tuple(design_delays),
+                          plant_payload_kg if cond.payload_told else 0.0)
     n = model.n
     gains, shaping = d.gains(potential), d.shaping
     if overrides:  # as a node would take the design's file with these values
@@ -833,11 +869,16 @@ def run_arm(robot: Robot, cond: Condition, potential: str, count: int, seed: int
                   'coulomb_friction': [cond.coulomb_effort_fraction * e
                                        for e in model.effort_limits],
                   'enforce_velocity_limits': False}
-    spec = model_spec(model, robot_urdf(robot))
+    spec = model_spec(model, model.urdf_xml)  # a payload told: its link in the URDF
+    # the goals are those the plant can hold up, its payload in, told or not (cases)
+    plant_model = (model if cond.payload_told or not plant_payload_kg else
+                   RobotModel(robot_urdf(robot), robot.base_link, robot.tip_link,
+                              list(robot.joints), model.armature, plant_payload_kg,
+                              PAYLOAD_COM_TIP_M))
     jobs = [CaseJob(robot, spec, gains, shaping, sim_params, i, q0, qg, cond.delay_ticks, engine,
                     (cond.plant_armature,) * n, cond.no_velocities, 1.0 / rate_hz,
-                    cond.encoder_bits, cond.encoder_told)
-            for i, (q0, qg) in enumerate(cases(model, robot, count, seed))]
+                    cond.encoder_bits, cond.encoder_told, plant_payload_kg)
+            for i, (q0, qg) in enumerate(cases(plant_model, robot, count, seed))]
     return run_jobs(jobs, f'{robot.name} {cond.name}', progress, workers, ray_address)
 
 
@@ -923,6 +964,9 @@ def main(argv: Optional[list] = None) -> int:
                      help="'armature-wrong': the design is told this x the rotor inertia")
     arm.add_argument('--friction-fraction', type=float, default=0.01,
                      help="'friction': untold Coulomb friction, x each effort limit")
+    arm.add_argument('--payload-share', type=float, default=0.1,
+                     help="'payload', 'payload-told': a payload at the tip (5 cm along its z), "
+                     'this x the mass the arm moves (default 0.1)')
     arm.add_argument('--encoder-bits', type=int, default=17,
                      help="'encoder': the positions in counts of 2 pi / 2^bits (8 to 32, "
                      'or 0 for exact ones; default 17)')
@@ -1019,13 +1063,14 @@ def main_arm(parser: argparse.ArgumentParser, args, overrides: dict) -> int:
     rows, text = [], []
     for name in args.condition:
         cond = condition(name, args.armature, args.armature_told_scale, args.friction_fraction,
-                         args.encoder_bits, args.encoder_told, args.delay)
+                         args.encoder_bits, args.encoder_told, args.delay, args.payload_share)
         for potential in args.potential:
             t0 = time.monotonic()
             try:  # design_gains may refuse the arm, and says why (cached: run_arm reuses it)
                 arm_design(robot, cond.told_armature, float(args.rate),
                            args.friction_effort_share, args.approach_time, args.cruise_fraction,
-                           tuple(args.design_delays))
+                           tuple(args.design_delays),
+                           payload_kg(robot, cond) if cond.payload_told else 0.0)
             except ValueError as exc:
                 parser.error(f'design_gains: {exc}')
             try:

@@ -37,7 +37,7 @@ def controller_from_config(params: Mapping[str, Any], urdf_xml: str = '',
     ``potential`` and ``overrides`` replace the parameters' values. Raises the node's errors
     (ModelError, GainsError, ShapingError, DescriptionError), each naming the bad value, or
     ConfigError naming a missing one. A missing ``preferred_configuration`` is the middle of
-    the ranges, and a missing ``armature`` zeros, as the node's defaults.
+    the ranges, and a missing ``armature`` zeros and ``payload_mass`` 0, as the node's defaults.
     """
     p = {**params, **(overrides or {})}
     missing = [name for name in REQUIRED if name not in p and not (
@@ -49,7 +49,8 @@ def controller_from_config(params: Mapping[str, Any], urdf_xml: str = '',
                                           p.get('robot_description_file', ''),
                                           p.get('robot_description_topic', ''))).xml
     model = RobotModel(urdf_xml, p['base_link'], p['tip_link'], p['joints'],
-                       p.get('armature') or None)
+                       p.get('armature') or None, p.get('payload_mass', 0.0),
+                       p.get('payload_com', (0.0, 0.0, 0.0)))
     task = cl.Task(p['task'])
     gains = cl.Gains.create(potential or p['potential'], p['kp'], p['kv'], p['lambda'], task,
                             model.n, p.get('gravity_compensation', True), model.effort_limits)

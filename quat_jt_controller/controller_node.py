@@ -50,7 +50,7 @@ class QuatJtController(Node):
         self.realtime = declare_realtime(self, 'simulated time' if self._use_sim_time else '')
         try:
             model = RobotModel(cfg.urdf_xml, cfg.base_link, cfg.tip_link, cfg.joints,
-                               cfg.armature)
+                               cfg.armature, cfg.payload_kg, cfg.payload_com_tip_m)
         except ModelError as exc:
             raise ModelError(f'{exc}{bundled_urdf_hint(cfg.given_urdf)}') from None
         gains = parameters.declare_gains(  # each change logged once by the ChangeLog
@@ -61,8 +61,8 @@ class QuatJtController(Node):
             preferred_configuration=model.middle_of_ranges())
         reg.set_shaping(self.shaping.current)
         self._change_log = parameters.change_log(self, reg)
-        self._goal_checker = GoalCheckWorker(ModelSpec(
-            cfg.urdf_xml, cfg.base_link, cfg.tip_link, cfg.joints, cfg.task))
+        self._goal_checker = GoalCheckWorker(ModelSpec(  # the payload's link in the URDF
+            model.urdf_xml, cfg.base_link, cfg.tip_link, cfg.joints, cfg.task))
         ctl = self.controller = Controller(
             reg, cfg.state_timeout_s, cfg.publish_rate_divider, cfg.max_state_age_s,
             cfg.state_rate_hz, self._goal_checker, started_ns=steady_ns(),

@@ -176,6 +176,13 @@ def main(argv: Optional[list] = None) -> int:
                         'value for every joint, or one per joint (default 0). Added to the '
                         "diagonal of the URDF's M(q); written to the file as the controller's "
                         'armature')
+    parser.add_argument('--payload-mass', type=_real, default=0.0,
+                        help='mass the tip link carries that the URDF does not list (a tool, '
+                        'a grasped part), kg (default 0); in g(q) and M(q), and written to '
+                        "the file as the controller's payload_mass")
+    parser.add_argument('--payload-com', type=_real, nargs=3, default=[0.0, 0.0, 0.0],
+                        metavar=('X', 'Y', 'Z'),
+                        help="where that mass is, m, in the tip link's frame (default 0 0 0)")
     parser.add_argument('--rate', type=_real, default=1000.0,
                         help='the control rate (of joint_states and commands), Hz, in '
                         f'[{STATE_RATE_RANGE_HZ[0]:g}, {STATE_RATE_RANGE_HZ[1]:g}]; the '
@@ -249,9 +256,11 @@ def main(argv: Optional[list] = None) -> int:
     except ModelError as exc:
         parser.error(f'{exc} (--urdf {args.urdf or "<the bundled wrist>"})')
     try:  # one value for every joint or one per joint, each finite and >= 0
-        if args.armature is not None:
+        if args.armature is not None or args.payload_mass != 0.0:
             model = RobotModel(urdf, args.base_link, args.tip_link, args.joints,
-                               per_joint_values(args.armature, model.n, '--armature'))
+                               None if args.armature is None else
+                               per_joint_values(args.armature, model.n, '--armature'),
+                               args.payload_mass, args.payload_com)
         sim_armature = per_joint_values(args.sim_armature, model.n, '--sim-armature')
     except (ModelError, ValueError) as exc:
         parser.error(str(exc))

@@ -148,6 +148,8 @@ class Design:
     shaping: Shaping
     figures: dict = field(default_factory=dict)
     armature: tuple[float, ...] = ()  # kg m^2 per joint, in M(q) of the design (the model's)
+    payload_kg: float = 0.0  # the tip link's payload, in g(q) and M(q) of the design
+    payload_com_tip_m: tuple[float, ...] = (0.0, 0.0, 0.0)  # where it is, in tip_link's frame
 
     def gains(self, potential: str = 'tanh') -> cl.Gains:
         """Return the K_p, K_v, Lambda of the design as validated Gains for ``potential``."""
@@ -175,6 +177,7 @@ class Design:
                     for name in ('robot_description', 'state_timeout', 'max_state_age')}
         return {'task': self.task.value, 'joints': list(self.joints),
                 'armature': list(self.armature or [0.0] * len(self.joints)),
+                'payload_mass': self.payload_kg, 'payload_com': list(self.payload_com_tip_m),
                 'base_link': self.base_link, 'tip_link': self.tip_link, **defaults,
                 'state_rate': self.rate_hz,
                 'publish_rate_divider': max(1, int(round(self.rate_hz / 100.0)))}
@@ -750,7 +753,8 @@ def design(model: RobotModel, task: cl.Task, rate_hz: float = 1000.0,
         'friction_effort_share': friction_effort_share,
     }
     return Design(task, model.joint_names, model.base_link, model.tip_link, rate_hz, kp_r,
-                  kv_r, lam_r, shaping, figures, model.armature)
+                  kv_r, lam_r, shaping, figures, model.armature, model.payload_kg,
+                  model.payload_com_tip_m)
 
 
 def guide_warnings(model: RobotModel, guide: np.ndarray, bound: np.ndarray) -> list[str]:

@@ -132,7 +132,9 @@ def to_yaml(d: Design, potential: str = 'tanh', command: str = '',
         f'  effort limits {_fmt(f["effort_limits_nm"])}, largest |g(q)| '
         f'{_fmt(np.round(f["gravity_max_nm"], 4))}{_reserve(f)}, friction estimates '
         f'{_fmt(f["friction_nm"])}, rotor inertia (armature, in M(q)) '
-        f'{_fmt(d.armature or [0.0] * len(d.joints))} kg m^2;',
+        f'{_fmt(d.armature or [0.0] * len(d.joints))} kg m^2'
+        + (f', payload {d.payload_kg:g} kg at {_fmt(d.payload_com_tip_m)} m in {d.tip_link} '
+           '(in g(q) and M(q))' if d.payload_kg > 0.0 else '') + ';',
         f'  at rest the regulator may learn {f["friction_learning"]:g} x the estimates more, '
         f'and without an estimate {f.get("friction_effort_share", 0.0):g} x the effort limit (a '
         'friction nobody measured; at most what changes the speed of the joint by '
@@ -210,6 +212,8 @@ def to_yaml(d: Design, potential: str = 'tanh', command: str = '',
         'posture_weight': 'of that posture against the distance to the arm (no effect without '
                           'self-motion)',
         'armature': 'kg m^2, rotor inertia per joint, in M(q) of the design',
+        'payload_mass': 'kg the tip link carries beyond the URDF, in g(q) and M(q)',
+        'payload_com': 'm, where, in tip_link',
         'robot_description': "URDF XML; '' = the bundled wrist" + (
             f' ({robot_description_note})' if robot_description_note else ''),
         'state_timeout': 's without valid joint_states -> zero torque (once)',

@@ -16,7 +16,9 @@ The inertia is the URDF's links plus, per joint, the rotor inertia its drive ref
 ``armature`` a, kg m^2 or kg): M(q) of Eq. (1) becomes M_links(q) + diag(a), in the mass matrix,
 the forward dynamics and everything designed or checked from them. A URDF rarely carries it (a
 geared drive's rotor, seen through the gear ratio r, adds r^2 I_rotor, often more than the
-link), so it is given as a model input.
+link), so it is given as a model input. So is a payload the URDF does not carry (a tool, a grasped
+part): ``payload_kg`` at ``payload_com_tip_m`` in the tip link's frame, a link the model adds to
+the URDF (``quat_jt_runtime.payload``), in g(q), M(q) and everything built on them.
 """
 from math import cos, sin
 from typing import Optional, Sequence
@@ -32,6 +34,7 @@ except ModuleNotFoundError as exc:  # e.g. a colcon workspace whose rosdep skipp
 
 from quat_jt_runtime.errors import checked_vector, QuatJtError
 from quat_jt_runtime.joints import fixed_joints, movable_joints, select_joints
+from quat_jt_runtime.payload import payload_values, with_payload
 
 # sigma_min of the task Jacobian (J_o, J_G or J_p), its position rows divided by the arm's
 # length (RobotModel.task_sigma_min: dimensionless), below this: near-singular (the paper's
@@ -59,16 +62,31 @@ class RobotModel:
     is the rotor inertia per joint, in that order (kg m^2, or kg for a prismatic joint; default
     zeros), added to the diagonal of M(q) (Pinocchio's ``model.armature``, at each joint's
     velocity index); ModelError names a value that is not finite and >= 0, or a length that is
-    not one per joint.
+    not one per joint. ``payload_kg`` (>= 0) at ``payload_com_tip_m`` (x, y, z in the tip
+    link's frame, m) is a point mass the tip link carries that the URDF does not list
+    (:func:`~quat_jt_runtime.payload.with_payload`); :attr:`urdf_xml` is the URDF with it.
     """
 
     def __init__(self, urdf_xml: str, base_link: str, tip_link: str,
                  joint_names: Optional[Sequence[str]] = None,
-                 armature: Optional[Sequence[float]] = None) -> None:
+                 armature: Optional[Sequence[float]] = None, payload_kg: float = 0.0,
+                 payload_com_tip_m: Sequence[float] = (0.0, 0.0, 0.0)) -> None:
         try:
             movable = movable_joints(urdf_xml)
         except ValueError as exc:
             raise ModelError(f'cannot parse the URDF: {exc}') from exc
+        try:
+            self.payload_kg, self.payload_com_tip_m = payload_values(payload_kg,
+                                                                     payload_com_tip_m)
+        except ValueError as exc:
+            raise ModelError(str(exc)) from None
+        if self.payload_kg > 0.0:
+            try:
+                urdf_xml = with_payload(urdf_xml, tip_link, self.payload_kg,
+                                        self.payload_com_tip_m)
+            except ValueError:  # no such link: the check of the links below names it
+                pass
+        self.urdf_xml = urdf_xml  # as modelled: the payload's link in, if any
         joint_names = select_joints(joint_names, movable, ModelError)
         # Joints not controlled are locked at zero: made fixed in the URDF itself, which is
         # what Pinocchio's buildReducedModel computes, without its lookup of frames by name

@@ -227,6 +227,26 @@ def test_an_arm_from_its_urdf_runs_the_same_serial_or_parallel(tmp_path, name):
 
 
 @pytest.mark.e2e
+def test_a_payload_is_carried_by_the_plant_and_told_to_the_design_only_if_asked(tmp_path):
+    """'payload': the plant's tip carries it, the design does not know; 'payload-told': both."""
+    path, robot = _small_arm(tmp_path)
+    untold, told = (rx.condition(name, payload_share=0.5) for name in ('payload', 'payload-told'))
+    assert rx.payload_kg(robot, told) == pytest.approx(0.5 * rx.link_mass_kg(robot))
+    assert rx.link_mass_kg(robot) > 0.0 and not untold.payload_told and told.payload_told
+    [ideal], [carried], [known] = (rx.run_arm(robot, cond, 'tanh', 1, seed=1, progress=None,
+                                              workers=1)
+                                   for cond in (rx.condition('ideal'), untold, told))
+    assert not np.array_equal(ideal.q_final, carried.q_final)  # the plant carries it
+    assert not np.array_equal(carried.q_final, known.q_final)  # ... and the controller knows
+    model, design = rx.arm_design(robot, 0.0, 1000.0, told_payload_kg=rx.payload_kg(robot, told))
+    assert model.payload_kg == rx.payload_kg(robot, told) == design.payload_kg
+    assert rx.table_row(robot, told, [known]).startswith(
+        '| small | payload 0.5 x the link mass, given | ')
+    with pytest.raises(ValueError, match='--payload-share must be finite and >= 0'):
+        rx.condition('payload', payload_share=-0.1)
+
+
+@pytest.mark.e2e
 def test_an_arm_runs_with_the_ticks_of_delay_asked_for(tmp_path, capsys):
     """``--delay`` reaches an arm's cases (it was 1 whatever was asked), and its table row."""
     path, robot = _small_arm(tmp_path)

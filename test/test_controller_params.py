@@ -226,6 +226,20 @@ def test_the_armature_is_in_the_inertia_the_controller_uses(make_node):
                                np.diag([0.1, 0.2, 0.3]), atol=1e-12)
 
 
+def test_the_payload_is_in_the_gravity_the_controller_compensates(make_node):
+    """Read-only payload_mass at payload_com in tip_link: in g(q), and said at start-up."""
+    from quat_jt_controller.model import RobotModel
+    from quat_jt_runtime.resources import default_urdf_xml
+    node = make_node({'payload_mass': 0.5, 'payload_com': [0.0, 0.0, 0.05]})
+    expected = RobotModel(default_urdf_xml(), 'base_link', 'tool0', payload_kg=0.5,
+                          payload_com_tip_m=(0.0, 0.0, 0.05))
+    q = [0.2, -0.4, 0.9]
+    np.testing.assert_allclose(node.regulator.model.gravity(q), expected.gravity(q),
+                               atol=1e-12)
+    assert node.regulator.model.payload_kg == 0.5
+    assert node.config.payload_com_tip_m == (0.0, 0.0, 0.05)
+
+
 def test_the_position_resolution_reaches_the_state_check(make_node):
     """A read-only count per joint; the node's controller estimates velocities with it."""
     assert make_node().controller.position_resolution == (0.0, 0.0, 0.0)
@@ -336,6 +350,8 @@ def test_position_task_has_three_gains_and_a_position_error_topic(make_node):
      r'position_resolution\[1\] must be finite and >= 0, got -0.0001'),
     ({'position_resolution': [1e-4]}, ValueError,
      r'position_resolution must have 3 values \(one per joint\)'),
+    ({'payload_mass': -0.5}, Exception, 'payload_mass'),
+    ({'payload_com': [0.0, 0.1]}, ValueError, 'payload_com must be 3 finite numbers'),
 ])
 def test_bad_start_up_configuration_raises_a_clear_error(make_node, overrides, error, words):
     with pytest.raises(error, match=words):

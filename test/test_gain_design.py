@@ -196,6 +196,30 @@ def test_the_command_prints_a_loadable_file_and_the_design_parameters_match():
         assert all(isinstance(v, float) for v in values), (key, value)
 
 
+def test_a_payload_given_to_the_design_is_in_its_file_and_in_the_controller_it_makes():
+    """--payload-mass/--payload-com: the design's g(q), the header, the controller's model."""
+    from quat_jt_controller.controller_config import controller_from_config
+    result = subprocess.run([sys.executable, '-m', 'quat_jt_controller.gain_design',
+                             '--payload-mass', '0.3', '--payload-com', '0', '0', '0.05'],
+                            capture_output=True, text=True, timeout=120)
+    assert result.returncode == 0, result.stderr
+    p = params_of(result.stdout)
+    assert p['payload_mass'] == 0.3 and p['payload_com'] == [0.0, 0.0, 0.05]
+    header = ' '.join(line.lstrip('# ') for line in result.stdout.splitlines()
+                      if line.startswith('#'))
+    assert 'payload 0.3 kg at [0.0, 0.0, 0.05] m in tool0' in header
+    loaded = controller_from_config(p, default_urdf_xml()).model
+    plain = wrist_model()
+    q = [0.3, 0.8, -0.5]
+    assert loaded.payload_kg == 0.3
+    assert np.linalg.norm(np.subtract(loaded.gravity(q), plain.gravity(q))) > 0.01
+    refused = subprocess.run([sys.executable, '-m', 'quat_jt_controller.gain_design',
+                              '--payload-mass', '-1'], capture_output=True, text=True,
+                             timeout=120)
+    assert refused.returncode == 2
+    assert 'payload_mass must be finite and >= 0 kg, got -1.0' in refused.stderr
+
+
 def test_the_design_warns_of_estimates_the_urdf_does_not_support():
     model = xarm6_model()  # <dynamics friction="1.0"/> on every joint
     assert model.friction_nm == (1.0,) * 6

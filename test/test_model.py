@@ -193,6 +193,54 @@ def test_armature_adds_to_the_diagonal_of_the_inertia_in_the_callers_order():
                                        np.array([1.0, 2.0, 3.0])), atol=1e-10)
 
 
+def test_a_payload_adds_its_weight_through_its_jacobian_and_its_mass_to_the_inertia():
+    """g(q) gains J_c(q)^T m g0 of a point mass at c in the tip frame; M(q) gains m J_c^T J_c."""
+    from quat_jt_runtime.payload import PAYLOAD_RADIUS_M
+    xml = default_urdf_xml()
+    plain = RobotModel(xml, 'base_link', 'tool0')
+    com_tip_m = (0.02, -0.01, 0.05)
+    loaded = RobotModel(xml, 'base_link', 'tool0', payload_kg=0.8, payload_com_tip_m=com_tip_m)
+    assert (loaded.payload_kg, loaded.payload_com_tip_m) == (0.8, com_tip_m)
+    assert 'tool0_payload' in loaded.urdf_xml and plain.urdf_xml == xml
+    rng = np.random.default_rng(5)
+    for _ in range(5):
+        q = random_q(plain, rng)
+        p, R, J = plain.kinematics(q)
+        R, J = np.array(R), np.array(J)
+        c = R @ np.array(com_tip_m)  # tip origin -> payload, base axes
+        J_c = J[:3] - np.array([[0.0, -c[2], c[1]], [c[2], 0.0, -c[0]],
+                                [-c[1], c[0], 0.0]]) @ J[3:]
+        g0 = 9.81 * np.array([0.0, 0.0, 1.0])  # the weight -m g0, held up by the torques
+        np.testing.assert_allclose(np.subtract(loaded.gravity(q), plain.gravity(q)),
+                                   J_c.T @ (0.8 * g0), atol=1e-9)
+        sphere = 0.4 * 0.8 * PAYLOAD_RADIUS_M ** 2  # its inertia about c, any axis
+        np.testing.assert_allclose(loaded.mass_matrix(q) - plain.mass_matrix(q),
+                                   0.8 * J_c.T @ J_c + sphere * J[3:].T @ J[3:], atol=1e-12)
+
+
+@pytest.mark.parametrize('mass, com, match', [
+    (-0.1, (0.0, 0.0, 0.0), 'payload_mass must be finite and >= 0 kg, got -0.1'),
+    (float('nan'), (0.0, 0.0, 0.0), 'payload_mass must be finite and >= 0 kg, got nan'),
+    (0.5, (0.0, 0.1), 'payload_com must be 3 finite numbers'),
+    (0.5, (0.0, float('inf'), 0.0), 'payload_com must be 3 finite numbers'),
+    (0.5, 'abc', 'payload_com must be 3'),
+])
+def test_a_bad_payload_is_refused_by_name(mass, com, match):
+    with pytest.raises(ModelError, match=match):
+        RobotModel(default_urdf_xml(), 'base_link', 'tool0', payload_kg=mass,
+                   payload_com_tip_m=com)
+
+
+def test_a_payload_link_takes_a_free_name_and_needs_its_link():
+    from quat_jt_runtime.payload import with_payload
+    xml = with_payload(default_urdf_xml(), 'tool0', 1.0, (0.0, 0.0, 0.1))
+    again = with_payload(xml, 'tool0', 0.5, (0.0, 0.0, 0.0))  # tool0_payload is taken
+    assert 'tool0_payload_' in again and again.count('<link name="tool0_payload') == 2
+    assert with_payload(xml, 'tool0', 0.0, (0.0, 0.0, 0.0)) == xml  # no mass: as it was
+    with pytest.raises(ValueError, match="link 'nowhere' is not in the URDF"):
+        with_payload(default_urdf_xml(), 'nowhere', 1.0, (0.0, 0.0, 0.0))
+
+
 @pytest.mark.parametrize('armature, match', [
     ([0.1, -0.2, 0.0], r'armature\[1\] must be finite and >= 0, got -0.2'),
     ([0.1, float('nan'), 0.0], r'armature\[1\] must be finite and >= 0, got nan'),
