@@ -43,7 +43,8 @@ Any arm from its URDF plus what a user knows, instead of ``--robot`` (docs/reach
     python -m experiments.reach_experiment (--urdf FILE | --example-robot NAME)
         [--base-link L] [--tip-link L] [--task pose|orientation|position] [--rate HZ]
         [--condition ideal armature armature-wrong friction armature-friction no-velocities
-         encoder] [--encoder-bits B] [--no-encoder-told]
+         encoder payload payload-told armature-payload armature-payload-told]
+        [--encoder-bits B] [--no-encoder-told] [--payload-share S]
         [--engine mujoco|pybullet] [--armature A] [--armature-told-scale S]
         [--friction-fraction F] [--delay TICKS] [--cases N] [--potential tanh]
 
@@ -53,8 +54,11 @@ untold Coulomb friction, its velocities not clamped (a peak past a URDF velocity
 reported as ``|qdot|/limit``), or its states given without velocities (estimated by
 ``quat_jt_runtime.joints.VelocityEstimator``, as the node does), their positions exact or, in
 ``encoder``, in whole counts of a ``--encoder-bits`` encoder whose count the controller is
-told (``position_resolution``) unless ``--no-encoder-told``. A markdown table ends the
-output: reached, stops touched, velocity limits exceeded, limit cycles, time to goal.
+told (``position_resolution``) unless ``--no-encoder-told``. In the payload conditions the
+plant's tip carries ``--payload-share`` of what it can carry (``payload_capacity_kg``), 5 cm
+along its z, and the design and the controller are told it (``payload-told``:
+``payload_mass``, ``payload_com``) or not. A markdown table ends the output: reached, stops
+touched, velocity limits exceeded, limit cycles, time to goal.
 
 ``--dds K`` also runs the first K cases of each robot over DDS with the real nodes
 (``local_ros``, lockstep paced at real time, so that the goal-check worker answers in the same
@@ -86,7 +90,7 @@ from quat_jt_controller.controller_config import (controller_from_config,
 from quat_jt_controller.gain_design import CRUISE_FRACTION, SPEED_MARGIN
 from quat_jt_controller.goal_check import heavy_warning
 from quat_jt_controller.inverse_kinematics import goal_configuration, sampling_box
-from quat_jt_controller.model import RobotModel
+from quat_jt_controller.model import GRAVITY_RESERVE_SHARE, RobotModel
 from quat_jt_controller.reference_sim import ClosedLoop, run_sampled
 from quat_jt_controller.stall import StallDetector
 from quat_jt_runtime.param_table import names
@@ -545,7 +549,7 @@ class CaseJob:
     """One case, picklable: what a worker process (or a Ray task) needs to run it."""
 
     robot: Robot
-    model_spec: tuple  # (urdf_xml, base_link, tip_link, joint_names, armature): the model
+    model_spec: tuple  # (urdf_xml, base_link, tip_link, joints, armature, payload): the model
     gains: cl.Gains
     shaping: sh.Shaping
     sim_params: dict
@@ -564,14 +568,16 @@ class CaseJob:
 
 @functools.lru_cache(maxsize=8)
 def _model(urdf_xml: str, base_link: str, tip_link: str, joints: tuple,
-           armature: tuple) -> RobotModel:
-    return RobotModel(urdf_xml, base_link, tip_link, list(joints), list(armature))
+           armature: tuple, payload_kg: float = 0.0,
+           payload_com_tip_m: tuple = (0.0, 0.0, 0.0)) -> RobotModel:
+    return RobotModel(urdf_xml, base_link, tip_link, list(joints), list(armature), payload_kg,
+                      payload_com_tip_m)
 
 
 def model_spec(model: RobotModel, urdf_xml: str) -> tuple:
     """Return what rebuilds ``model`` in a worker (``CaseJob.model_spec``)."""
     return (urdf_xml, model.base_link, model.tip_link, tuple(model.joint_names),
-            tuple(model.armature))
+            tuple(model.armature), model.payload_kg, model.payload_com_tip_m)
 
 
 def run_job(job: CaseJob) -> Outcome:
@@ -693,7 +699,8 @@ def run_dds(robot: Robot, count: int, seed: int, progress=print) -> str:
 MAX_DELAY_TICKS = 10
 
 CONDITIONS = ('ideal', 'armature', 'armature-wrong', 'friction', 'armature-friction',
-              'no-velocities', 'encoder', 'payload', 'payload-told')
+              'no-velocities', 'encoder', 'payload', 'payload-told', 'armature-payload',
+              'armature-payload-told')
 # Where the payload conditions put the payload: 5 cm along the tip link's z, in its frame
 PAYLOAD_COM_TIP_M = (0.0, 0.0, 0.05)
 
@@ -710,7 +717,7 @@ class Condition:
     encoder_bits: int = 0  # the positions read in whole counts of 2 pi / 2^bits (0: exact)
     encoder_told: bool = True  # ... and the controller told the count (position_resolution)
     delay_ticks: int = 1  # the ticks between a state and the torque computed from it applied
-    payload_share: float = 0.0  # a payload at the tip, x the mass the arm's joints move
+    payload_share: float = 0.0  # a payload at the tip, x what it can carry (payload_capacity_kg)
     payload_told: bool = False  # ... and the design and the controller told it
 
     def describe(self) -> str:
@@ -729,15 +736,19 @@ class Condition:
             'encoder': f'positions from {self.encoder_bits}-bit encoders, no velocities '
                        + ('(estimated, the count told)' if self.encoder_told else
                           '(estimated, the count not told)'),
-            'payload': f'untold payload {self.payload_share:g} x the link mass',
-            'payload-told': f'payload {self.payload_share:g} x the link mass, given',
+            'payload': f'untold payload {self.payload_share:g} x capacity',
+            'payload-told': f'payload {self.payload_share:g} x capacity, given',
+            'armature-payload': f'rotor inertia {self.plant_armature:g} kg m^2, given, and '
+                                f'untold payload {self.payload_share:g} x capacity',
+            'armature-payload-told': f'rotor inertia {self.plant_armature:g} kg m^2 and '
+                                     f'payload {self.payload_share:g} x capacity, given',
         }[self.name] + delay
 
 
 def condition(name: str, armature: float = 0.1, told_scale: float = 0.5,
               friction_fraction: float = 0.01, encoder_bits: int = 17,
               encoder_told: bool = True, delay_ticks: int = 1,
-              payload_share: float = 0.1) -> Condition:
+              payload_share: float = 0.5) -> Condition:
     """Return the condition ``name`` (``CONDITIONS``) with these plant figures."""
     encoder_resolution_rad(encoder_bits)  # ValueError names a bad count
     if not (math.isfinite(payload_share) and payload_share >= 0.0):
@@ -757,6 +768,10 @@ def condition(name: str, armature: float = 0.1, told_scale: float = 0.5,
         'payload': Condition('payload', payload_share=payload_share),
         'payload-told': Condition('payload-told', payload_share=payload_share,
                                   payload_told=True),
+        'armature-payload': Condition('armature-payload', armature, armature,
+                                      payload_share=payload_share),
+        'armature-payload-told': Condition('armature-payload-told', armature, armature,
+                                           payload_share=payload_share, payload_told=True),
     }[name], delay_ticks=delay_ticks)
 
 
@@ -798,16 +813,41 @@ def arm_robot(name: str, urdf_path: str, base_link: Optional[str], tip_link: Opt
                  base_link=base, tip_link=tip, joints=tuple(joints))
 
 
-def link_mass_kg(robot: Robot) -> float:
-    """Return the mass the arm's joints move (kg): its links past the first controlled joint."""
+# The configurations payload_capacity_kg samples, seeded
+CAPACITY_SURVEY = 400
+
+
+@functools.lru_cache(maxsize=64)
+def payload_capacity_kg(robot: Robot) -> float:
+    """
+    Return the most the arm's tip can carry at ``PAYLOAD_COM_TIP_M`` within the gravity reserve.
+
+    The largest mass whose weight, on top of the arm's own, asks no joint for more than
+    ``GRAVITY_RESERVE_SHARE`` of its URDF effort limit in any of ``CAPACITY_SURVEY`` seeded
+    configurations (``RobotModel.payload_regressor``; the sign of the two taken at their
+    worst): an arm's rated payload, as its URDF's effort limits give it. 0 where the arm's own
+    weight already asks more somewhere (Baxter's and TALOS's shoulders).
+    """
     model = _model(robot_urdf(robot), robot.base_link, robot.tip_link, tuple(robot.joints),
                    (0.0,) * len(robot.joints))
-    return float(sum(inertia.mass for inertia in model.model.inertias[1:]))
+    lower, upper = sampling_box(model)
+    rng = np.random.default_rng(0)
+    reserve = GRAVITY_RESERVE_SHARE * np.array(model.effort_limits)
+    unit = np.array([1.0, *PAYLOAD_COM_TIP_M])  # 1 kg
+    most = math.inf
+    for _ in range(CAPACITY_SURVEY):
+        q = rng.uniform(lower, upper).tolist()
+        own = np.abs(model.gravity(q))
+        per_kg = np.abs(model.payload_regressor(q) @ unit)
+        lifted = per_kg > 1e-9
+        if np.any(lifted):
+            most = min(most, float(np.min((reserve[lifted] - own[lifted]) / per_kg[lifted])))
+    return max(most, 0.0) if math.isfinite(most) else 0.0
 
 
 def payload_kg(robot: Robot, cond: 'Condition') -> float:
-    """Return the plant's payload of ``cond`` on ``robot``, kg (its share of the link mass)."""
-    return cond.payload_share * link_mass_kg(robot) if cond.payload_share else 0.0
+    """Return the plant's payload of ``cond`` on ``robot``, kg (its share of the capacity)."""
+    return cond.payload_share * payload_capacity_kg(robot) if cond.payload_share else 0.0
 
 
 @functools.lru_cache(maxsize=16)
@@ -869,7 +909,7 @@ def run_arm(robot: Robot, cond: Condition, potential: str, count: int, seed: int
                   'coulomb_friction': [cond.coulomb_effort_fraction * e
                                        for e in model.effort_limits],
                   'enforce_velocity_limits': False}
-    spec = model_spec(model, model.urdf_xml)  # a payload told: its link in the URDF
+    spec = model_spec(model, robot_urdf(robot))  # a payload told: in the model's
     # the goals are those the plant can hold up, its payload in, told or not (cases)
     plant_model = (model if cond.payload_told or not plant_payload_kg else
                    RobotModel(robot_urdf(robot), robot.base_link, robot.tip_link,
@@ -964,9 +1004,10 @@ def main(argv: Optional[list] = None) -> int:
                      help="'armature-wrong': the design is told this x the rotor inertia")
     arm.add_argument('--friction-fraction', type=float, default=0.01,
                      help="'friction': untold Coulomb friction, x each effort limit")
-    arm.add_argument('--payload-share', type=float, default=0.1,
-                     help="'payload', 'payload-told': a payload at the tip (5 cm along its z), "
-                     'this x the mass the arm moves (default 0.1)')
+    arm.add_argument('--payload-share', type=float, default=0.5,
+                     help='the payload conditions: a payload at the tip (5 cm along its z), '
+                     'this x what the tip can carry within the gravity reserve of the URDF '
+                     'effort limits (default 0.5)')
     arm.add_argument('--encoder-bits', type=int, default=17,
                      help="'encoder': the positions in counts of 2 pi / 2^bits (8 to 32, "
                      'or 0 for exact ones; default 17)')
@@ -1084,6 +1125,8 @@ def main_arm(parser: argparse.ArgumentParser, args, overrides: dict) -> int:
             except (cl.GainsError, sh.ShapingError) as exc:
                 parser.error(f'--param: {exc}')
             label = ', '.join([potential, cond.describe(), args.engine]
+                              + ([f'payload {payload_kg(robot, cond):.3g} kg']
+                                 if cond.payload_share else [])
                               + [f'{k} {v}' for k, v in overrides.items()])
             text.append(report(robot, label, outcomes, time.monotonic() - t0,
                                args.cruise_fraction or CRUISE_FRACTION))

@@ -435,7 +435,8 @@ class Controller:
             goal, self.last_q, goal.q_desired_base, goal.p_desired_base,
             shaping.joint_limit_margin_rad if shaping.configuration_on or tracking else None,
             nu_desired if tracking else None,
-            Posture(shaping.preferred_configuration_rad or None, shaping.posture_weight))
+            Posture(shaping.preferred_configuration_rad or None, shaping.posture_weight),
+            self.regulator.model.payload)
 
     def take_goal_checks(self) -> tuple[LogLine, ...]:
         """

@@ -44,13 +44,24 @@ class QuatJtController(Node):
     def __init__(self, prewarm: bool = True, **kwargs) -> None:
         """Build the node; ``prewarm=False``: never a throwaway tick (the composed mode)."""
         super().__init__(NODE_NAME, **kwargs)
+        try:
+            self._start(prewarm)
+        except BaseException:
+            # A node that cannot start gives its handles back at once (its /rosout logger
+            # too, which a later node of the same name in this process would not get).
+            if getattr(self, '_goal_checker', None) is not None:
+                self._goal_checker.close()
+            Node.destroy_node(self)
+            raise
+
+    def _start(self, prewarm: bool) -> None:
         cfg = self.config = parameters.declare_structural(self)
         self._use_sim_time = bool(self.get_parameter('use_sim_time').value)
         # applied by lifecycle.run_node; on simulated time there are no deadlines to keep
         self.realtime = declare_realtime(self, 'simulated time' if self._use_sim_time else '')
         try:
             model = RobotModel(cfg.urdf_xml, cfg.base_link, cfg.tip_link, cfg.joints,
-                               cfg.armature, cfg.payload_kg, cfg.payload_com_tip_m)
+                               cfg.armature)
         except ModelError as exc:
             raise ModelError(f'{exc}{bundled_urdf_hint(cfg.given_urdf)}') from None
         gains = parameters.declare_gains(  # each change logged once by the ChangeLog
@@ -60,9 +71,11 @@ class QuatJtController(Node):
             self, cfg, check=reg.check_shaping, on_apply=reg.set_shaping,
             preferred_configuration=model.middle_of_ranges())
         reg.set_shaping(self.shaping.current)
+        self.payload = parameters.declare_payload(self, on_apply=reg.set_payload)
+        reg.set_payload(self.payload.current)
         self._change_log = parameters.change_log(self, reg)
-        self._goal_checker = GoalCheckWorker(ModelSpec(  # the payload's link in the URDF
-            model.urdf_xml, cfg.base_link, cfg.tip_link, cfg.joints, cfg.task))
+        self._goal_checker = GoalCheckWorker(ModelSpec(
+            cfg.urdf_xml, cfg.base_link, cfg.tip_link, cfg.joints, cfg.task))
         ctl = self.controller = Controller(
             reg, cfg.state_timeout_s, cfg.publish_rate_divider, cfg.max_state_age_s,
             cfg.state_rate_hz, self._goal_checker, started_ns=steady_ns(),

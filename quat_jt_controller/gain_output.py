@@ -231,8 +231,8 @@ def to_yaml(d: Design, potential: str = 'tanh', command: str = '',
     values.update(d.parameters(potential))
     values.update(structure)
     first = row(table.STRUCTURE, 'task')
-    rows = (first, *live, *(spec for spec in table.STRUCTURE
-                            if spec is not first and spec.name in structure))
+    rows = (first, *live, *table.PAYLOAD, *(spec for spec in table.STRUCTURE
+                                            if spec is not first and spec.name in structure))
     lines += ['/**:  # any node name and namespace', '  ros__parameters:']
     lines += yaml_lines(rows, values, comments)
     return '\n'.join(lines) + '\n'

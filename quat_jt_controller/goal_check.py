@@ -26,6 +26,7 @@ from quat_jt_controller.inverse_kinematics import configuration_velocity, MAX_ST
 from quat_jt_controller.inverse_kinematics import RESIDUAL_TOLERANCE, search_goal_configuration
 from quat_jt_controller.inverse_kinematics import Search, SINGULAR_SIGMA_MIN, solve_ik, starts
 from quat_jt_controller.model import GRAVITY_RESERVE_SHARE, RobotModel
+from quat_jt_runtime.payload import Payload
 from quat_jt_runtime.realtime import start_at_normal_scheduling
 
 
@@ -216,7 +217,7 @@ class GoalCheckWorker:
                q_desired: Sequence[float], p_desired: Sequence[float],
                configuration_margin_rad: Optional[float] = None,
                nu_desired: Optional[Sequence[float]] = None,
-               posture: Posture = Posture()) -> None:
+               posture: Posture = Posture(), payload: Payload = Payload()) -> None:
         """
         Queue a check; ``key`` comes back with its verdict (e.g. the goal object).
 
@@ -225,7 +226,9 @@ class GoalCheckWorker:
         :meth:`take_configuration` once ``key`` has come back from :meth:`poll`. With
         ``nu_desired`` too (the goal's task velocity), also its joint velocity
         (:func:`configuration_velocity`), with :meth:`take_configuration_velocity`.
-        ``posture`` chooses q* along a redundant arm's self-motion.
+        ``posture`` chooses q* along a redundant arm's self-motion; ``payload`` is the one the
+        tip carries now (the worker's model takes it before the check: a goal the arm may not
+        hold up with it is warned about).
         """
         request = {'q_measured': None if q_measured is None else [float(x) for x in q_measured],
                    'q_desired': [float(x) for x in q_desired],
@@ -234,7 +237,8 @@ class GoalCheckWorker:
                    'nu_desired': None if nu_desired is None else [float(x) for x in nu_desired],
                    'preferred_configuration': None if posture.preferred_rad is None else
                    [float(x) for x in posture.preferred_rad],
-                   'posture_weight': float(posture.weight)}
+                   'posture_weight': float(posture.weight),
+                   'payload': [float(payload.mass_kg), *(float(c) for c in payload.com_m)]}
         self._next = (key, request)
         if self._running is None and self.available:
             self._start_next()
@@ -371,6 +375,9 @@ def _serve() -> None:
         request = json.loads(line)
         configuration = velocity = None
         try:
+            mass_kg, *com_m = request.get('payload') or (0.0, 0.0, 0.0, 0.0)
+            if (mass_kg, tuple(com_m)) != (model.payload_kg, model.payload_com_tip_m):
+                model.set_payload(mass_kg, com_m)
             margin = request.get('configuration_margin')
             if margin is None:
                 verdict = check_goal(model, request['q_measured'], request['q_desired'],

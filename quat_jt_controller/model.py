@@ -17,8 +17,9 @@ The inertia is the URDF's links plus, per joint, the rotor inertia its drive ref
 the forward dynamics and everything designed or checked from them. A URDF rarely carries it (a
 geared drive's rotor, seen through the gear ratio r, adds r^2 I_rotor, often more than the
 link), so it is given as a model input. So is a payload the URDF does not carry (a tool, a grasped
-part): ``payload_kg`` at ``payload_com_tip_m`` in the tip link's frame, a link the model adds to
-the URDF (``quat_jt_runtime.payload``), in g(q), M(q) and everything built on them.
+part): a point mass at a point of the tip link's frame, added to the body of the tip's joint
+(:meth:`RobotModel.set_payload`, which may change it while the controller runs), in g(q), M(q)
+and everything built on them.
 """
 from math import cos, sin
 from typing import Optional, Sequence
@@ -34,7 +35,7 @@ except ModuleNotFoundError as exc:  # e.g. a colcon workspace whose rosdep skipp
 
 from quat_jt_runtime.errors import checked_vector, QuatJtError
 from quat_jt_runtime.joints import fixed_joints, movable_joints, select_joints
-from quat_jt_runtime.payload import payload_values, with_payload
+from quat_jt_runtime.payload import Payload, PAYLOAD_RADIUS_M
 
 # sigma_min of the task Jacobian (J_o, J_G or J_p), its position rows divided by the arm's
 # length (RobotModel.task_sigma_min: dimensionless), below this: near-singular (the paper's
@@ -64,7 +65,7 @@ class RobotModel:
     velocity index); ModelError names a value that is not finite and >= 0, or a length that is
     not one per joint. ``payload_kg`` (>= 0) at ``payload_com_tip_m`` (x, y, z in the tip
     link's frame, m) is a point mass the tip link carries that the URDF does not list
-    (:func:`~quat_jt_runtime.payload.with_payload`); :attr:`urdf_xml` is the URDF with it.
+    (:meth:`set_payload`).
     """
 
     def __init__(self, urdf_xml: str, base_link: str, tip_link: str,
@@ -75,18 +76,6 @@ class RobotModel:
             movable = movable_joints(urdf_xml)
         except ValueError as exc:
             raise ModelError(f'cannot parse the URDF: {exc}') from exc
-        try:
-            self.payload_kg, self.payload_com_tip_m = payload_values(payload_kg,
-                                                                     payload_com_tip_m)
-        except ValueError as exc:
-            raise ModelError(str(exc)) from None
-        if self.payload_kg > 0.0:
-            try:
-                urdf_xml = with_payload(urdf_xml, tip_link, self.payload_kg,
-                                        self.payload_com_tip_m)
-            except ValueError:  # no such link: the check of the links below names it
-                pass
-        self.urdf_xml = urdf_xml  # as modelled: the payload's link in, if any
         joint_names = select_joints(joint_names, movable, ModelError)
         # Joints not controlled are locked at zero: made fixed in the URDF itself, which is
         # what Pinocchio's buildReducedModel computes, without its lookup of frames by name
@@ -148,12 +137,20 @@ class RobotModel:
             raise ModelError(f'base link {base_link!r} moves with joint '
                              f'{model.names[model.frames[self._base_id].parentJoint]!r}; '
                              'it must be fixed to the URDF root')
+        # the body the tip moves with, as the URDF has it: set_payload adds to it
+        tip_frame = model.frames[self._tip_id]
+        self._tip_joint = tip_frame.parentJoint
+        self._tip_placement = tip_frame.placement.copy()
+        self._bare_tip_body = model.inertias[self._tip_joint].copy()
+        self.payload = Payload()
+        self.set_payload(payload_kg, payload_com_tip_m)
         self._q = pin.neutral(model)
         self._link_data = None  # link_pose's own, made when first asked
         pin.framesForwardKinematics(model, self.data, self._q)
         base = self.data.oMf[self._base_id]
         self._base_is_root = bool(np.allclose(base.homogeneous, np.eye(4)))
         self._R_root_base = base.rotation.copy()  # base orientation in the root frame
+        self._gravity_base = self._R_root_base.T @ model.gravity.linear  # m/s^2, base axes
         self._p_root_base = base.translation.copy()
 
         inf = float('inf')
@@ -166,6 +163,37 @@ class RobotModel:
         # the URDF's <dynamics friction>, N m (0: not given); the simulator does not use it
         self.friction_nm = self._per_joint(model.friction)
         self.length_m = self._chain_length(joint_ids)
+
+    def set_payload(self, payload_kg: float, payload_com_tip_m: Sequence[float]) -> None:
+        """
+        Carry ``payload_kg`` at ``payload_com_tip_m`` (m, in the tip link's frame) from now on.
+
+        A point mass (a sphere of ``PAYLOAD_RADIUS_M``, as ``quat_jt_runtime.payload`` puts it
+        in a URDF) added to the body of the joint that moves the tip, in place: g(q), M(q) and
+        the dynamics have it from the next call. It replaces the payload before; 0 takes it
+        away. ModelError names a mass that is not finite and >= 0, or a point that is not 3
+        finite coordinates. A tip fixed to the base carries it on the base: nothing changes.
+        """
+        try:
+            payload = Payload.create(payload_kg, payload_com_tip_m)
+        except ValueError as exc:
+            raise ModelError(str(exc)) from None
+        mass = payload.mass_kg
+        body = self._bare_tip_body + self._tip_placement.act(pin.Inertia(
+            mass, np.array(payload.com_m), np.eye(3) * (0.4 * mass * PAYLOAD_RADIUS_M ** 2)))
+        self.model.inertias[self._tip_joint] = body
+        self._inertial[0].inertias[self._tip_joint] = body
+        self.payload = payload
+
+    @property
+    def payload_kg(self) -> float:
+        """Return the mass of the payload the tip carries (kg; 0: none)."""
+        return self.payload.mass_kg
+
+    @property
+    def payload_com_tip_m(self) -> tuple[float, ...]:
+        """Return where the payload is, m, in the tip link's frame."""
+        return self.payload.com_m
 
     def _chain_length(self, joint_ids: Sequence[int]) -> float:
         """
@@ -298,6 +326,22 @@ class RobotModel:
         """g(q) of Eq. (1), N m, in ``joint_names`` order."""
         g = pin.computeGeneralizedGravity(self.model, self.data, self._set_q(q))
         return g.tolist() if self._identity_order else [float(g[i]) for i in self._idx]
+
+    def payload_regressor(self, q: Sequence[float]) -> np.ndarray:
+        """
+        Return ``Y(q)`` (n x 4): the g(q) of a point payload ``m`` at ``c`` is ``Y [m; m c]``.
+
+        ``c`` in the tip link's frame (m). With the tip's ``J_p``, ``J_o`` and ``R`` in the
+        base frame and ``g0`` the acceleration of gravity reversed (m/s^2, base axes), the
+        weight ``-m g0`` at ``p + R c`` needs ``J_c^T m g0``, ``J_c = J_p - [R c]x J_o``:
+        ``m J_p^T g0 - J_o^T [g0]x R (m c)``. Linear in ``(m, m c)``, so a held torque can be
+        fitted by least squares (the stall diagnosis's untold payload).
+        """
+        _, R, J = self.kinematics(q)
+        J, R = np.array(J), np.array(R)
+        g0 = -self._gravity_base
+        cross = np.array([[0.0, -g0[2], g0[1]], [g0[2], 0.0, -g0[0]], [-g0[1], g0[0], 0.0]])
+        return np.column_stack((J[:3].T @ g0, -J[3:].T @ cross @ R))
 
     def mass_matrix(self, q: Sequence[float]) -> np.ndarray:
         """M(q) of Eq. (1), the armature on its diagonal, in ``joint_names`` order."""

@@ -52,18 +52,19 @@ POSITION_RESOLUTION = Spec(
     size='n', bounds=(0.0, inf), default_text=JOINT_ZEROS_TEXT)
 PER_JOINT_STRUCTURE = (ARMATURE, POSITION_RESOLUTION)
 PAYLOAD_MASS_MAX_KG = 1000.0
+# Live, applied whole as one Payload (quat_jt_runtime.payload) to the model's tip body
 PAYLOAD = (
     Spec('payload_mass', Kind.DOUBLE, 0.0,
          'Mass the tip link carries that the URDF does not list (a tool, a grasped part), kg: '
-         'a point mass at payload_com, in g(q) and M(q) wherever the controller uses them. '
-         'Without it gravity compensation leaves its weight to the potential, and the tip '
-         'settles where the stiffness holds it, short of the goal; what the friction learning '
-         'takes covers a light one (docs/reach.md, "an untold payload"). design_gains '
-         '--payload-mass takes the same value.', read_only=True,
-         bounds=(0.0, PAYLOAD_MASS_MAX_KG)),
+         'a point mass at payload_com, in g(q) and M(q) wherever the controller uses them, '
+         'from the next tick. Without it gravity compensation leaves its weight to the '
+         'potential, and the tip settles where the stiffness holds it, short of the goal; the '
+         'friction learning takes up a light one (docs/reach.md, "An untold payload"). Set it '
+         'when a part is grasped or let go; design_gains --payload-mass takes the tool the arm '
+         'always carries. Live.', bounds=(0.0, PAYLOAD_MASS_MAX_KG)),
     Spec('payload_com', Kind.DOUBLE_ARRAY, [0.0, 0.0, 0.0],
-         "Where payload_mass is, x y z in m in tip_link's frame (design_gains --payload-com).",
-         read_only=True, constraints='3 finite values'),
+         "Where payload_mass is, x y z in m in tip_link's frame (design_gains --payload-com). "
+         'Live.', constraints='3 finite values'),
 )
 STRUCTURE = (
     Spec('task', Kind.STRING, Task.ORIENTATION.value,
@@ -77,7 +78,6 @@ STRUCTURE = (
          'matched by name.', read_only=True, constraints='non-empty names'),
     ARMATURE,
     POSITION_RESOLUTION,
-    *PAYLOAD,
     Spec('base_link', Kind.STRING, 'base_link',
          'Frame of goals and published poses (target_pose header.frame_id).', read_only=True),
     Spec('tip_link', Kind.STRING, 'tool0', 'The end-effector link whose pose is regulated.',

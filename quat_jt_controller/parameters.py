@@ -22,7 +22,7 @@ from quat_jt_runtime.description import robot_description
 from quat_jt_runtime.joints import check_state_rate
 from quat_jt_runtime.param_table import names, row
 from quat_jt_runtime.params import ChangeLog, declare, LiveParameters
-from quat_jt_runtime.payload import payload_values
+from quat_jt_runtime.payload import Payload
 from quat_jt_runtime.urdf_source import Description, WithDescription
 from rclpy.node import Node
 
@@ -38,8 +38,6 @@ class StructuralConfig(WithDescription):
     description: Description  # the URDF in use and where it came from
     armature: tuple[float, ...]  # kg m^2 per joint, finite and >= 0
     position_resolution: tuple[float, ...]  # rad (m) a count per joint; 0: exact
-    payload_kg: float  # the tip link's payload the URDF does not list, >= 0
-    payload_com_tip_m: tuple[float, ...]  # where it is, in tip_link's frame
     state_timeout_s: float
     max_state_age_s: float  # 0: stamps not checked
     state_rate_hz: float
@@ -65,13 +63,9 @@ class StructuralConfig(WithDescription):
         resolution = table.POSITION_RESOLUTION.check(values['position_resolution'],
                                                      {'n': len(joints)})
         state_rate_hz = check_state_rate(values['state_rate'])
-        payload_kg, payload_com_tip_m = payload_values(
-            row(table.PAYLOAD, 'payload_mass').check(values['payload_mass'], {}),
-            values['payload_com'])
         return cls(task=task, joints=joints, base_link=values['base_link'],
                    tip_link=values['tip_link'], armature=armature,
-                   position_resolution=resolution, payload_kg=payload_kg,
-                   payload_com_tip_m=payload_com_tip_m,
+                   position_resolution=resolution,
                    description=description(),
                    state_timeout_s=float(values['state_timeout']),
                    max_state_age_s=float(values['max_state_age']),
@@ -126,8 +120,8 @@ def describe_start(config: StructuralConfig, regulator: Regulator,
             f'{config.tip_link}, potential {gains.potential.value}, kp {list(gains.kp)}, kv '
             f'{list(gains.kv)}, lambda {list(gains.lam)}, effort limits '
             f'{list(regulator.effort_limits_nm)} N m'
-            + (f', payload {config.payload_kg:g} kg at {list(config.payload_com_tip_m)} m in '
-               f'{config.tip_link}' if config.payload_kg > 0.0 else '')
+            + (f', {regulator.model.payload.describe(config.tip_link)}'
+               if regulator.model.payload_kg > 0.0 else '')
             + f'; waiting for joint states on {state_topic}, '
             'then holding the first pose measured until a goal arrives on ~/target_pose'
             + ('' if config.task.has_orientation else
@@ -139,7 +133,9 @@ def change_log(node: Node, regulator: Regulator) -> ChangeLog:
     """Log each parameter request once, with the gains and the extensions then in force."""
     return ChangeLog(node, (
         (names(table.GAINS), lambda: describe_gains(regulator.gains)),
-        (names(table.SHAPING), lambda: f'extensions: {describe_shaping(regulator.shaping)}')))
+        (names(table.SHAPING), lambda: f'extensions: {describe_shaping(regulator.shaping)}'),
+        (names(table.PAYLOAD),
+         lambda: regulator.model.payload.describe(regulator.model.tip_link))))
 
 
 def describe_gains(gains: Gains) -> str:
@@ -179,6 +175,18 @@ def declare_shaping(node: Node, config: StructuralConfig,
         return shaping if check is None else check(shaping)
 
     return LiveParameters(node, names(table.SHAPING), build, on_apply)
+
+
+def declare_payload(node: Node, on_apply: Optional[Callable[[Payload], None]] = None
+                    ) -> LiveParameters[Payload]:
+    """
+    Declare the live payload parameters; return them as a Payload.
+
+    ``on_apply`` is called with each new Payload after a successful set (the regulator's
+    model carries it from the next tick). Raises ValueError naming a bad start-up value.
+    """
+    declare(node, table.PAYLOAD)
+    return LiveParameters(node, names(table.PAYLOAD), Payload.from_parameters, on_apply)
 
 
 def build_shaping(values: Mapping[str, Any], config: StructuralConfig) -> Shaping:

@@ -34,6 +34,7 @@ from quat_jt_controller import control_law as cl
 from quat_jt_controller import quaternion as quat
 from quat_jt_controller import shaping as sh
 from quat_jt_controller.model import RobotModel
+from quat_jt_runtime.payload import Payload
 
 Vector3 = tuple[float, float, float]
 MAX_LEARNING_STEP_S = 0.01  # a longer gap between ticks advances the friction learning by this
@@ -351,6 +352,15 @@ class Regulator:
                 raise sh.ShapingError(f'preferred_configuration: {name} = {v} is outside its '
                                       f'limits [{lo:g}, {hi:g}]')
         return shaping
+
+    def set_payload(self, payload: Payload) -> None:
+        """
+        Carry ``payload`` at the tip from the next tick (``RobotModel.set_payload``).
+
+        Its weight goes into the gravity compensation g(q), its mass into M(q) and the
+        damping built on it. The learned friction is kept: it adapts to what is left.
+        """
+        self.model.set_payload(payload.mass_kg, payload.com_m)
 
     def set_shaping(self, shaping: sh.Shaping) -> None:
         """

@@ -42,6 +42,14 @@ LEARNED_FULL_SHARE = 0.999
 # With no estimate and the learning on, a weak joint the learning has seen held for less than
 # this (its h, Regulator.friction_held) is not held by a friction (shaping.learn_friction)
 HELD_LEARNING = 0.5
+# The torque held at rest is named the weight of an untold payload where a payload's g(q)
+# (RobotModel.payload_regressor: 4 unknowns, of which 3 act in one pose) fits all but this
+# share of it (the norm of the rest over its own) ...
+PAYLOAD_FIT_RESIDUAL = 0.2
+# ... on an arm with at least this many joints (more equations than the pose's unknowns) ...
+PAYLOAD_FIT_JOINTS = 5
+# ... where the fitted torque is at least this share of some joint's effort limit
+PAYLOAD_FIT_EFFORT_SHARE = 0.01
 
 
 class StallDetector:
@@ -101,7 +109,7 @@ class StallDetector:
         """
         reg = self.regulator
         model, shaping = reg.model, reg.shaping
-        causes = []
+        causes = self._payload(q, out)
         near = max(NEAR_LIMIT_RAD, shaping.joint_limit_margin_rad)
         for j, name in enumerate(model.joint_names):
             lo, hi = model.position_lower[j], model.position_upper[j]
@@ -127,6 +135,42 @@ class StallDetector:
         if not causes:
             causes.append('no known cause (a local minimum of the potential)')
         return causes
+
+    def _payload(self, q: Sequence[float], out: TickOutput) -> list[str]:
+        """
+        Name a weight the model does not carry where it explains the torque held at rest.
+
+        At rest the torque the controller applies beyond its ``g(q)`` holds what its model
+        leaves out. A payload's ``g(q)`` is linear in its mass and first moment
+        (``RobotModel.payload_regressor``); where the least-squares fit of one leaves less than
+        ``PAYLOAD_FIT_RESIDUAL`` of the held torque and asks at least
+        ``PAYLOAD_FIT_EFFORT_SHARE`` of an effort limit, the stall is most likely an untold
+        payload, or link masses the URDF has wrong: its mass is said (a negative one: the
+        URDF's tip is heavier than the arm's). A friction holds with a torque of any pattern;
+        the fit tells the two apart only on an arm with more joints than the pose shows of the
+        payload (``PAYLOAD_FIT_JOINTS``).
+        """
+        reg = self.regulator
+        model = reg.model
+        if model.n < PAYLOAD_FIT_JOINTS or not reg.gains.gravity_compensation:
+            return []
+        held = np.array(out.tau_nm) - np.array(model.gravity(list(q)))
+        norm = float(np.linalg.norm(held))
+        if norm <= 0.0:
+            return []
+        Y = model.payload_regressor(q)
+        theta = np.linalg.lstsq(Y, held, rcond=None)[0]
+        fitted = Y @ theta
+        if (np.linalg.norm(held - fitted) > PAYLOAD_FIT_RESIDUAL * norm
+                or np.all(np.abs(fitted) < PAYLOAD_FIT_EFFORT_SHARE
+                          * np.array(model.effort_limits))):
+            return []
+        mass = float(theta[0]) + model.payload_kg
+        return [f'the torque held at rest is what {abs(theta[0]):.3g} kg '
+                + ('more' if theta[0] > 0.0 else 'less')
+                + f' at the tip ({model.tip_link}) would need: a payload the model does not '
+                f'carry (set payload_mass, {max(mass, 0.0):.3g} kg, and payload_com), or link '
+                'masses the URDF has wrong']
 
     def _weak_push(self, tau_p: Sequence[float], qdot: Sequence[float],
                    kv: Sequence[float]) -> list[str]:

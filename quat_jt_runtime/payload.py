@@ -9,12 +9,18 @@ URDF with the payload as one more link, fixed to the link that carries it. The c
 model (Pinocchio, which folds a fixed link into its parent's body) and the simulator's plant
 (PyBullet, MuJoCo) are both built from that text, so the two cannot disagree on it.
 
+The controller's model takes the same payload as a :class:`Payload` and adds its inertia to
+the body of the tip's joint in place (``RobotModel.set_payload``), so that it can change while
+the controller runs (a part grasped, a tool changed); its tests check both ways against each
+other.
+
 The payload is a point mass, within the 1 cm sphere the URDF needs for an inertia
 (``PAYLOAD_RADIUS_M``): its weight and its lever are what matter to g(q), and a tool whose own
 inertia matters belongs in the URDF as links.
 """
+from dataclasses import dataclass
 from math import isfinite
-from typing import Sequence
+from typing import Mapping, Sequence
 from xml.etree import ElementTree
 
 PAYLOAD_RADIUS_M = 0.01  # the sphere whose inertia the payload link is given
@@ -42,6 +48,30 @@ def payload_values(mass_kg: float, com_m: Sequence[float]) -> tuple[float, tuple
         raise ValueError('payload_com must be 3 finite numbers, x y z in m in the frame of '
                          f'the link that carries it, got {list(com)}')
     return mass, com
+
+
+@dataclass(frozen=True)
+class Payload:
+    """A payload, validated: ``mass_kg`` >= 0 at ``com_m`` (m, in the carrying link's frame)."""
+
+    mass_kg: float = 0.0
+    com_m: tuple[float, ...] = (0.0, 0.0, 0.0)
+
+    @classmethod
+    def create(cls, mass_kg: float, com_m: Sequence[float]) -> 'Payload':
+        """Return the payload checked (:func:`payload_values`); ValueError names a bad value."""
+        return cls(*payload_values(mass_kg, com_m))
+
+    @classmethod
+    def from_parameters(cls, values: Mapping) -> 'Payload':
+        """Return the payload of ``payload_mass`` and ``payload_com`` (absent: 0, the origin)."""
+        return cls.create(values.get('payload_mass', 0.0),
+                          values.get('payload_com', (0.0, 0.0, 0.0)))
+
+    def describe(self, link: str) -> str:
+        """Return the payload in words, for the log."""
+        return (f'payload {self.mass_kg:g} kg at {list(self.com_m)} m in {link}'
+                if self.mass_kg > 0.0 else 'no payload')
 
 
 def with_payload(urdf_xml: str, link: str, mass_kg: float, com_m: Sequence[float]) -> str:

@@ -231,8 +231,15 @@ def test_a_payload_is_carried_by_the_plant_and_told_to_the_design_only_if_asked(
     """'payload': the plant's tip carries it, the design does not know; 'payload-told': both."""
     path, robot = _small_arm(tmp_path)
     untold, told = (rx.condition(name, payload_share=0.5) for name in ('payload', 'payload-told'))
-    assert rx.payload_kg(robot, told) == pytest.approx(0.5 * rx.link_mass_kg(robot))
-    assert rx.link_mass_kg(robot) > 0.0 and not untold.payload_told and told.payload_told
+    capacity = rx.payload_capacity_kg(robot)  # its weight within the gravity reserve
+    assert rx.payload_kg(robot, told) == pytest.approx(0.5 * capacity) and capacity > 0.0
+    assert not untold.payload_told and told.payload_told
+    heavier = rx.RobotModel(rx.robot_urdf(robot), robot.base_link, robot.tip_link,
+                            list(robot.joints), None, capacity, rx.PAYLOAD_COM_TIP_M)
+    rng = np.random.default_rng(0)  # the capacity's first configuration: within the reserve
+    lower, upper = rx.sampling_box(heavier)
+    q = rng.uniform(lower, upper).tolist()
+    assert np.all(np.abs(heavier.gravity(q)) <= 0.75 * np.array(heavier.effort_limits) + 1e-9)
     [ideal], [carried], [known] = (rx.run_arm(robot, cond, 'tanh', 1, seed=1, progress=None,
                                               workers=1)
                                    for cond in (rx.condition('ideal'), untold, told))
@@ -241,7 +248,7 @@ def test_a_payload_is_carried_by_the_plant_and_told_to_the_design_only_if_asked(
     model, design = rx.arm_design(robot, 0.0, 1000.0, told_payload_kg=rx.payload_kg(robot, told))
     assert model.payload_kg == rx.payload_kg(robot, told) == design.payload_kg
     assert rx.table_row(robot, told, [known]).startswith(
-        '| small | payload 0.5 x the link mass, given | ')
+        '| small | payload 0.5 x capacity, given | ')
     with pytest.raises(ValueError, match='--payload-share must be finite and >= 0'):
         rx.condition('payload', payload_share=-0.1)
 

@@ -177,7 +177,7 @@ def test_the_node_declares_exactly_its_table(make_node):
     from quat_jt_runtime.params import rclpy_type, REALTIME
     node = make_node()
     rows = {spec.name: spec for spec in table.STRUCTURE + table.GAINS + table.SHAPING
-            + REALTIME}
+            + table.PAYLOAD + REALTIME}
     declared = set(node._parameters) - {'use_sim_time', 'start_type_description_service'}
     assert declared == set(rows)
     for name, spec in rows.items():
@@ -226,18 +226,30 @@ def test_the_armature_is_in_the_inertia_the_controller_uses(make_node):
                                np.diag([0.1, 0.2, 0.3]), atol=1e-12)
 
 
-def test_the_payload_is_in_the_gravity_the_controller_compensates(make_node):
-    """Read-only payload_mass at payload_com in tip_link: in g(q), and said at start-up."""
+def test_the_payload_is_in_the_gravity_the_controller_compensates_and_set_live(make_node):
+    """payload_mass at payload_com in tip_link: in g(q); set live, whole, or refused by name."""
     from quat_jt_controller.model import RobotModel
     from quat_jt_runtime.resources import default_urdf_xml
+
+    def with_payload(mass, com):
+        return RobotModel(default_urdf_xml(), 'base_link', 'tool0', payload_kg=mass,
+                          payload_com_tip_m=com)
+
     node = make_node({'payload_mass': 0.5, 'payload_com': [0.0, 0.0, 0.05]})
-    expected = RobotModel(default_urdf_xml(), 'base_link', 'tool0', payload_kg=0.5,
-                          payload_com_tip_m=(0.0, 0.0, 0.05))
+    model = node.regulator.model
     q = [0.2, -0.4, 0.9]
-    np.testing.assert_allclose(node.regulator.model.gravity(q), expected.gravity(q),
+    np.testing.assert_allclose(model.gravity(q), with_payload(0.5, (0.0, 0.0, 0.05)).gravity(q),
                                atol=1e-12)
-    assert node.regulator.model.payload_kg == 0.5
-    assert node.config.payload_com_tip_m == (0.0, 0.0, 0.05)
+    results = node.set_parameters_atomically([Parameter('payload_mass', value=1.5),
+                                              Parameter('payload_com', value=[0.0, 0.1, 0.0])])
+    assert results.successful, results.reason
+    np.testing.assert_allclose(model.gravity(q), with_payload(1.5, (0.0, 0.1, 0.0)).gravity(q),
+                               atol=1e-12)
+    refused = node.set_parameters([Parameter('payload_com', value=[0.0, 0.1])])[0]
+    assert not refused.successful and 'payload_com must be 3 finite numbers' in refused.reason
+    refused = node.set_parameters([Parameter('payload_mass', value=-1.0)])[0]
+    assert not refused.successful  # below the declared range
+    assert (model.payload_kg, model.payload_com_tip_m) == (1.5, (0.0, 0.1, 0.0))
 
 
 def test_the_position_resolution_reaches_the_state_check(make_node):
@@ -892,7 +904,7 @@ def test_the_readme_table_names_every_controller_parameter_and_no_other():
     readme = (Path(__file__).resolve().parent.parent / 'README.md').read_text()
     rows = readme.split('## The parameters\n\n')[1].split('\n\n')[0].splitlines()[2:]
     patterns = re.findall(r'`([a-z_*]+)`', ' '.join(line.split('|')[1] for line in rows))
-    parameters = names(table.STRUCTURE + table.GAINS + table.SHAPING + REALTIME)
+    parameters = names(table.STRUCTURE + table.GAINS + table.SHAPING + table.PAYLOAD + REALTIME)
     assert len(patterns) > 20, patterns  # the table was found
     assert [p for p in patterns if not fnmatch.filter(parameters, p)] == []
     assert [p for p in parameters if not any(fnmatch.fnmatch(p, pattern)

@@ -201,7 +201,6 @@ def test_a_payload_adds_its_weight_through_its_jacobian_and_its_mass_to_the_iner
     com_tip_m = (0.02, -0.01, 0.05)
     loaded = RobotModel(xml, 'base_link', 'tool0', payload_kg=0.8, payload_com_tip_m=com_tip_m)
     assert (loaded.payload_kg, loaded.payload_com_tip_m) == (0.8, com_tip_m)
-    assert 'tool0_payload' in loaded.urdf_xml and plain.urdf_xml == xml
     rng = np.random.default_rng(5)
     for _ in range(5):
         q = random_q(plain, rng)
@@ -229,6 +228,52 @@ def test_a_bad_payload_is_refused_by_name(mass, com, match):
     with pytest.raises(ModelError, match=match):
         RobotModel(default_urdf_xml(), 'base_link', 'tool0', payload_kg=mass,
                    payload_com_tip_m=com)
+
+
+def test_the_payload_set_live_is_the_one_a_simulator_gets_as_a_link_of_its_urdf():
+    """set_payload (Pinocchio, in place) == with_payload (a URDF link, what a plant loads)."""
+    from quat_jt_runtime.payload import with_payload
+    xml = default_urdf_xml()
+    model = RobotModel(xml, 'base_link', 'tool0')
+    plain = RobotModel(xml, 'base_link', 'tool0')
+    rng = np.random.default_rng(8)
+    for mass, com in ((0.8, (0.02, -0.01, 0.05)), (2.5, (0.0, 0.1, 0.0))):
+        model.set_payload(mass, com)
+        linked = RobotModel(with_payload(xml, 'tool0', mass, com), 'base_link', 'tool0')
+        for _ in range(3):
+            q = random_q(plain, rng)
+            np.testing.assert_allclose(model.gravity(q), linked.gravity(q), atol=1e-12)
+            np.testing.assert_allclose(model.mass_matrix(q), linked.mass_matrix(q), atol=1e-12)
+            qddot = rng.uniform(-2.0, 2.0, 3).tolist()
+            np.testing.assert_allclose(model.inertial_torque(q, qddot),
+                                       linked.inertial_torque(q, qddot), atol=1e-12)
+    with pytest.raises(ModelError, match='payload_mass must be finite and >= 0 kg'):
+        model.set_payload(-1.0, (0.0, 0.0, 0.0))
+    assert model.payload_kg == 2.5  # a refused set changes nothing
+    model.set_payload(0.0, (0.0, 0.0, 0.0))  # taken away: the URDF's own again
+    q = random_q(plain, rng)
+    np.testing.assert_allclose(model.gravity(q), plain.gravity(q), atol=1e-12)
+    np.testing.assert_allclose(model.mass_matrix(q), plain.mass_matrix(q), atol=1e-12)
+
+
+def test_the_payload_regressor_gives_the_gravity_of_any_payload_linearly():
+    """Y(q) [m; m c] = g(q) with the payload - g(q) without, the base turned from the root."""
+    from robots import panda_model
+    xml = default_urdf_xml()
+    tilted = xml.replace('<link name="base_link">', '<link name="world"/><joint name="mount" '
+                         'type="fixed"><parent link="world"/><child link="base_link"/><origin '
+                         'rpy="0.4 -0.3 0.2" xyz="0 0 0.5"/></joint><link name="base_link">', 1)
+    for plain in (panda_model(), RobotModel(tilted, 'base_link', 'tool0')):
+        rng = np.random.default_rng(11)
+        for mass, com in ((0.7, (0.01, 0.02, 0.1)), (3.0, (-0.05, 0.0, 0.02))):
+            for _ in range(3):
+                q = random_q(plain, rng).tolist()
+                Y = plain.payload_regressor(q)
+                before = np.array(plain.gravity(q))
+                plain.set_payload(mass, com)
+                np.testing.assert_allclose(Y @ np.array([mass, *(mass * c for c in com)]),
+                                           np.array(plain.gravity(q)) - before, atol=1e-9)
+                plain.set_payload(0.0, (0.0, 0.0, 0.0))
 
 
 def test_a_payload_link_takes_a_free_name_and_needs_its_link():

@@ -89,7 +89,8 @@ def test_the_parameter_file_is_in_the_table_order_with_its_types():
     written = yaml.safe_load(go.to_yaml(design))['/**']['ros__parameters']
     order = ['task', *names(table.GAINS), *names(table.SHAPING)]
     assert list(written)[:len(order)] == order
-    rows = {spec.name: spec for spec in table.STRUCTURE + table.GAINS + table.SHAPING}
+    rows = {spec.name: spec for spec in (table.STRUCTURE + table.GAINS + table.SHAPING
+                                         + table.PAYLOAD)}
     context = {**CONTEXT, 'ceiling': float('inf')}  # the design's gains: no robot's ceiling
     for name, value in written.items():
         spec = rows[name]

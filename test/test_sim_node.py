@@ -277,6 +277,33 @@ def test_the_engine_and_armature_are_read_once_and_an_unsimulated_armature_is_sa
 
 
 @pytest.mark.node
+def test_the_plant_carries_a_payload_the_urdf_does_not_list(context):
+    """payload_link/mass/com: the plant holds still on the g(q) of a model told the payload."""
+    from quat_jt_controller.model import RobotModel
+    from quat_jt_runtime.resources import default_urdf_xml
+    start = [0.3, 0.8, -0.5]
+    node = _make_node(context, payload_link='tool0', payload_mass=1.0,
+                      payload_com=[0.0, 0.05, 0.1], initial_positions=start)
+    told = RobotModel(default_urdf_xml(), 'base_link', 'tool0', payload_kg=1.0,
+                      payload_com_tip_m=(0.0, 0.05, 0.1))
+    plain = RobotModel(default_urdf_xml(), 'base_link', 'tool0')
+    try:
+        drift = {}
+        for name, model in (('told', told), ('untold', plain)):
+            node.sim.reset(start)
+            for _ in range(100):
+                node.sim.step(model.gravity(node.sim.q_rad.tolist()))
+            drift[name] = float(np.abs(node.sim.q_rad - start).max())
+        assert drift['told'] < 1e-4 < 1e-2 < drift['untold'], drift
+        with pytest.raises(SimulatorError, match="link 'nowhere' is not in the URDF"):
+            _make_node(context, payload_link='nowhere', payload_mass=1.0)
+        with pytest.raises(SimulatorError, match='needs a payload_link'):
+            _make_node(context, payload_mass=1.0)
+    finally:
+        node.destroy_node()
+
+
+@pytest.mark.node
 @pytest.mark.parametrize('config', ['wrist_sim.yaml', 'xarm6_sim.yaml', 'panda_sim.yaml'])
 def test_the_robots_of_the_configs_run_in_mujoco(context, config):
     """Each config's robot, friction and start in engine mujoco: a few steps, finite."""

@@ -16,6 +16,7 @@ from quat_jt_controller import quaternion as quat
 from quat_jt_controller import shaping as sh
 from quat_jt_controller import stall
 from quat_jt_controller.regulator import Goal, Regulator
+from quat_jt_runtime.payload import Payload
 from robots import wrist_model
 
 pytestmark = pytest.mark.unit
@@ -248,3 +249,31 @@ def test_the_settling_damping_counts_as_the_damping_of_a_slow_approach():
         found[alpha] = ' '.join(stall.StallDetector(reg).diagnose(q, out, qdot))
     assert 'likely friction' in found[0.0] and 'slow approach' not in found[0.0]
     assert 'slow approach' in found[40.0] and 'likely friction' not in found[40.0]
+
+
+def test_a_held_torque_that_an_untold_payload_explains_names_it_and_its_mass():
+    """At rest, tau - g(q) = Y(q) [m; m c]: the weight of a payload the model lacks, by mass."""
+    from robots import panda_model, random_q
+    model = panda_model()
+    gains = cl.Gains.create('tanh', (50.0,) * 3 + (5.0,) * 3, (5.0,) * 7, (40.0,) * 3
+                            + (4.0,) * 3, cl.Task.POSE, 7)
+    reg = Regulator(model, cl.Task.POSE, gains)
+    rng = np.random.default_rng(4)
+    q = random_q(model, rng).tolist()
+    reg.set_goal(reg.pose([x + 0.05 for x in q]))  # held 0.05 rad a joint off its goal
+    out = reg.update(q, [0.0] * 7)
+    g = np.array(model.gravity(q))
+    weight = model.payload_regressor(q) @ np.array([1.2, 0.0, 0.012, 0.06])  # 1.2 kg
+    det = stall.StallDetector(reg)
+    [cause] = [c for c in det.diagnose(q, out._replace(tau_nm=(g + weight).tolist()))
+               if 'payload' in c]
+    assert 'what 1.2 kg more at the tip (panda_link8) would need' in cause
+    assert 'set payload_mass, 1.2 kg' in cause
+    lighter = g - 0.5 * weight  # the URDF's tip heavier than the arm's
+    assert any('0.6 kg less' in c for c in det.diagnose(q, out._replace(tau_nm=lighter.tolist())))
+    # a friction holds each joint with a torque of its own: no payload fits that pattern
+    held = g + 0.02 * np.array(model.effort_limits) * np.array([1, -1, 1, 1, -1, -1, 1])
+    assert not any('payload' in c for c in det.diagnose(q, out._replace(tau_nm=held.tolist())))
+    reg.set_payload(Payload.create(1.2, (0.0, 0.01, 0.05)))  # told: its g(q) has it
+    assert 'set payload_mass, 2.4 kg' in det.diagnose(
+        q, out._replace(tau_nm=(np.array(model.gravity(q)) + weight).tolist()))[0]

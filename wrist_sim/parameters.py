@@ -17,6 +17,7 @@ from quat_jt_runtime.joints import movable_joints
 from quat_jt_runtime.param_table import joint_zeros, JOINT_ZEROS_TEXT, Kind, names, Spec
 from quat_jt_runtime.params import ChangeLog, declare, LiveParameters, REALTIME, Realtime
 from quat_jt_runtime.params import realtime_from
+from quat_jt_runtime.payload import Payload, with_payload
 from quat_jt_runtime.urdf_source import Description, DescriptionError, Source, SOURCES
 from quat_jt_runtime.urdf_source import WithDescription
 from rclpy.node import Node
@@ -43,9 +44,22 @@ ARMATURE = Spec('armature', Kind.DOUBLE_ARRAY, joint_zeros,
 JOINTS = Spec('joints', Kind.STRING_ARRAY, lambda context: list(context['movable']),
               'joints to drive, in command/state order; default the URDF movable joints',
               read_only=True, default_text="the URDF's movable joints")
+# A payload the URDF does not list, simulated on a link (quat_jt_runtime.payload)
+PAYLOAD = (
+    Spec('payload_link', Kind.STRING, '',
+         "the link that carries payload_mass (the controller's tip_link, say); '' = none",
+         read_only=True),
+    Spec('payload_mass', Kind.DOUBLE, 0.0,
+         'mass on payload_link that the URDF does not list, kg: a plant carrying a tool or a '
+         'part its controller may not be told of (the controller has the same parameter)',
+         read_only=True, bounds=(0.0, 1000.0)),
+    Spec('payload_com', Kind.DOUBLE_ARRAY, [0.0, 0.0, 0.0],
+         "where payload_mass is, x y z in m in payload_link's frame", read_only=True,
+         constraints='3 finite values'),
+)
 DESCRIPTION = (ROBOT_DESCRIPTION, *SOURCES)
 STRUCTURE = (
-    *DESCRIPTION, JOINTS, ENGINE, ARMATURE,
+    *DESCRIPTION, JOINTS, ENGINE, ARMATURE, *PAYLOAD,
     Spec('rate_hz', Kind.INT, 1000, 'steps per second; the time step is 1 / rate_hz',
          read_only=True, bounds=(1, 20000)),
     Spec('use_gui', Kind.BOOL, False, "open the PyBullet window (engine 'pybullet' only)",
@@ -116,6 +130,8 @@ class SimStructure(WithDescription):
     joints: tuple[str, ...]
     engine: str  # one of wrist_sim.simulator.ENGINES
     armature: tuple[float, ...]  # kg m^2 per joint, finite and >= 0
+    payload_link: str  # '' = no payload
+    payload: Payload  # what payload_link carries beyond the URDF
     rate_hz: int
     use_gui: bool
     publish_clock: bool
@@ -126,6 +142,14 @@ class SimStructure(WithDescription):
     stats_file: str
     stats_window_steps: int
     realtime: Realtime  # cpu_affinity, thread_priority (off in lockstep and with the window)
+
+    @property
+    def plant_xml(self) -> str:
+        """Return the URDF the engine simulates: the description's, the payload's link added."""
+        if not self.payload_link or self.payload.mass_kg == 0.0:
+            return self.urdf_xml
+        return with_payload(self.urdf_xml, self.payload_link, self.payload.mass_kg,
+                            self.payload.com_m)
 
     @property
     def dt_ns(self) -> int:
@@ -153,6 +177,15 @@ def declare_structure(node: Node) -> SimStructure:
         raise SimulatorError(f"engine must be one of {list(ENGINES)}, got {values['engine']!r}")
     armature = per_joint('armature', values['armature'], len(values['joints']),
                          nonnegative=True)
+    try:
+        payload = Payload.create(values['payload_mass'], values['payload_com'])
+        if values['payload_link']:
+            with_payload(urdf, values['payload_link'], 1.0, (0.0, 0.0, 0.0))  # a link of it?
+    except ValueError as exc:
+        raise SimulatorError(f'{exc} (payload_link {values["payload_link"]!r})') from None
+    if payload.mass_kg > 0.0 and not values['payload_link']:
+        raise SimulatorError(f'payload_mass {payload.mass_kg:g} kg needs a payload_link to '
+                             'carry it')
     # Applied by lifecycle.run_node; no deadlines in lockstep, and the window renders in a
     # thread of its own: normal scheduling there.
     off = 'lockstep' if values['publish_clock'] else 'the PyBullet window' if values[
@@ -163,7 +196,8 @@ def declare_structure(node: Node) -> SimStructure:
         raise SimulatorError(str(exc)) from None
     return SimStructure(
         description=description, joints=tuple(values['joints']),
-        engine=values['engine'], armature=armature,
+        engine=values['engine'], armature=armature, payload_link=values['payload_link'],
+        payload=payload,
         rate_hz=int(values['rate_hz']), use_gui=bool(values['use_gui']),
         publish_clock=bool(values['publish_clock']),
         clock_divider=int(values['clock_divider']),

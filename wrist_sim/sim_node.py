@@ -70,7 +70,7 @@ class WristSimNode(Node):
         self.dt_ns = p.dt_ns
         try:
             self.sim = RobotSimulator(
-                p.urdf_xml, p.joints, dt_s=self.dt_ns * 1e-9, use_gui=p.use_gui,
+                p.plant_xml, p.joints, dt_s=self.dt_ns * 1e-9, use_gui=p.use_gui,
                 viscous_nm_s_per_rad=c.viscous_nm_s_per_rad, coulomb_nm=c.coulomb_nm,
                 initial_positions_rad=c.initial_positions_rad,
                 enforce_velocity_limits=p.enforce_velocity_limits, engine=p.engine,
@@ -123,7 +123,8 @@ class WristSimNode(Node):
         self.get_logger().info(
             f'simulating joints {list(self.sim.joint_names)} in {self.sim.engine} at '
             f'{p.rate_hz} Hz, armature {list(p.armature)} kg m^2, '
-            f'effort limits {self.sim.effort_limits_nm.tolist()} N m, '
+            + (f'{p.payload.describe(p.payload_link)}, ' if p.payload.mass_kg > 0.0 else '')
+            + f'effort limits {self.sim.effort_limits_nm.tolist()} N m, '
             + ('lockstep with /clock' if self.publish_clock else 'real time')
             + f'; {self._before_first_command()} until the first command on '
             f'{self.cmd_sub.topic_name}'
