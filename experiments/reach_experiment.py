@@ -55,10 +55,10 @@ reported as ``|qdot|/limit``), or its states given without velocities (estimated
 ``quat_jt_runtime.joints.VelocityEstimator``, as the node does), their positions exact or, in
 ``encoder``, in whole counts of a ``--encoder-bits`` encoder whose count the controller is
 told (``position_resolution``) unless ``--no-encoder-told``. In the payload conditions the
-plant's tip carries ``--payload-share`` of what it can carry (``payload_capacity_kg``), 5 cm
-along its z, and the design and the controller are told it (``payload-told``:
-``payload_mass``, ``payload_com``) or not. A markdown table ends the output: reached, stops
-touched, velocity limits exceeded, limit cycles, time to goal.
+plant's tip carries ``--payload-share`` of the arm's link mass, at most half what it can carry
+(``payload_kg``), 5 cm along its z, and the design and the controller are told it
+(``payload-told``: ``payload_mass``, ``payload_com``) or not. A markdown table ends the
+output: reached, stops touched, velocity limits exceeded, limit cycles, time to goal.
 
 ``--dds K`` also runs the first K cases of each robot over DDS with the real nodes
 (``local_ros``, lockstep paced at real time, so that the goal-check worker answers in the same
@@ -717,7 +717,7 @@ class Condition:
     encoder_bits: int = 0  # the positions read in whole counts of 2 pi / 2^bits (0: exact)
     encoder_told: bool = True  # ... and the controller told the count (position_resolution)
     delay_ticks: int = 1  # the ticks between a state and the torque computed from it applied
-    payload_share: float = 0.0  # a payload at the tip, x what it can carry (payload_capacity_kg)
+    payload_share: float = 0.0  # a payload at the tip, x the arm's link mass (payload_kg)
     payload_told: bool = False  # ... and the design and the controller told it
 
     def describe(self) -> str:
@@ -736,19 +736,19 @@ class Condition:
             'encoder': f'positions from {self.encoder_bits}-bit encoders, no velocities '
                        + ('(estimated, the count told)' if self.encoder_told else
                           '(estimated, the count not told)'),
-            'payload': f'untold payload {self.payload_share:g} x capacity',
-            'payload-told': f'payload {self.payload_share:g} x capacity, given',
+            'payload': f'untold payload {self.payload_share:g} x link mass',
+            'payload-told': f'payload {self.payload_share:g} x link mass, given',
             'armature-payload': f'rotor inertia {self.plant_armature:g} kg m^2, given, and '
-                                f'untold payload {self.payload_share:g} x capacity',
+                                f'untold payload {self.payload_share:g} x link mass',
             'armature-payload-told': f'rotor inertia {self.plant_armature:g} kg m^2 and '
-                                     f'payload {self.payload_share:g} x capacity, given',
+                                     f'payload {self.payload_share:g} x link mass, given',
         }[self.name] + delay
 
 
 def condition(name: str, armature: float = 0.1, told_scale: float = 0.5,
               friction_fraction: float = 0.01, encoder_bits: int = 17,
               encoder_told: bool = True, delay_ticks: int = 1,
-              payload_share: float = 0.5) -> Condition:
+              payload_share: float = 0.1) -> Condition:
     """Return the condition ``name`` (``CONDITIONS``) with these plant figures."""
     encoder_resolution_rad(encoder_bits)  # ValueError names a bad count
     if not (math.isfinite(payload_share) and payload_share >= 0.0):
@@ -815,6 +815,8 @@ def arm_robot(name: str, urdf_path: str, base_link: Optional[str], tip_link: Opt
 
 # The configurations payload_capacity_kg samples, seeded
 CAPACITY_SURVEY = 400
+# A payload condition's payload is at most this share of payload_capacity_kg
+CAPACITY_SHARE = 0.5
 
 
 @functools.lru_cache(maxsize=64)
@@ -845,9 +847,26 @@ def payload_capacity_kg(robot: Robot) -> float:
     return max(most, 0.0) if math.isfinite(most) else 0.0
 
 
+def link_mass_kg(robot: Robot) -> float:
+    """Return the mass the arm's joints move (kg): its links past the first controlled joint."""
+    model = _model(robot_urdf(robot), robot.base_link, robot.tip_link, tuple(robot.joints),
+                   (0.0,) * len(robot.joints))
+    return float(sum(inertia.mass for inertia in model.model.inertias[1:]))
+
+
 def payload_kg(robot: Robot, cond: 'Condition') -> float:
-    """Return the plant's payload of ``cond`` on ``robot``, kg (its share of the capacity)."""
-    return cond.payload_share * payload_capacity_kg(robot) if cond.payload_share else 0.0
+    """
+    Return the plant's payload of ``cond`` on ``robot``, kg.
+
+    Its share of the mass the arm moves (a real arm's rated payload is 20 to 40% of its own:
+    a UR5's 5 kg, a Panda's 3 kg), at most ``CAPACITY_SHARE`` of what its URDF's effort limits
+    carry within the gravity reserve (``payload_capacity_kg``; 0 for an arm that cannot hold
+    itself up everywhere).
+    """
+    if not cond.payload_share:
+        return 0.0
+    return min(cond.payload_share * link_mass_kg(robot),
+               CAPACITY_SHARE * payload_capacity_kg(robot))
 
 
 @functools.lru_cache(maxsize=16)
@@ -1004,10 +1023,10 @@ def main(argv: Optional[list] = None) -> int:
                      help="'armature-wrong': the design is told this x the rotor inertia")
     arm.add_argument('--friction-fraction', type=float, default=0.01,
                      help="'friction': untold Coulomb friction, x each effort limit")
-    arm.add_argument('--payload-share', type=float, default=0.5,
+    arm.add_argument('--payload-share', type=float, default=0.1,
                      help='the payload conditions: a payload at the tip (5 cm along its z), '
-                     'this x what the tip can carry within the gravity reserve of the URDF '
-                     'effort limits (default 0.5)')
+                     'this x the mass the arm moves, at most half what the tip can carry '
+                     'within the gravity reserve of the URDF effort limits (default 0.1)')
     arm.add_argument('--encoder-bits', type=int, default=17,
                      help="'encoder': the positions in counts of 2 pi / 2^bits (8 to 32, "
                      'or 0 for exact ones; default 17)')

@@ -127,7 +127,8 @@ def to_yaml(d: Design, potential: str = 'tanh', command: str = '',
         f'  {command or "python -m quat_jt_controller.gain_design ..."}',
         f'Live parameters (ros2 param set): {", ".join(names(table.GAINS))} and the '
         f'extensions ({_live_names(table.SHAPING)}; '
-        'docs/lyapunov.md). The rest is read-only.',
+        f'docs/lyapunov.md), and the payload ({", ".join(names(table.PAYLOAD))}). The rest is '
+        'read-only.',
         'The design, per joint (N m unless said):',
         f'  effort limits {_fmt(f["effort_limits_nm"])}, largest |g(q)| '
         f'{_fmt(np.round(f["gravity_max_nm"], 4))}{_reserve(f)}, friction estimates '
@@ -249,8 +250,8 @@ def sim_yaml(model: RobotModel, rate_hz: float,
 
     The joints are the design's; the others of the URDF (a gripper's fingers) are held where
     they are by the simulator. The start defaults to the middle of the ranges, the friction to
-    none, the rotor inertia (``armature``) to the model's. Raises ValueError on a list of the
-    wrong length or a start outside the limits.
+    none, the rotor inertia (``armature``) and the payload to the model's. Raises ValueError on
+    a list of the wrong length or a start outside the limits.
     """
     n = model.n
     lower, upper = np.array(model.position_lower), np.array(model.position_upper)
@@ -297,6 +298,10 @@ def sim_yaml(model: RobotModel, rate_hz: float,
         f'    viscous_friction: {_fmt(viscous)}  # N m s/rad',
         f'    coulomb_friction: {_fmt(coulomb)}  # N m (stiction level)',
         f'    armature: {_fmt(rotor)}  # kg m^2, rotor inertia per joint (engine mujoco)',
+        *([f'    payload_link: {model.tip_link}  # carries the payload of the design',
+           f'    payload_mass: {model.payload_kg!r}  # kg',
+           f'    payload_com: {_fmt(model.payload_com_tip_m)}  # m, in payload_link']
+          if model.payload_kg > 0.0 else []),
         f'    engine: {engine}                 # or '
         + ' or '.join(e for e in ENGINES if e != engine),
         '    command_timeout: 0.5             # s without a valid command -> zero torque',

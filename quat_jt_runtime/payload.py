@@ -4,15 +4,12 @@ A payload the URDF does not carry (a tool, a grasped part), added to the URDF as
 Real arms are told their payload (a UR controller's payload mass and centre of gravity, a
 Franka's load): the links of the URDF are not all the arm carries, and gravity compensation
 with the links alone leaves the weight of the rest to the potential, which then holds the tip
-where its stiffness balances that weight, short of the goal. :func:`with_payload` returns the
-URDF with the payload as one more link, fixed to the link that carries it. The controller's
-model (Pinocchio, which folds a fixed link into its parent's body) and the simulator's plant
-(PyBullet, MuJoCo) are both built from that text, so the two cannot disagree on it.
-
-The controller's model takes the same payload as a :class:`Payload` and adds its inertia to
-the body of the tip's joint in place (``RobotModel.set_payload``), so that it can change while
-the controller runs (a part grasped, a tool changed); its tests check both ways against each
-other.
+where its stiffness balances that weight, short of the goal. A :class:`Payload` is one,
+validated. :func:`with_payload` returns the URDF with it as one more link, fixed to the link
+that carries it: what the simulator's plant (PyBullet, MuJoCo) loads. The controller's model
+adds the same inertia to the body of the tip's joint in place (``RobotModel.set_payload``), so
+that it can change while the controller runs (a part grasped, a tool changed); the tests check
+the two ways against each other.
 
 The payload is a point mass, within the 1 cm sphere the URDF needs for an inertia
 (``PAYLOAD_RADIUS_M``): its weight and its lever are what matter to g(q), and a tool whose own

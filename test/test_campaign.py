@@ -232,7 +232,9 @@ def test_a_payload_is_carried_by_the_plant_and_told_to_the_design_only_if_asked(
     path, robot = _small_arm(tmp_path)
     untold, told = (rx.condition(name, payload_share=0.5) for name in ('payload', 'payload-told'))
     capacity = rx.payload_capacity_kg(robot)  # its weight within the gravity reserve
-    assert rx.payload_kg(robot, told) == pytest.approx(0.5 * capacity) and capacity > 0.0
+    assert rx.payload_kg(robot, told) == pytest.approx(min(0.5 * rx.link_mass_kg(robot),
+                                                           0.5 * capacity))
+    assert capacity > 0.0 and rx.payload_kg(robot, told) > 0.0
     assert not untold.payload_told and told.payload_told
     heavier = rx.RobotModel(rx.robot_urdf(robot), robot.base_link, robot.tip_link,
                             list(robot.joints), None, capacity, rx.PAYLOAD_COM_TIP_M)
@@ -248,7 +250,7 @@ def test_a_payload_is_carried_by_the_plant_and_told_to_the_design_only_if_asked(
     model, design = rx.arm_design(robot, 0.0, 1000.0, told_payload_kg=rx.payload_kg(robot, told))
     assert model.payload_kg == rx.payload_kg(robot, told) == design.payload_kg
     assert rx.table_row(robot, told, [known]).startswith(
-        '| small | payload 0.5 x capacity, given | ')
+        '| small | payload 0.5 x link mass, given | ')
     with pytest.raises(ValueError, match='--payload-share must be finite and >= 0'):
         rx.condition('payload', payload_share=-0.1)
 

@@ -196,13 +196,19 @@ def test_the_command_prints_a_loadable_file_and_the_design_parameters_match():
         assert all(isinstance(v, float) for v in values), (key, value)
 
 
-def test_a_payload_given_to_the_design_is_in_its_file_and_in_the_controller_it_makes():
-    """--payload-mass/--payload-com: the design's g(q), the header, the controller's model."""
+def test_a_payload_given_to_the_design_is_in_its_file_and_in_the_controller_it_makes(
+        tmp_path):
+    """--payload-mass/--payload-com: the design's g(q), the header, the controller, the sim."""
     from quat_jt_controller.controller_config import controller_from_config
+    sim = tmp_path / 'sim.yaml'
     result = subprocess.run([sys.executable, '-m', 'quat_jt_controller.gain_design',
-                             '--payload-mass', '0.3', '--payload-com', '0', '0', '0.05'],
-                            capture_output=True, text=True, timeout=120)
+                             '--payload-mass', '0.3', '--payload-com', '0', '0', '0.05',
+                             '--sim-out', str(sim)], capture_output=True, text=True,
+                            timeout=120)
     assert result.returncode == 0, result.stderr
+    simulated = params_of(sim.read_text())
+    assert (simulated['payload_link'], simulated['payload_mass'],
+            simulated['payload_com']) == ('tool0', 0.3, [0.0, 0.0, 0.05])
     p = params_of(result.stdout)
     assert p['payload_mass'] == 0.3 and p['payload_com'] == [0.0, 0.0, 0.05]
     header = ' '.join(line.lstrip('# ') for line in result.stdout.splitlines()
