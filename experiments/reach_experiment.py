@@ -72,6 +72,7 @@ import functools
 import math
 import os
 from pathlib import Path
+import re
 import shutil
 import sys
 import tempfile
@@ -430,6 +431,10 @@ def classify(model: RobotModel, loop: ClosedLoop, shaping: sh.Shaping, q_star,
     return '; '.join(causes)
 
 
+# The stall diagnosis's words for an untold payload (stall.StallDetector), and its mass
+PAYLOAD_CAUSE = re.compile(r'what ([0-9.e+-]+) kg (more|less) at the tip')
+
+
 def report(robot: Robot, potential: str, outcomes: list, elapsed_s: float,
            cruise_fraction: float = CRUISE_FRACTION) -> str:
     """Return the summary lines of one robot and potential (designed for ``cruise_fraction``)."""
@@ -483,6 +488,12 @@ def report(robot: Robot, potential: str, outcomes: list, elapsed_s: float,
         finals.append(f'final ||p_d - p||: median {np.median(pos) * 1e3:.3f} mm, max '
                       f'{pos.max() * 1e3:.3f} mm')
     lines.append('  ' + '; '.join(finals) + f' ({elapsed_s:.0f} s)')
+    named = [float(m.group(1)) * (1.0 if m.group(2) == 'more' else -1.0)
+             for m in (PAYLOAD_CAUSE.search(o.cause) for o in outcomes) if m]
+    if named:
+        lines.append(f'  the stall diagnosis names a payload the model does not carry in '
+                     f'{len(named)} cases: median {np.median(named):.3g} kg (from '
+                     f'{min(named):.3g} to {max(named):.3g})')
     for o in outcomes:
         if (not o.reached or o.touched or o.flips_per_s > LIMIT_CYCLE_FLIPS_PER_S
                 or o.speed_ratio > 1.0):

@@ -338,7 +338,10 @@ class RobotModel:
         fitted by least squares (the stall diagnosis's untold payload).
         """
         _, R, J = self.kinematics(q)
-        J, R = np.array(J), np.array(R)
+        return self.payload_regressor_at(np.array(R), np.array(J))
+
+    def payload_regressor_at(self, R: np.ndarray, J: np.ndarray) -> np.ndarray:
+        """Return :meth:`payload_regressor` from the tip's ``R`` and ``J_G`` (base frame)."""
         g0 = -self._gravity_base
         cross = np.array([[0.0, -g0[2], g0[1]], [g0[2], 0.0, -g0[0]], [-g0[1], g0[0], 0.0]])
         return np.column_stack((J[:3].T @ g0, -J[3:].T @ cross @ R))

@@ -109,7 +109,9 @@ class StallDetector:
         """
         reg = self.regulator
         model, shaping = reg.model, reg.shaping
-        causes = self._payload(q, out)
+        _, R, J = model.kinematics(list(q))
+        J = np.array(J)
+        causes = self._payload(q, out, np.array(R), J)
         near = max(NEAR_LIMIT_RAD, shaping.joint_limit_margin_rad)
         for j, name in enumerate(model.joint_names):
             lo, hi = model.position_lower[j], model.position_upper[j]
@@ -122,8 +124,7 @@ class StallDetector:
                                              reg.settling_damping(q, out.y_tilde))]
             causes += self._weak_push(out.tau_potential_nm,
                                       (0.0,) * model.n if qdot is None else qdot, damping)
-        _, _, J = model.kinematics(list(q))
-        rows = reg.task.rows(np.array(J))
+        rows = reg.task.rows(J)
         self.sigma_min = model.task_sigma_min(rows, reg.task.has_position)
         if self.sigma_min < SINGULAR_SIGMA_MIN:
             causes.append(f'near-singular: sigma_min(J) = {self.sigma_min:.3g} < '
@@ -136,7 +137,8 @@ class StallDetector:
             causes.append('no known cause (a local minimum of the potential)')
         return causes
 
-    def _payload(self, q: Sequence[float], out: TickOutput) -> list[str]:
+    def _payload(self, q: Sequence[float], out: TickOutput, R: np.ndarray,
+                 J: np.ndarray) -> list[str]:
         """
         Name a weight the model does not carry where it explains the torque held at rest.
 
@@ -148,7 +150,7 @@ class StallDetector:
         payload, or link masses the URDF has wrong: its mass is said (a negative one: the
         URDF's tip is heavier than the arm's). A friction holds with a torque of any pattern;
         the fit tells the two apart only on an arm with more joints than the pose shows of the
-        payload (``PAYLOAD_FIT_JOINTS``).
+        payload (``PAYLOAD_FIT_JOINTS``). ``R`` and ``J`` are the tip's at ``q`` (base frame).
         """
         reg = self.regulator
         model = reg.model
@@ -158,7 +160,7 @@ class StallDetector:
         norm = float(np.linalg.norm(held))
         if norm <= 0.0:
             return []
-        Y = model.payload_regressor(q)
+        Y = model.payload_regressor_at(R, J)
         theta = np.linalg.lstsq(Y, held, rcond=None)[0]
         fitted = Y @ theta
         if (np.linalg.norm(held - fitted) > PAYLOAD_FIT_RESIDUAL * norm

@@ -253,6 +253,11 @@ def test_a_payload_is_carried_by_the_plant_and_told_to_the_design_only_if_asked(
         '| small | payload 0.5 x link mass, given | ')
     with pytest.raises(ValueError, match='--payload-share must be finite and >= 0'):
         rx.condition('payload', payload_share=-0.1)
+    stalled = [dataclasses.replace(carried, reached=False, cause=(
+        f'stalled: the torque held at rest is what {kg} kg {way} at the tip (x) would need'))
+        for kg, way in (('1.5', 'more'), ('0.5', 'less'), ('2.5', 'more'))]
+    assert ('the stall diagnosis names a payload the model does not carry in 3 cases: median '
+            '1.5 kg (from -0.5 to 2.5)') in rx.report(robot, 'tanh', stalled, 1.0)
 
 
 @pytest.mark.e2e

@@ -315,6 +315,23 @@ def test_live_kp_and_potential_changes_take_effect(rig, model):
     assert close(plant.command_for(q), expected(model, q))
 
 
+def test_a_payload_set_as_ros2_param_set_does_is_in_the_next_commands(rig, model):
+    """payload_mass and payload_com over the parameter services: g(q) has it; 0 takes it away."""
+    h, plant = rig
+    set_potential(h, 'tanh')
+    send_goal(h, plant, model, GOAL_XYZW, gains())
+    q = (0.2, 0.3, 0.1)
+    carrying = RobotModel(default_urdf_xml(), 'base_link', 'tool0', JOINTS, payload_kg=0.8,
+                          payload_com_tip_m=(0.0, 0.03, 0.05))
+    results = set_params(h, payload_mass=0.8, payload_com=[0.0, 0.03, 0.05])
+    assert all(r.successful for r in results), results
+    assert close(plant.command_for(q), expected(carrying, q))
+    assert not close(expected(carrying, q), expected(model, q))  # the weight is felt
+    results = set_params(h, payload_mass=0.0)
+    assert results[0].successful
+    assert close(plant.command_for(q), expected(model, q))
+
+
 @pytest.mark.parametrize('name, value, words', [
     ('kp', list(paper.KP[:2]), 'kp must have 3 values'),
     ('kp', list(paper.KP) + [1.0] * 3, 'kp must have 3 values'),
@@ -331,6 +348,8 @@ def test_live_kp_and_potential_changes_take_effect(rig, model):
     ('task', 'pose', 'read-only'),
     ('joints', ['a', 'b', 'c'], 'read-only'),
     ('state_timeout', 1.0, 'read-only'),
+    ('payload_com', [0.0, 0.1], 'payload_com must be 3 finite numbers'),
+    ('payload_mass', float('nan'), 'payload_mass'),
 ])
 def test_invalid_parameter_sets_are_rejected_with_a_reason(rig, model, name, value, words):
     h, plant = rig
