@@ -163,6 +163,9 @@ class RobotModel:
         # the URDF's <dynamics friction>, N m (0: not given); the simulator does not use it
         self.friction_nm = self._per_joint(model.friction)
         self.length_m = self._chain_length(joint_ids)
+        # kg the controlled joints move: the URDF's links past the first of them, no payload
+        self.link_mass_kg = float(sum(inertia.mass for inertia in model.inertias[1:])
+                                  - self.payload_kg)
 
     def set_payload(self, payload_kg: float, payload_com_tip_m: Sequence[float]) -> None:
         """

@@ -147,8 +147,9 @@ class StallDetector:
         (``RobotModel.payload_regressor``); where the least-squares fit of one leaves less than
         ``PAYLOAD_FIT_RESIDUAL`` of the held torque and asks at least
         ``PAYLOAD_FIT_EFFORT_SHARE`` of an effort limit, the stall is most likely an untold
-        payload, or link masses the URDF has wrong: its mass is said (a negative one: the
-        URDF's tip is heavier than the arm's). A friction holds with a torque of any pattern;
+        payload, or link masses the URDF has wrong: its mass is said (a negative one, no more
+        than the model's links and payload weigh: the model is heavier than the arm). A
+        friction holds with a torque of any pattern;
         the fit tells the two apart only on an arm with more joints than the pose shows of the
         payload (``PAYLOAD_FIT_JOINTS``). ``R`` and ``J`` are the tip's at ``q`` (base frame).
         """
@@ -163,16 +164,20 @@ class StallDetector:
         Y = model.payload_regressor_at(R, J)
         theta = np.linalg.lstsq(Y, held, rcond=None)[0]
         fitted = Y @ theta
+        extra_kg = float(theta[0])
         if (np.linalg.norm(held - fitted) > PAYLOAD_FIT_RESIDUAL * norm
                 or np.all(np.abs(fitted) < PAYLOAD_FIT_EFFORT_SHARE
-                          * np.array(model.effort_limits))):
+                          * np.array(model.effort_limits))
+                or -extra_kg > model.link_mass_kg + model.payload_kg):  # more than it has
             return []
-        mass = float(theta[0]) + model.payload_kg
-        return [f'the torque held at rest is what {abs(theta[0]):.3g} kg '
-                + ('more' if theta[0] > 0.0 else 'less')
-                + f' at the tip ({model.tip_link}) would need: a payload the model does not '
-                f'carry (set payload_mass, {max(mass, 0.0):.3g} kg, and payload_com), or link '
-                'masses the URDF has wrong']
+        if extra_kg > 0.0:
+            return [f'the torque held at rest is what {extra_kg:.3g} kg more at the tip '
+                    f'({model.tip_link}) would need: a payload the model does not carry (set '
+                    f'payload_mass, {extra_kg + model.payload_kg:.3g} kg, and payload_com), or '
+                    'link masses the URDF has wrong']
+        return [f'the torque held at rest is what {-extra_kg:.3g} kg less at the tip '
+                f'({model.tip_link}) would need: the model carries more than the arm (check '
+                f'payload_mass, {model.payload_kg:g} kg, and the link masses of the URDF)']
 
     def _weak_push(self, tau_p: Sequence[float], qdot: Sequence[float],
                    kv: Sequence[float]) -> list[str]:

@@ -270,7 +270,11 @@ def test_a_held_torque_that_an_untold_payload_explains_names_it_and_its_mass():
     assert 'what 1.2 kg more at the tip (panda_link8) would need' in cause
     assert 'set payload_mass, 1.2 kg' in cause
     lighter = g - 0.5 * weight  # the URDF's tip heavier than the arm's
-    assert any('0.6 kg less' in c for c in det.diagnose(q, out._replace(tau_nm=lighter.tolist())))
+    assert any('0.6 kg less' in c and 'the model carries more than the arm' in c
+               for c in det.diagnose(q, out._replace(tau_nm=lighter.tolist())))
+    too_light = g - (model.link_mass_kg + 1.0) / 1.2 * weight  # lighter than its links: no
+    assert not any('payload' in c or 'kg less' in c
+                   for c in det.diagnose(q, out._replace(tau_nm=too_light.tolist())))
     # a friction holds each joint with a torque of its own: no payload fits that pattern
     held = g + 0.02 * np.array(model.effort_limits) * np.array([1, -1, 1, 1, -1, -1, 1])
     assert not any('payload' in c for c in det.diagnose(q, out._replace(tau_nm=held.tolist())))
