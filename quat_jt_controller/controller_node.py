@@ -25,6 +25,7 @@ from quat_jt_controller.reports import CommandReceivers, Diagnostics, Feedback, 
 from quat_jt_runtime import lifecycle
 from quat_jt_runtime.loop_stats import TickStats
 from quat_jt_runtime.params import declare_realtime, history_qos
+from quat_jt_runtime.payload import Payload
 from quat_jt_runtime.prewarm_timer import describe_prewarm, prewarm_off_reason, PrewarmTimer
 from quat_jt_runtime.resources import bundled_urdf_hint
 from rclpy.clock import Clock, ClockType
@@ -71,7 +72,8 @@ class QuatJtController(Node):
             self, cfg, check=reg.check_shaping, on_apply=reg.set_shaping,
             preferred_configuration=model.middle_of_ranges())
         reg.set_shaping(self.shaping.current)
-        self.payload = parameters.declare_payload(self, on_apply=reg.set_payload)
+        self.payload = parameters.declare_payload(  # held up where the arm last was
+            self, check=self._check_payload, on_apply=reg.set_payload)
         reg.set_payload(self.payload.current)
         self._change_log = parameters.change_log(self, reg)
         self._goal_checker = GoalCheckWorker(ModelSpec(
@@ -105,6 +107,13 @@ class QuatJtController(Node):
         for line in parameters.describe_start(cfg, reg, self._state_sub.topic_name) + [
                 describe_prewarm(cfg.prewarm_lead_s, off)]:
             self.get_logger().info(line)
+
+    def _check_payload(self, payload: Payload) -> Payload:
+        """Refuse a payload the arm cannot hold up where it was last measured (if it was)."""
+        ctl = getattr(self, 'controller', None)
+        if ctl is None or ctl.last_q is None:  # no pose yet: only the values are checked
+            return payload
+        return self.regulator.check_payload(payload, ctl.last_q)
 
     @property
     def gains(self) -> Gains:

@@ -177,16 +177,24 @@ def declare_shaping(node: Node, config: StructuralConfig,
     return LiveParameters(node, names(table.SHAPING), build, on_apply)
 
 
-def declare_payload(node: Node, on_apply: Optional[Callable[[Payload], None]] = None
+def declare_payload(node: Node, check: Optional[Callable[[Payload], Payload]] = None,
+                    on_apply: Optional[Callable[[Payload], None]] = None
                     ) -> LiveParameters[Payload]:
     """
     Declare the live payload parameters; return them as a Payload.
 
-    ``on_apply`` is called with each new Payload after a successful set (the regulator's
-    model carries it from the next tick). Raises ValueError naming a bad start-up value.
+    ``check`` validates a Payload against the arm (``Regulator.check_payload``: held up where
+    it is) as part of the on-set validation; ``on_apply`` is called with each new Payload after
+    a successful set (the regulator's model carries it from the next tick). Raises ValueError
+    naming a bad start-up value.
     """
     declare(node, table.PAYLOAD)
-    return LiveParameters(node, names(table.PAYLOAD), Payload.from_parameters, on_apply)
+
+    def build(values: Mapping[str, Any]) -> Payload:
+        payload = Payload.from_parameters(values)
+        return payload if check is None else check(payload)
+
+    return LiveParameters(node, names(table.PAYLOAD), build, on_apply)
 
 
 def build_shaping(values: Mapping[str, Any], config: StructuralConfig) -> Shaping:

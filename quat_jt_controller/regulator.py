@@ -33,7 +33,7 @@ from typing import NamedTuple, Optional, Sequence
 from quat_jt_controller import control_law as cl
 from quat_jt_controller import quaternion as quat
 from quat_jt_controller import shaping as sh
-from quat_jt_controller.model import RobotModel
+from quat_jt_controller.model import ModelError, RobotModel
 from quat_jt_runtime.payload import Payload
 
 Vector3 = tuple[float, float, float]
@@ -352,6 +352,30 @@ class Regulator:
                 raise sh.ShapingError(f'preferred_configuration: {name} = {v} is outside its '
                                       f'limits [{lo:g}, {hi:g}]')
         return shaping
+
+    def check_payload(self, payload: Payload, q: Sequence[float]) -> Payload:
+        """
+        Return ``payload`` if the arm can hold it up at ``q``; raise ModelError saying why not.
+
+        With it in ``g(q)`` (the payload in force taken out), no joint may need more than its
+        effort limit at ``q``: a mass beyond that (a typo of a hundred kilograms) would drive
+        every joint to its limit at once, and the arm could not hold it anyway. One ``g(q)``
+        and one Jacobian: cheap enough for a parameter callback on the control thread. Goals
+        whose pose it cannot be held in are the goal check's (``heavy_warning``).
+        """
+        model = self.model
+        Y = model.payload_regressor(q)
+        old, new = ([p.mass_kg, *(p.mass_kg * c for c in p.com_m)]
+                    for p in (model.payload, payload))
+        needed = [g + sum(y[k] * (new[k] - old[k]) for k in range(4))
+                  for g, y in zip(model.gravity(q), Y.tolist())]
+        for name, tau, limit in zip(model.joint_names, needed, self.effort_limits_nm):
+            if abs(tau) > limit:
+                raise ModelError(
+                    f'payload_mass {payload.mass_kg:g} kg at payload_com {list(payload.com_m)} '
+                    f'cannot be held up where the arm is: {name} would need {abs(tau):.3g} N m '
+                    f'of its {limit:g} N m effort limit against gravity')
+        return payload
 
     def set_payload(self, payload: Payload) -> None:
         """

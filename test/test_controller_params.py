@@ -226,8 +226,12 @@ def test_the_armature_is_in_the_inertia_the_controller_uses(make_node):
                                np.diag([0.1, 0.2, 0.3]), atol=1e-12)
 
 
-def test_the_payload_is_in_the_gravity_the_controller_compensates_and_set_live(make_node):
-    """payload_mass at payload_com in tip_link: in g(q); set live, whole, or refused by name."""
+def test_the_payload_is_in_the_gravity_the_controller_compensates_and_set_live(make_probe):
+    """
+    payload_mass at payload_com in tip_link: in g(q); set live, whole, or refused by name.
+
+    Refused too: a payload the arm cannot hold up where it was last measured.
+    """
     from quat_jt_controller.model import RobotModel
     from quat_jt_runtime.resources import default_urdf_xml
 
@@ -235,7 +239,8 @@ def test_the_payload_is_in_the_gravity_the_controller_compensates_and_set_live(m
         return RobotModel(default_urdf_xml(), 'base_link', 'tool0', payload_kg=mass,
                           payload_com_tip_m=com)
 
-    node = make_node({'payload_mass': 0.5, 'payload_com': [0.0, 0.0, 0.05]})
+    probe = make_probe({'payload_mass': 0.5, 'payload_com': [0.0, 0.0, 0.05]})
+    node = probe.node
     model = node.regulator.model
     q = [0.2, -0.4, 0.9]
     np.testing.assert_allclose(model.gravity(q), with_payload(0.5, (0.0, 0.0, 0.05)).gravity(q),
@@ -249,6 +254,13 @@ def test_the_payload_is_in_the_gravity_the_controller_compensates_and_set_live(m
     assert not refused.successful and 'payload_com must be 3 finite numbers' in refused.reason
     refused = node.set_parameters([Parameter('payload_mass', value=-1.0)])[0]
     assert not refused.successful  # below the declared range
+    heavy = [Parameter('payload_mass', value=500.0),  # a typo, 10 cm off joint 2's axis
+             Parameter('payload_com', value=[0.1, 0.0, 0.0])]
+    probe.command_for(state((0.0, 0.0, 0.0)))  # the arm measured there
+    refused = node.set_parameters_atomically(heavy)
+    assert not refused.successful
+    assert ('payload_mass 500 kg at payload_com [0.1, 0.0, 0.0] cannot be held up where the arm '
+            'is: joint2 would need 491 N m of its 30 N m effort limit') in refused.reason
     assert (model.payload_kg, model.payload_com_tip_m) == (1.5, (0.0, 0.1, 0.0))
 
 
