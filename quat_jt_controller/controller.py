@@ -38,10 +38,13 @@ from quat_jt_controller.goal_check import Posture
 from quat_jt_controller.goal_frames import GoalFrames
 from quat_jt_controller.goal_motion import GoalVelocityEstimator
 from quat_jt_controller.regulator import Goal, Regulator, TickOutput
+from quat_jt_controller.stall import fit_payload, PAYLOAD_FIT_EFFORT_SHARE, PAYLOAD_FIT_JOINTS
+from quat_jt_controller.stall import REST_SPEED_RAD_S
 from quat_jt_controller.stall import StallDetector
 from quat_jt_runtime.joints import (DEFAULT_STATE_RATE_HZ, ForeignState, StaleState,
                                     StateCheck)
 from quat_jt_runtime.joints import VELOCITY_WINDOW_STATES
+from quat_jt_runtime.payload import Payload
 from quat_jt_runtime.throttle import cause, Throttle
 
 # /diagnostics wait for the next tick while states come at least this often (else: at once)
@@ -325,6 +328,58 @@ class Controller:
         return Command(list(self._zero), logs=(LogLine(Severity.ERROR, (
             f'no valid joint_states for {silent_ns * 1e-9:.3f} s (> state_timeout '
             f'{self.state_timeout_s} s): published zero torque, waiting for states')),))
+
+    def identify_payload(self) -> tuple[Optional[Payload], str]:
+        """
+        Return the payload the tip carries as the torque held at rest shows it, and why.
+
+        The arm must have ``PAYLOAD_FIT_JOINTS`` joints or more, be at rest (every joint slower
+        than the stall detector's rest speed), and have gravity compensation on. The torque of
+        the last tick beyond the model's ``g(q)`` is fitted by a payload at the tip
+        (``stall.fit_payload``), on top of the one in force. Below ``PAYLOAD_FIT_EFFORT_SHARE``
+        of every effort limit, the payload in force is kept. The answer is None, with the
+        reason, where the fit leaves more than ``PAYLOAD_FIT_RESIDUAL`` of that torque (a
+        friction or a contact holds it, not a weight) or makes the tip lighter than nothing.
+        One pose shows the centre of mass across gravity only: the message says so.
+        """
+        reg = self.regulator
+        model = reg.model
+        if model.n < PAYLOAD_FIT_JOINTS:
+            return None, (f'an arm of {model.n} joints shows too little of a payload at its tip '
+                          'to tell its mass from its lever: set payload_mass and payload_com')
+        if self.last is None or self.last_q is None or self.last_qdot is None:
+            return None, 'no joint state yet: identify the payload with the arm at rest'
+        if not reg.gains.gravity_compensation:
+            return None, ('gravity_compensation is off: the drives hold the weight, and the '
+                          'held torque says nothing of it')
+        fastest = max(abs(v) for v in self.last_qdot)
+        if fastest >= REST_SPEED_RAD_S:
+            return None, (f'the arm is moving ({fastest:.3g} rad/s; at rest is below '
+                          f'{REST_SPEED_RAD_S:g}): identify the payload with the arm at rest')
+        fit = fit_payload(model, self.last_q, self.last.tau_nm)
+        mass = model.payload_kg + fit.extra_kg
+        if all(abs(t) < PAYLOAD_FIT_EFFORT_SHARE * limit
+               for t, limit in zip(fit.held_nm, reg.effort_limits_nm)):
+            return model.payload, ("the model's g(q) holds the arm here (what it holds beyond "
+                                   f'is below {PAYLOAD_FIT_EFFORT_SHARE:g} of each effort '
+                                   f'limit): {model.payload.describe(model.tip_link)} kept')
+        if not fit.significant:
+            return None, (f'the torque held beyond g(q) ({max(abs(t) for t in fit.held_nm):.3g} '
+                          f'N m at most) is not a weight at the tip: a payload fits '
+                          f'{100.0 * (1.0 - min(fit.unexplained, 1.0)):.0f}% of it (a friction '
+                          'or a contact holds the arm); nothing changed')
+        if mass <= 0.0:
+            return None, (f'the held torque asks for a tip {-fit.extra_kg:.3g} kg lighter than '
+                          f'the model, lighter than its payload of {model.payload_kg:g} kg: '
+                          "check the URDF's masses; nothing changed")
+        moment = [model.payload_kg * c + m for c, m in
+                  zip(model.payload_com_tip_m, fit.extra_moment_kg_m)]
+        payload = Payload.create(mass, [m / mass for m in moment])
+        return payload, (f'identified at rest: {payload.describe(model.tip_link)} '
+                         f'({fit.extra_kg:+.3g} kg; the fit leaves '
+                         f'{100.0 * fit.unexplained:.0f}% of the held torque). One pose shows '
+                         'the centre of mass across gravity only: identify again in another '
+                         'orientation of the tip, or set payload_com')
 
     def refuse_commands(self, reason: str) -> Optional[Command]:
         """

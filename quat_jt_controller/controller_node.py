@@ -30,8 +30,10 @@ from quat_jt_runtime.prewarm_timer import describe_prewarm, prewarm_off_reason, 
 from quat_jt_runtime.resources import bundled_urdf_hint
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
+from rclpy.parameter import Parameter
 from sensor_msgs.msg import JointState
 from std_msgs.msg import Float64MultiArray
+from std_srvs.srv import Trigger
 
 NODE_NAME = 'quat_jt_controller'
 NO_STATE_CHECK_S = 0.3  # until the first state: is a no-state warning due (Controller)?
@@ -96,6 +98,7 @@ class QuatJtController(Node):
         self._state_sub = self.create_subscription(
             JointState, 'joint_states', self._on_joint_state, 10)
         self.create_subscription(PoseStamped, '~/target_pose', self._on_target_pose, 10)
+        self.create_service(Trigger, '~/identify_payload', self._on_identify_payload)
         self.create_timer(min(0.05, cfg.state_timeout_s / 4.0), self._on_watchdog)
         self._no_state_timer = self.create_timer(
             NO_STATE_CHECK_S, self._on_no_state_yet, clock=Clock(clock_type=ClockType.STEADY_TIME))
@@ -107,6 +110,23 @@ class QuatJtController(Node):
         for line in parameters.describe_start(cfg, reg, self._state_sub.topic_name) + [
                 describe_prewarm(cfg.prewarm_lead_s, off)]:
             self.get_logger().info(line)
+
+    def _on_identify_payload(self, request: Trigger.Request, response: Trigger.Response
+                             ) -> Trigger.Response:
+        """Set payload_mass and payload_com to what the arm at rest holds (Controller)."""
+        payload, message = self.controller.identify_payload()
+        if payload is not None:  # through the parameters: validated, logged, then in force
+            result = self.set_parameters_atomically([
+                Parameter('payload_mass', value=payload.mass_kg),
+                Parameter('payload_com', value=list(payload.com_m))])
+            if not result.successful:
+                payload, message = None, f'{message}; not set: {result.reason}'
+        response.success, response.message = payload is not None, message
+        if payload is not None:  # one call site per severity, as rclpy's logger wants
+            self.get_logger().info(f'~/identify_payload: {message}')
+        else:
+            self.get_logger().warning(f'~/identify_payload: {message}')
+        return response
 
     def _check_payload(self, payload: Payload) -> Payload:
         """Refuse a payload the arm cannot hold up where it was last measured (if it was)."""

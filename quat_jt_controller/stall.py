@@ -14,12 +14,12 @@ the error is above tolerance for more than ``hold_s`` it reports a WARN naming t
 causes. ROS-free.
 """
 from math import isfinite, nan
-from typing import Optional, Sequence
+from typing import NamedTuple, Optional, Sequence
 
 import numpy as np
 
 from quat_jt_controller.diagnostics import NEAR_180_ETA_E, OK, Status, WARN
-from quat_jt_controller.model import SINGULAR_SIGMA_MIN
+from quat_jt_controller.model import RobotModel, SINGULAR_SIGMA_MIN
 from quat_jt_controller.regulator import Regulator, TickOutput
 
 PERIOD_S = 0.1  # evaluation period (10 Hz)
@@ -50,6 +50,42 @@ PAYLOAD_FIT_RESIDUAL = 0.2
 PAYLOAD_FIT_JOINTS = 5
 # ... where the fitted torque is at least this share of some joint's effort limit
 PAYLOAD_FIT_EFFORT_SHARE = 0.01
+
+
+class PayloadFit(NamedTuple):
+    """A payload's ``g(q)`` fitted to a torque held at rest (:func:`fit_payload`)."""
+
+    extra_kg: float  # the mass the model lacks at the tip (< 0: it has too much)
+    extra_moment_kg_m: tuple[float, ...]  # ... and its first moment, tip frame (min-norm)
+    unexplained: float  # the norm of what the fit leaves, over the held torque's; nan: none
+    held_nm: tuple[float, ...]  # the torque held beyond the model's g(q)
+
+    @property
+    def significant(self) -> bool:
+        """Return True if the fit explains the held torque (``PAYLOAD_FIT_RESIDUAL``)."""
+        return self.unexplained <= PAYLOAD_FIT_RESIDUAL
+
+
+def fit_payload(model: RobotModel, q: Sequence[float], tau_nm: Sequence[float],
+                R: Optional[np.ndarray] = None, J: Optional[np.ndarray] = None) -> PayloadFit:
+    """
+    Fit the payload the model lacks to the torque ``tau_nm`` held at rest at ``q``.
+
+    At rest the torque beyond the model's ``g(q)`` holds what the model leaves out. A point
+    payload's ``g(q)`` is ``Y(q) [m; m c]`` (``RobotModel.payload_regressor``): least squares
+    give ``(m, m c)``; one pose shows 3 of the 4 (a lever along gravity makes no torque), and
+    the first moment returned is the smallest that fits. ``R``, ``J``: the tip's at ``q``
+    (base frame), if already computed.
+    """
+    held = np.array(tau_nm, dtype=float) - np.array(model.gravity(list(q)))
+    if R is None or J is None:
+        _, R, J = model.kinematics(list(q))
+    Y = model.payload_regressor_at(np.asarray(R), np.asarray(J))
+    theta = np.linalg.lstsq(Y, held, rcond=None)[0]
+    norm = float(np.linalg.norm(held))
+    unexplained = float(np.linalg.norm(held - Y @ theta)) / norm if norm > 0.0 else nan
+    return PayloadFit(float(theta[0]), tuple(float(x) for x in theta[1:]), unexplained,
+                      tuple(held.tolist()))
 
 
 class StallDetector:
@@ -157,16 +193,10 @@ class StallDetector:
         model = reg.model
         if model.n < PAYLOAD_FIT_JOINTS or not reg.gains.gravity_compensation:
             return []
-        held = np.array(out.tau_nm) - np.array(model.gravity(list(q)))
-        norm = float(np.linalg.norm(held))
-        if norm <= 0.0:
-            return []
-        Y = model.payload_regressor_at(R, J)
-        theta = np.linalg.lstsq(Y, held, rcond=None)[0]
-        fitted = Y @ theta
-        extra_kg = float(theta[0])
-        if (np.linalg.norm(held - fitted) > PAYLOAD_FIT_RESIDUAL * norm
-                or np.all(np.abs(fitted) < PAYLOAD_FIT_EFFORT_SHARE
+        fit = fit_payload(model, q, out.tau_nm, R, J)
+        extra_kg = fit.extra_kg
+        if (not fit.significant
+                or np.all(np.abs(np.array(fit.held_nm)) < PAYLOAD_FIT_EFFORT_SHARE
                           * np.array(model.effort_limits))
                 or -extra_kg > model.link_mass_kg + model.payload_kg):  # more than it has
             return []

@@ -424,3 +424,43 @@ def test_a_repeated_goal_keeps_its_goal_configuration_and_is_checked_once():
     assert again.accepted and not again.new
     assert ctl.goal is goal and len(checker.submitted) == 1
     assert ctl.regulator.goal_configuration == pytest.approx((0.1, 0.6, 0.2))
+
+
+def test_the_payload_held_at_rest_is_identified_on_an_arm_that_shows_it():
+    """The torque held at rest beyond g(q), fitted by a payload: its mass and its g(q) here."""
+    from quat_jt_runtime.payload import Payload
+    from robots import panda_model, PANDA_JOINTS, random_q
+    import numpy as np
+    model = panda_model()
+    gains = cl.Gains.create('tanh', (50.0,) * 3 + (5.0,) * 3, (5.0,) * 7, (40.0,) * 3
+                            + (4.0,) * 3, cl.Task.POSE, 7)
+    ctl = Controller(Regulator(model, cl.Task.POSE, gains), 0.5, 3, started_ns=0)
+    payload, why = ctl.identify_payload()
+    assert payload is None and 'no joint state yet' in why
+    q = random_q(model, np.random.default_rng(2)).tolist()
+    ctl.on_state(PANDA_JOINTS, q, [0.0] * 7, 0, 0, MS // 2)  # held as the model has it
+    payload, why = ctl.identify_payload()
+    assert payload == Payload() and "the model's g(q) holds the arm here" in why
+    ctl.regulator.set_goal(ctl.regulator.pose([x + 0.1 for x in q]))  # pushed, not a weight
+    ctl.on_state(PANDA_JOINTS, q, [0.0] * 7, 0, 0, MS // 2)
+    payload, why = ctl.identify_payload()
+    assert payload is None and 'is not a weight at the tip' in why
+    ctl.regulator.hold(q)
+    carried = Payload.create(1.3, (0.02, -0.01, 0.08))
+    ctl.regulator.set_payload(carried)  # the arm holds its pose with 1.3 kg in g(q) ...
+    ctl.on_state(PANDA_JOINTS, q, [0.0] * 7, 0, 0, MS)
+    ctl.regulator.set_payload(Payload())  # ... which the model then has no more
+    payload, why = ctl.identify_payload()
+    assert payload is not None and payload.mass_kg == pytest.approx(1.3, rel=1e-6), why
+    Y = model.payload_regressor(q)  # the weight it gives here is the one held
+    np.testing.assert_allclose(Y @ [payload.mass_kg, *(payload.mass_kg * c
+                                                       for c in payload.com_m)],
+                               Y @ [1.3, 0.026, -0.013, 0.104], atol=1e-9)
+    assert why.startswith('identified at rest: payload 1.3 kg at [') and 'across gravity' in why
+    ctl.on_state(PANDA_JOINTS, q, [0.3] + [0.0] * 6, 0, 0, 2 * MS)
+    payload, why = ctl.identify_payload()
+    assert payload is None and 'the arm is moving (0.3 rad/s' in why
+    wrist = controller()
+    tick(wrist, (0.1, 0.2, 0.3), MS)
+    payload, why = wrist.identify_payload()
+    assert payload is None and 'an arm of 3 joints shows too little' in why

@@ -332,6 +332,19 @@ def test_a_payload_set_as_ros2_param_set_does_is_in_the_next_commands(rig, model
     assert close(plant.command_for(q), expected(model, q))
 
 
+def test_identify_payload_answers_over_its_service_and_changes_nothing_it_cannot_fit(rig):
+    """~/identify_payload (std_srvs/Trigger): the wrist shows too little of a payload to fit."""
+    from std_srvs.srv import Trigger
+    h, plant = rig
+    client = h.node.create_client(Trigger, f'{CONTROLLER}/identify_payload')
+    h.spin_until(client.service_is_ready, 10.0, f'{CONTROLLER}/identify_payload')
+    reply = call_service(h.executor, client, Trigger.Request())  # asked again if no answer
+    assert not reply.success
+    assert 'an arm of 3 joints shows too little of a payload' in reply.message
+    got = h.wait_future(h.params.get_parameters(['payload_mass']))
+    assert got.values[0].double_value == 0.0
+
+
 @pytest.mark.parametrize('name, value, words', [
     ('kp', list(paper.KP[:2]), 'kp must have 3 values'),
     ('kp', list(paper.KP) + [1.0] * 3, 'kp must have 3 values'),
