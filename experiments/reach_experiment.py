@@ -560,7 +560,8 @@ class CaseJob:
     """One case, picklable: what a worker process (or a Ray task) needs to run it."""
 
     robot: Robot
-    model_spec: tuple  # (urdf_xml, base_link, tip_link, joints, armature, payload): the model
+    # (urdf_xml, base_link, tip_link, joints, armature, payload_kg, payload_com_tip_m)
+    model_spec: tuple
     gains: cl.Gains
     shaping: sh.Shaping
     sim_params: dict
@@ -839,7 +840,8 @@ def payload_capacity_kg(robot: Robot) -> float:
     ``GRAVITY_RESERVE_SHARE`` of its URDF effort limit in any of ``CAPACITY_SURVEY`` seeded
     configurations (``RobotModel.payload_regressor``; the sign of the two taken at their
     worst): an arm's rated payload, as its URDF's effort limits give it. 0 where the arm's own
-    weight already asks more somewhere (Baxter's and TALOS's shoulders).
+    weight already asks more somewhere (Baxter's and TALOS's shoulders), or where a joint the
+    payload loads has no effort limit in the URDF (0).
     """
     model = _model(robot_urdf(robot), robot.base_link, robot.tip_link, tuple(robot.joints),
                    (0.0,) * len(robot.joints))
@@ -859,10 +861,9 @@ def payload_capacity_kg(robot: Robot) -> float:
 
 
 def link_mass_kg(robot: Robot) -> float:
-    """Return the mass the arm's joints move (kg): its links past the first controlled joint."""
-    model = _model(robot_urdf(robot), robot.base_link, robot.tip_link, tuple(robot.joints),
-                   (0.0,) * len(robot.joints))
-    return float(sum(inertia.mass for inertia in model.model.inertias[1:]))
+    """Return the mass the arm's joints move (kg; ``RobotModel.link_mass_kg``)."""
+    return _model(robot_urdf(robot), robot.base_link, robot.tip_link, tuple(robot.joints),
+                  (0.0,) * len(robot.joints)).link_mass_kg
 
 
 def payload_kg(robot: Robot, cond: 'Condition') -> float:
@@ -1118,7 +1119,8 @@ def main_arm(parser: argparse.ArgumentParser, args, overrides: dict) -> int:
         for name, value in (('--armature', args.armature), ('--rate', args.rate),
                             ('--armature-told-scale', args.armature_told_scale),
                             ('--friction-fraction', args.friction_fraction),
-                            ('--friction-effort-share', args.friction_effort_share or 0.0)):
+                            ('--friction-effort-share', args.friction_effort_share or 0.0),
+                            ('--payload-share', args.payload_share)):
             if not (math.isfinite(value) and value >= 0.0):
                 raise ValueError(f'{name} must be finite and >= 0, got {value}')
         encoder_resolution_rad(args.encoder_bits)

@@ -19,6 +19,7 @@ from quat_jt_controller.gain_output import ENGINES, sim_yaml, to_yaml
 from quat_jt_controller.model import ModelError, RobotModel
 from quat_jt_runtime.joints import chain_joints, check_state_rate, default_chain_end, joint_rows
 from quat_jt_runtime.joints import STATE_RATE_RANGE_HZ
+from quat_jt_runtime.payload import Payload
 
 
 class _Parser(argparse.ArgumentParser):
@@ -255,6 +256,11 @@ def main(argv: Optional[list] = None) -> int:
         model = RobotModel(urdf, args.base_link, args.tip_link, args.joints)
     except ModelError as exc:
         parser.error(f'{exc} (--urdf {args.urdf or "<the bundled wrist>"})')
+    try:  # the flags' words for the payload's checks (a com given is checked, mass or not)
+        Payload.create(args.payload_mass, args.payload_com)
+    except ValueError as exc:
+        parser.error(str(exc).replace('payload_mass', '--payload-mass')
+                     .replace('payload_com', '--payload-com'))
     try:  # one value for every joint or one per joint, each finite and >= 0
         if args.armature is not None or args.payload_mass != 0.0:
             model = RobotModel(urdf, args.base_link, args.tip_link, args.joints,

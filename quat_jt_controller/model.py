@@ -150,7 +150,8 @@ class RobotModel:
         base = self.data.oMf[self._base_id]
         self._base_is_root = bool(np.allclose(base.homogeneous, np.eye(4)))
         self._R_root_base = base.rotation.copy()  # base orientation in the root frame
-        self._gravity_base = self._R_root_base.T @ model.gravity.linear  # m/s^2, base axes
+        # the acceleration of gravity, m/s^2, in base axes
+        self.gravity_base_m_s2 = self._R_root_base.T @ model.gravity.linear
         self._p_root_base = base.translation.copy()
 
         inf = float('inf')
@@ -165,7 +166,7 @@ class RobotModel:
         self.length_m = self._chain_length(joint_ids)
         # kg the controlled joints move: the URDF's links past the first of them, no payload
         self.link_mass_kg = float(sum(inertia.mass for inertia in model.inertias[1:])
-                                  - self.payload_kg)
+                                  - (self.payload_kg if self._tip_joint else 0.0))
 
     def set_payload(self, payload_kg: float, payload_com_tip_m: Sequence[float]) -> None:
         """
@@ -345,7 +346,7 @@ class RobotModel:
 
     def payload_regressor_at(self, R: np.ndarray, J: np.ndarray) -> np.ndarray:
         """Return :meth:`payload_regressor` from the tip's ``R`` and ``J_G`` (base frame)."""
-        g0 = -self._gravity_base
+        g0 = -self.gravity_base_m_s2
         cross = np.array([[0.0, -g0[2], g0[1]], [g0[2], 0.0, -g0[0]], [-g0[1], g0[0], 0.0]])
         return np.column_stack((J[:3].T @ g0, -J[3:].T @ cross @ R))
 

@@ -23,6 +23,7 @@ from quat_jt_runtime.joints import DEFAULT_MAX_STATE_AGE_S, DEFAULT_STATE_RATE_H
 from quat_jt_runtime.joints import DEFAULT_STATE_TIMEOUT_S, STATE_RATE_RANGE_HZ
 from quat_jt_runtime.param_table import joint_zeros, JOINT_ZEROS_TEXT, Kind, markdown_value
 from quat_jt_runtime.param_table import row, Spec
+from quat_jt_runtime.payload import PAYLOAD_MASS_MAX_KG
 from quat_jt_runtime.realtime import DEFAULT_PREWARM_LEAD_S
 from quat_jt_runtime.urdf_source import SOURCES
 
@@ -51,7 +52,6 @@ POSITION_RESOLUTION = Spec(
     'real robot").', read_only=True,
     size='n', bounds=(0.0, inf), default_text=JOINT_ZEROS_TEXT)
 PER_JOINT_STRUCTURE = (ARMATURE, POSITION_RESOLUTION)
-PAYLOAD_MASS_MAX_KG = 1000.0
 # Live, applied whole as one Payload (quat_jt_runtime.payload) to the model's tip body
 PAYLOAD = (
     Spec('payload_mass', Kind.DOUBLE, 0.0,

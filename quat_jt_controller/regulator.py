@@ -361,8 +361,11 @@ class Regulator:
         effort limit at ``q``: a mass beyond that (a typo of a hundred kilograms) would drive
         every joint to its limit at once, and the arm could not hold it anyway. One ``g(q)``
         and one Jacobian: cheap enough for a parameter callback on the control thread. Goals
-        whose pose it cannot be held in are the goal check's (``heavy_warning``).
+        whose pose it cannot be held in are the goal check's (``heavy_warning``). With
+        ``gravity_compensation`` off the drives hold the weight, not our torque: not checked.
         """
+        if not self.gains.gravity_compensation:
+            return payload
         model = self.model
         Y = model.payload_regressor(q)
         old, new = ([p.mass_kg, *(p.mass_kg * c for c in p.com_m)]

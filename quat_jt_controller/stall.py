@@ -66,6 +66,19 @@ class PayloadFit(NamedTuple):
         return self.unexplained <= PAYLOAD_FIT_RESIDUAL
 
 
+def negligible_torque(tau_nm: Sequence[float], effort_limits_nm: Sequence[float]) -> bool:
+    """
+    Return True if every joint's ``tau_nm`` is below ``PAYLOAD_FIT_EFFORT_SHARE`` of its limit.
+
+    A joint whose URDF gives no usable effort limit (0, not finite) counts with the largest
+    usable one; an arm with none at all, against 1 N m.
+    """
+    usable = [e for e in effort_limits_nm if isfinite(e) and e > 0.0]
+    fallback = max(usable) if usable else 1.0
+    return all(abs(t) < PAYLOAD_FIT_EFFORT_SHARE * (e if isfinite(e) and e > 0.0 else fallback)
+               for t, e in zip(tau_nm, effort_limits_nm))
+
+
 def fit_payload(model: RobotModel, q: Sequence[float], tau_nm: Sequence[float],
                 R: Optional[np.ndarray] = None, J: Optional[np.ndarray] = None) -> PayloadFit:
     """
@@ -138,7 +151,9 @@ class StallDetector:
     def diagnose(self, q: Sequence[float], out: TickOutput,
                  qdot: Optional[Sequence[float]] = None) -> list[str]:
         """
-        Return the likely causes of a stall at ``q`` (one SVD; called at most at 10 Hz).
+        Return the likely causes of a stall at ``q`` (called at most at 10 Hz).
+
+        It costs a Jacobian, an SVD, a g(q) and an n x 4 least-squares fit.
 
         ``qdot`` (rad/s; None: at rest) tells a joint held by a friction from one still
         moving along its weak push (:meth:`_weak_push`).
@@ -195,9 +210,7 @@ class StallDetector:
             return []
         fit = fit_payload(model, q, out.tau_nm, R, J)
         extra_kg = fit.extra_kg
-        if (not fit.significant
-                or np.all(np.abs(np.array(fit.held_nm)) < PAYLOAD_FIT_EFFORT_SHARE
-                          * np.array(model.effort_limits))
+        if (not fit.significant or negligible_torque(fit.held_nm, model.effort_limits)
                 or -extra_kg > model.link_mass_kg + model.payload_kg):  # more than it has
             return []
         if extra_kg > 0.0:

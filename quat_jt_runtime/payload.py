@@ -21,6 +21,7 @@ from typing import Mapping, Sequence
 from xml.etree import ElementTree
 
 PAYLOAD_RADIUS_M = 0.01  # the sphere whose inertia the payload link is given
+PAYLOAD_MASS_MAX_KG = 1000.0  # the parameters' range (the arm's own limits come first)
 PAYLOAD_LINK_SUFFIX = '_payload'
 
 

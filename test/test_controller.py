@@ -457,6 +457,23 @@ def test_the_payload_held_at_rest_is_identified_on_an_arm_that_shows_it():
                                                        for c in payload.com_m)],
                                Y @ [1.3, 0.026, -0.013, 0.104], atol=1e-9)
     assert why.startswith('identified at rest: payload 1.3 kg at [') and 'across gravity' in why
+    # with a payload in force, its lever along gravity (which this pose does not show) kept
+    in_force = Payload.create(0.4, (0.0, 0.05, 0.02))
+    ctl.regulator.set_payload(carried)
+    ctl.on_state(PANDA_JOINTS, q, [0.0] * 7, 0, 0, MS)
+    ctl.regulator.set_payload(in_force)
+    again, why = ctl.identify_payload()
+    assert again is not None and again.mass_kg == pytest.approx(1.3, rel=1e-6), why
+    _, R, _ = model.kinematics(q)
+    up = np.array(R).T @ model.gravity_base_m_s2
+    up /= np.linalg.norm(up)
+    assert up @ again.com_m == pytest.approx(up @ np.array(in_force.com_m), abs=1e-9)
+    np.testing.assert_allclose(Y @ [again.mass_kg, *(again.mass_kg * c for c in again.com_m)],
+                               Y @ [1.3, 0.026, -0.013, 0.104], atol=1e-9)
+    ctl.refuse_commands('another receiver')  # our torque no longer holds the arm
+    payload, why = ctl.identify_payload()
+    assert payload is None and 'no torque of ours holds the arm' in why
+    ctl.allow_commands()
     ctl.on_state(PANDA_JOINTS, q, [0.3] + [0.0] * 6, 0, 0, 2 * MS)
     payload, why = ctl.identify_payload()
     assert payload is None and 'the arm is moving (0.3 rad/s' in why

@@ -223,7 +223,11 @@ def test_a_payload_given_to_the_design_is_in_its_file_and_in_the_controller_it_m
                               '--payload-mass', '-1'], capture_output=True, text=True,
                              timeout=120)
     assert refused.returncode == 2
-    assert 'payload_mass must be finite and >= 0 kg, got -1.0' in refused.stderr
+    assert '--payload-mass must be finite and >= 0 kg, got -1.0' in refused.stderr
+    refused = subprocess.run([sys.executable, '-m', 'quat_jt_controller.gain_design',
+                              '--payload-com', '0', 'nan', '0'], capture_output=True,
+                             text=True, timeout=120)  # checked with no mass too
+    assert refused.returncode == 2 and '--payload-com must be 3 finite numbers' in refused.stderr
 
 
 def test_the_design_warns_of_estimates_the_urdf_does_not_support():

@@ -17,7 +17,7 @@ from quat_jt_runtime.joints import movable_joints
 from quat_jt_runtime.param_table import joint_zeros, JOINT_ZEROS_TEXT, Kind, names, Spec
 from quat_jt_runtime.params import ChangeLog, declare, LiveParameters, REALTIME, Realtime
 from quat_jt_runtime.params import realtime_from
-from quat_jt_runtime.payload import Payload, with_payload
+from quat_jt_runtime.payload import Payload, PAYLOAD_MASS_MAX_KG, with_payload
 from quat_jt_runtime.urdf_source import Description, DescriptionError, Source, SOURCES
 from quat_jt_runtime.urdf_source import WithDescription
 from rclpy.node import Node
@@ -52,7 +52,7 @@ PAYLOAD = (
     Spec('payload_mass', Kind.DOUBLE, 0.0,
          'mass on payload_link that the URDF does not list, kg: a plant carrying a tool or a '
          'part its controller may not be told of (the controller has the same parameter)',
-         read_only=True, bounds=(0.0, 1000.0)),
+         read_only=True, bounds=(0.0, PAYLOAD_MASS_MAX_KG)),
     Spec('payload_com', Kind.DOUBLE_ARRAY, [0.0, 0.0, 0.0],
          "where payload_mass is, x y z in m in payload_link's frame", read_only=True,
          constraints='3 finite values'),
@@ -179,10 +179,13 @@ def declare_structure(node: Node) -> SimStructure:
                          nonnegative=True)
     try:
         payload = Payload.create(values['payload_mass'], values['payload_com'])
-        if values['payload_link']:
-            with_payload(urdf, values['payload_link'], 1.0, (0.0, 0.0, 0.0))  # a link of it?
     except ValueError as exc:
-        raise SimulatorError(f'{exc} (payload_link {values["payload_link"]!r})') from None
+        raise SimulatorError(str(exc)) from None
+    if values['payload_link']:
+        try:  # a link of the URDF?
+            with_payload(urdf, values['payload_link'], 1.0, (0.0, 0.0, 0.0))
+        except ValueError as exc:
+            raise SimulatorError(f'payload_link: {exc}') from None
     if payload.mass_kg > 0.0 and not values['payload_link']:
         raise SimulatorError(f'payload_mass {payload.mass_kg:g} kg needs a payload_link to '
                              'carry it')
