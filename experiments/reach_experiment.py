@@ -92,8 +92,8 @@ from quat_jt_controller.gain_design import CRUISE_FRACTION, SPEED_MARGIN
 from quat_jt_controller.goal_check import heavy_warning
 from quat_jt_controller.inverse_kinematics import goal_configuration, sampling_box
 from quat_jt_controller.model import GRAVITY_RESERVE_SHARE, RobotModel
-from quat_jt_controller.reference_sim import ClosedLoop, run_sampled
-from quat_jt_controller.stall import StallDetector
+from quat_jt_controller.reference_sim import ClosedLoop, run_sampled, SampledRun
+from quat_jt_controller.stall import identify_payload, StallDetector
 from quat_jt_runtime.param_table import names
 from quat_jt_runtime.payload import with_payload
 from quat_jt_runtime.resources import config_parameters, default_urdf_xml
@@ -232,6 +232,7 @@ class Outcome:
     # at the velocity limits, acceleration aside (nan: no q* or no limits)
     travel_s: float = math.nan
     ripple: float = math.nan  # max_j std(tau_j - g_j) in the last second / effort limit_j
+    identified_kg: float = math.nan  # the payload identified at rest (nan: none asked or set)
 
 
 class PositionsOnly:
@@ -299,7 +300,7 @@ def run_case(robot: Robot, model: RobotModel, gains: cl.Gains, shaping: sh.Shapi
              delay_ticks: int = 1, q_star_after_s: float = Q_STAR_AFTER_S,
              engine: str = 'pybullet', sim_armature=None, no_velocities: bool = False,
              dt_s: float = 1e-3, encoder_bits: int = 0, encoder_told: bool = True,
-             sim_payload_kg: float = 0.0) -> Outcome:
+             sim_payload_kg: float = 0.0, identify_at_s: float = 0.0) -> Outcome:
     """
     Run one case on the simulator core (``engine``); classify it.
 
@@ -308,7 +309,10 @@ def run_case(robot: Robot, model: RobotModel, gains: cl.Gains, shaping: sh.Shapi
     positions read by encoders of ``encoder_bits`` bits a turn (0: exact), their count told
     to the controller if ``encoder_told``, ``dt_s`` the plant's step and the control period,
     ``sim_payload_kg`` a payload the plant's tip carries (at ``PAYLOAD_COM_TIP_M``; the model's
-    may differ).
+    may differ). With ``identify_at_s`` > 0, at that time the payload is identified from the
+    plant's state and the last torque (``stall.identify_payload``, what the node's
+    ``~/identify_payload`` does) and, if one is, set on the controller's model; the run goes
+    on from there.
     """
     from wrist_sim.simulator import RobotSimulator
 
@@ -331,9 +335,20 @@ def run_case(robot: Robot, model: RobotModel, gains: cl.Gains, shaping: sh.Shapi
                              engine=engine, armature=sim_armature, dt_s=dt_s)
     plant = (PositionsOnly(sim, encoder_resolution_rad(encoder_bits), encoder_told)
              if no_velocities else sim)
+    identified_kg = math.nan
     try:
-        held = run_sampled(loop, plant, robot.duration_s + robot.hold_s, delay_ticks, q_star,
-                           q_star_after_s)
+        total_s = robot.duration_s + robot.hold_s
+        if identify_at_s > 0.0:
+            first = run_sampled(loop, plant, identify_at_s, delay_ticks, q_star, q_star_after_s)
+            payload, _ = identify_payload(loop.clamped, sim.q_rad.tolist(),
+                                          sim.qdot_rad_s.tolist(), first.tau_nm[-1].tolist())
+            if payload is not None:
+                loop.clamped.set_payload(payload)  # the model the loop's regulators share
+                identified_kg = payload.mass_kg
+            held = _joined(first, run_sampled(loop, plant, total_s - identify_at_s,
+                                              delay_ticks, q_star, 0.0))
+        else:
+            held = run_sampled(loop, plant, total_s, delay_ticks, q_star, q_star_after_s)
     finally:
         sim.close()
     run = held.until(robot.duration_s)
@@ -360,7 +375,7 @@ def run_case(robot: Robot, model: RobotModel, gains: cl.Gains, shaping: sh.Shapi
                       speed_ratio=float((qdot / limits).max()),
                       travel_s=(math.nan if q_star is None else
                                 float((np.abs(np.asarray(q_star) - q0) / limits).max())),
-                      ripple=torque_ripple(model, rest))
+                      ripple=torque_ripple(model, rest), identified_kg=identified_kg)
     if not reached:
         outcome.cause = classify(model, loop, shaping, q_star, run)
     if outcome.flips_per_s > LIMIT_CYCLE_FLIPS_PER_S:
@@ -368,6 +383,18 @@ def run_case(robot: Robot, model: RobotModel, gains: cl.Gains, shaping: sh.Shapi
             f'LIMIT CYCLE: {outcome.flips_per_s:.0f} torque sign changes in the last second'))
             if c)
     return outcome
+
+
+def _joined(first: SampledRun, then: SampledRun) -> SampledRun:
+    """Return ``first`` followed by ``then`` (whose times restart at 0) as one run."""
+    both = (lambda a, b: None if a is None or b is None else np.concatenate((a, b)))
+    return SampledRun(np.concatenate((first.t_s, first.t_s[-1] + then.t_s)),
+                      both(first.position_error_m, then.position_error_m),
+                      both(first.orientation_error, then.orientation_error),
+                      both(first.max_abs_torque_nm, then.max_abs_torque_nm),
+                      first.saturated_ticks + then.saturated_ticks,
+                      first.all_finite and then.all_finite, both(first.q_rad, then.q_rad),
+                      both(first.tau_nm, then.tau_nm))
 
 
 def last_second_torques(model: RobotModel, run) -> np.ndarray:
@@ -494,6 +521,11 @@ def report(robot: Robot, potential: str, outcomes: list, elapsed_s: float,
         lines.append(f'  the stall diagnosis names a payload the model does not carry in '
                      f'{len(named)} cases: median {np.median(named):.3g} kg (from '
                      f'{min(named):.3g} to {max(named):.3g})')
+    identified = [o.identified_kg for o in outcomes if math.isfinite(o.identified_kg)]
+    if identified:
+        lines.append(f'  a payload identified at rest in {len(identified)} cases: median '
+                     f'{np.median(identified):.3g} kg (from {min(identified):.3g} to '
+                     f'{max(identified):.3g})')
     for o in outcomes:
         if (not o.reached or o.touched or o.flips_per_s > LIMIT_CYCLE_FLIPS_PER_S
                 or o.speed_ratio > 1.0):
@@ -576,6 +608,7 @@ class CaseJob:
     encoder_bits: int = 0
     encoder_told: bool = True
     sim_payload_kg: float = 0.0  # at the tip, PAYLOAD_COM_TIP_M in its frame
+    identify_at_s: float = 0.0  # > 0: the payload identified at rest then (run_case)
 
 
 @functools.lru_cache(maxsize=8)
@@ -598,7 +631,8 @@ def run_job(job: CaseJob) -> Outcome:
                     job.index, job.q_start, job.q_goal, job.delay_ticks, engine=job.engine,
                     sim_armature=job.sim_armature, no_velocities=job.no_velocities,
                     dt_s=job.dt_s, encoder_bits=job.encoder_bits,
-                    encoder_told=job.encoder_told, sim_payload_kg=job.sim_payload_kg)
+                    encoder_told=job.encoder_told, sim_payload_kg=job.sim_payload_kg,
+                    identify_at_s=job.identify_at_s)
 
 
 def run_jobs(jobs: list, label: str, progress=print, workers: Optional[int] = None,
@@ -712,7 +746,10 @@ MAX_DELAY_TICKS = 10
 
 CONDITIONS = ('ideal', 'armature', 'armature-wrong', 'friction', 'armature-friction',
               'no-velocities', 'encoder', 'payload', 'payload-told', 'armature-payload',
-              'armature-payload-told')
+              'armature-payload-told', 'armature-payload-identify')
+# ... and in 'armature-payload-identify', the payload is identified at rest this late (s; the
+# case then runs as long again: judged at twice its duration)
+IDENTIFY_AT_S = 5.0
 # Where the payload conditions put the payload: 5 cm along the tip link's z, in its frame
 PAYLOAD_COM_TIP_M = (0.0, 0.0, 0.05)
 
@@ -731,6 +768,7 @@ class Condition:
     delay_ticks: int = 1  # the ticks between a state and the torque computed from it applied
     payload_share: float = 0.0  # a payload at the tip, x the arm's link mass (payload_kg)
     payload_told: bool = False  # ... and the design and the controller told it
+    identify_at_s: float = 0.0  # > 0: stall.identify_payload at this time, then as long again
 
     def describe(self) -> str:
         """Return the condition in words, for the table."""
@@ -754,6 +792,10 @@ class Condition:
                                 f'untold payload {self.payload_share:g} x link mass',
             'armature-payload-told': f'rotor inertia {self.plant_armature:g} kg m^2 and '
                                      f'payload {self.payload_share:g} x link mass, given',
+            'armature-payload-identify': f'rotor inertia {self.plant_armature:g} kg m^2, given, '
+                                         f'untold payload {self.payload_share:g} x link mass, '
+                                         f'identified at rest at {self.identify_at_s:g} s '
+                                         f'(judged at {2.0 * self.identify_at_s:g} s)',
         }[self.name] + delay
 
 
@@ -784,6 +826,9 @@ def condition(name: str, armature: float = 0.1, told_scale: float = 0.5,
                                       payload_share=payload_share),
         'armature-payload-told': Condition('armature-payload-told', armature, armature,
                                            payload_share=payload_share, payload_told=True),
+        'armature-payload-identify': Condition('armature-payload-identify', armature,
+                                               armature, payload_share=payload_share,
+                                               identify_at_s=IDENTIFY_AT_S),
     }[name], delay_ticks=delay_ticks)
 
 
@@ -927,6 +972,8 @@ def run_arm(robot: Robot, cond: Condition, potential: str, count: int, seed: int
     (its ``--delays``) are design_gains' options (:func:`arm_design`).
     """
     plant_payload_kg = payload_kg(robot, cond)
+    if cond.identify_at_s > 0.0:  # as long again after the identification
+        robot = dataclasses.replace(robot, duration_s=robot.duration_s + cond.identify_at_s)
     model, d = arm_design(robot, cond.told_armature, float(rate_hz), friction_effort_share,
                           approach_time_s, cruise_fraction, tuple(design_delays),
                           plant_payload_kg if cond.payload_told else 0.0)
@@ -948,7 +995,7 @@ def run_arm(robot: Robot, cond: Condition, potential: str, count: int, seed: int
                               PAYLOAD_COM_TIP_M))
     jobs = [CaseJob(robot, spec, gains, shaping, sim_params, i, q0, qg, cond.delay_ticks, engine,
                     (cond.plant_armature,) * n, cond.no_velocities, 1.0 / rate_hz,
-                    cond.encoder_bits, cond.encoder_told, plant_payload_kg)
+                    cond.encoder_bits, cond.encoder_told, plant_payload_kg, cond.identify_at_s)
             for i, (q0, qg) in enumerate(cases(plant_model, robot, count, seed))]
     return run_jobs(jobs, f'{robot.name} {cond.name}', progress, workers, ray_address)
 
@@ -1156,14 +1203,16 @@ def main_arm(parser: argparse.ArgumentParser, args, overrides: dict) -> int:
                                    design_delays=tuple(args.design_delays))
             except (cl.GainsError, sh.ShapingError) as exc:
                 parser.error(f'--param: {exc}')
+            shown = (dataclasses.replace(robot, duration_s=robot.duration_s + cond.identify_at_s)
+                     if cond.identify_at_s > 0.0 else robot)  # judged as run_arm runs it
             label = ', '.join([potential, cond.describe(), args.engine]
                               + ([f'payload {payload_kg(robot, cond):.3g} kg']
                                  if cond.payload_share else [])
                               + [f'{k} {v}' for k, v in overrides.items()])
-            text.append(report(robot, label, outcomes, time.monotonic() - t0,
+            text.append(report(shown, label, outcomes, time.monotonic() - t0,
                                args.cruise_fraction or CRUISE_FRACTION))
             print(text[-1], flush=True)
-            rows.append(table_row(robot, cond, outcomes))
+            rows.append(table_row(shown, cond, outcomes))
             print(rows[-1], flush=True)
     print('\n' + '\n'.join(text) + '\n\n' + TABLE_HEADER + '\n' + '\n'.join(rows))
     return 0

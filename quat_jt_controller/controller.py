@@ -31,8 +31,6 @@ the log throttles).
 from enum import IntEnum
 from typing import Any, NamedTuple, Optional, Sequence
 
-import numpy as np
-
 from quat_jt_controller import diagnostics
 from quat_jt_controller import quaternion as quat
 from quat_jt_controller.control_law import Gains
@@ -40,10 +38,7 @@ from quat_jt_controller.goal_check import Posture
 from quat_jt_controller.goal_frames import GoalFrames
 from quat_jt_controller.goal_motion import GoalVelocityEstimator
 from quat_jt_controller.regulator import Goal, Regulator, TickOutput
-from quat_jt_controller.stall import fit_payload, negligible_torque, PAYLOAD_FIT_EFFORT_SHARE
-from quat_jt_controller.stall import PAYLOAD_FIT_JOINTS
-from quat_jt_controller.stall import REST_SPEED_RAD_S
-from quat_jt_controller.stall import StallDetector
+from quat_jt_controller.stall import identify_payload, StallDetector
 from quat_jt_runtime.joints import (DEFAULT_STATE_RATE_HZ, ForeignState, StaleState,
                                     StateCheck)
 from quat_jt_runtime.joints import VELOCITY_WINDOW_STATES
@@ -336,67 +331,17 @@ class Controller:
         """
         Return the payload the tip carries as the torque held at rest shows it, and why.
 
-        The arm must have ``PAYLOAD_FIT_JOINTS`` joints or more, be at rest (every joint slower
-        than the stall detector's rest speed), and have gravity compensation on. The torque of
-        the last tick beyond the model's ``g(q)`` is fitted by a payload at the tip
-        (``stall.fit_payload``), on top of the one in force. Below ``PAYLOAD_FIT_EFFORT_SHARE``
-        of every effort limit (``stall.negligible_torque``), the payload in force is kept. The
-        answer is None, with the reason, while no torque of ours holds the arm (states timed
-        out, commands refused, a torque not finite), where the fit leaves more than
-        ``PAYLOAD_FIT_RESIDUAL`` of that torque (a friction or a contact holds it, not a
-        weight), makes the tip lighter than nothing or puts the mass farther away than the
-        arm is long. One pose shows the centre of mass across gravity only: that component
-        stays what it was (the message says so).
+        ``stall.identify_payload`` at the last state and the last tick's torque. None, with the
+        reason, before any state, or while no torque of ours holds the arm (the states timed
+        out, the commands are refused, the last torque was not finite).
         """
-        reg = self.regulator
-        model = reg.model
-        if model.n < PAYLOAD_FIT_JOINTS:
-            return None, (f'an arm of {model.n} joints shows too little of a payload at its tip '
-                          'to tell its mass from its lever: set payload_mass and payload_com')
         if self.last is None or self.last_q is None or self.last_qdot is None:
             return None, 'no joint state yet: identify the payload with the arm at rest'
-        if not reg.gains.gravity_compensation:
-            return None, ('gravity_compensation is off: the drives hold the weight, and the '
-                          'held torque says nothing of it')
         if self.stopped or self.command_refusal or not self.last.finite:
             return None, ('no torque of ours holds the arm now (the states timed out, the '
                           'commands are refused, or the last one was not finite): nothing '
                           'to fit')
-        fastest = max(abs(v) for v in self.last_qdot)
-        if fastest >= REST_SPEED_RAD_S:
-            return None, (f'the arm is moving ({fastest:.3g} rad/s; at rest is below '
-                          f'{REST_SPEED_RAD_S:g}): identify the payload with the arm at rest')
-        fit = fit_payload(model, self.last_q, self.last.tau_nm)
-        mass = model.payload_kg + fit.extra_kg
-        if negligible_torque(fit.held_nm, model.effort_limits):
-            return model.payload, ("the model's g(q) holds the arm here (what it holds beyond "
-                                   f'is below {PAYLOAD_FIT_EFFORT_SHARE:g} of each effort '
-                                   f'limit): {model.payload.describe(model.tip_link)} kept')
-        if not fit.significant:
-            return None, (f'the torque held beyond g(q) ({max(abs(t) for t in fit.held_nm):.3g} '
-                          f'N m at most) is not a weight at the tip: a payload fits '
-                          f'{100.0 * (1.0 - min(fit.unexplained, 1.0)):.0f}% of it (a friction '
-                          'or a contact holds the arm); nothing changed')
-        if mass <= 0.0:
-            return None, (f'the held torque asks for a tip {-fit.extra_kg:.3g} kg lighter than '
-                          f'the model, lighter than its payload of {model.payload_kg:g} kg: '
-                          "check the URDF's masses; nothing changed")
-        # the first moment this pose shows, and along gravity (unseen here) the lever in force
-        _, R, _ = model.kinematics(self.last_q)
-        up = np.array(R).T @ model.gravity_base_m_s2
-        up /= np.linalg.norm(up)
-        moment = model.payload_kg * np.array(model.payload_com_tip_m) + fit.extra_moment_kg_m
-        com = (moment - up * (up @ moment)) / mass + up * (up @ model.payload_com_tip_m)
-        if np.linalg.norm(com) > model.length_m:
-            return None, (f'the held torque asks for {mass:.3g} kg at {np.round(com, 3).tolist()}'
-                          f' m, farther from the tip than the arm is long ({model.length_m:.3g} '
-                          'm): not a payload; nothing changed')
-        payload = Payload.create(mass, com.tolist())
-        return payload, (f'identified at rest: {payload.describe(model.tip_link)} '
-                         f'({fit.extra_kg:+.3g} kg; the fit leaves '
-                         f'{100.0 * fit.unexplained:.0f}% of the held torque). One pose shows '
-                         'the centre of mass across gravity only: identify again in another '
-                         'orientation of the tip, or set payload_com')
+        return identify_payload(self.regulator, self.last_q, self.last_qdot, self.last.tau_nm)
 
     def refuse_commands(self, reason: str) -> Optional[Command]:
         """

@@ -21,6 +21,7 @@ import numpy as np
 from quat_jt_controller.diagnostics import NEAR_180_ETA_E, OK, Status, WARN
 from quat_jt_controller.model import RobotModel, SINGULAR_SIGMA_MIN
 from quat_jt_controller.regulator import Regulator, TickOutput
+from quat_jt_runtime.payload import Payload
 
 PERIOD_S = 0.1  # evaluation period (10 Hz)
 HOLD_S = 0.5  # at rest and off the goal for longer than this: a stall
@@ -99,6 +100,66 @@ def fit_payload(model: RobotModel, q: Sequence[float], tau_nm: Sequence[float],
     unexplained = float(np.linalg.norm(held - Y @ theta)) / norm if norm > 0.0 else nan
     return PayloadFit(float(theta[0]), tuple(float(x) for x in theta[1:]), unexplained,
                       tuple(held.tolist()))
+
+
+def identify_payload(regulator: Regulator, q: Sequence[float], qdot: Sequence[float],
+                     tau_nm: Sequence[float]) -> tuple[Optional[Payload], str]:
+    """
+    Return the payload the tip carries as the torque ``tau_nm`` held at rest shows it, and why.
+
+    The arm must have ``PAYLOAD_FIT_JOINTS`` joints or more, be at rest at ``q`` (``qdot``
+    below ``REST_SPEED_RAD_S``), and have gravity compensation on. The torque beyond the
+    model's ``g(q)`` is fitted by a payload at the tip (:func:`fit_payload`), on top of the one
+    in force. Below ``PAYLOAD_FIT_EFFORT_SHARE`` of every effort limit
+    (:func:`negligible_torque`), the payload in force is kept. The answer is None, with the
+    reason, where the fit leaves more than ``PAYLOAD_FIT_RESIDUAL`` of that torque (a friction
+    or a contact holds it, not a weight), makes the tip lighter than nothing or puts the mass
+    farther away than the arm is long. One pose shows the centre of mass across gravity only:
+    that component stays what it was (the message says so). ``Controller.identify_payload``
+    (the node's ``~/identify_payload``) and the reach experiment call it.
+    """
+    model = regulator.model
+    if model.n < PAYLOAD_FIT_JOINTS:
+        return None, (f'an arm of {model.n} joints shows too little of a payload at its tip '
+                      'to tell its mass from its lever: set payload_mass and payload_com')
+    if not regulator.gains.gravity_compensation:
+        return None, ('gravity_compensation is off: the drives hold the weight, and the held '
+                      'torque says nothing of it')
+    fastest = max(abs(v) for v in qdot)
+    if fastest >= REST_SPEED_RAD_S:
+        return None, (f'the arm is moving ({fastest:.3g} rad/s; at rest is below '
+                      f'{REST_SPEED_RAD_S:g}): identify the payload with the arm at rest')
+    fit = fit_payload(model, q, tau_nm)
+    mass = model.payload_kg + fit.extra_kg
+    if negligible_torque(fit.held_nm, model.effort_limits):
+        return model.payload, ("the model's g(q) holds the arm here (what it holds beyond is "
+                               f'below {PAYLOAD_FIT_EFFORT_SHARE:g} of each effort limit): '
+                               f'{model.payload.describe(model.tip_link)} kept')
+    if not fit.significant:
+        return None, (f'the torque held beyond g(q) ({max(abs(t) for t in fit.held_nm):.3g} N m '
+                      'at most) is not a weight at the tip: a payload fits '
+                      f'{100.0 * (1.0 - min(fit.unexplained, 1.0)):.0f}% of it (a friction or a '
+                      'contact holds the arm); nothing changed')
+    if mass <= 0.0:
+        return None, (f'the held torque asks for a tip {-fit.extra_kg:.3g} kg lighter than the '
+                      f'model, lighter than its payload of {model.payload_kg:g} kg: check the '
+                      "URDF's masses; nothing changed")
+    # the first moment this pose shows, and along gravity (unseen here) the lever in force
+    _, R, _ = model.kinematics(list(q))
+    up = np.array(R).T @ model.gravity_base_m_s2
+    up /= np.linalg.norm(up)
+    moment = model.payload_kg * np.array(model.payload_com_tip_m) + fit.extra_moment_kg_m
+    com = (moment - up * (up @ moment)) / mass + up * (up @ model.payload_com_tip_m)
+    if np.linalg.norm(com) > model.length_m:
+        return None, (f'the held torque asks for {mass:.3g} kg at {np.round(com, 3).tolist()} '
+                      f'm, farther from the tip than the arm is long ({model.length_m:.3g} m): '
+                      'not a payload; nothing changed')
+    payload = Payload.create(mass, com.tolist())
+    return payload, (f'identified at rest: {payload.describe(model.tip_link)} '
+                     f'({fit.extra_kg:+.3g} kg; the fit leaves {100.0 * fit.unexplained:.0f}% '
+                     'of the held torque). One pose shows the centre of mass across gravity '
+                     'only: identify again in another orientation of the tip, or set '
+                     'payload_com')
 
 
 class StallDetector:

@@ -258,6 +258,11 @@ def test_a_payload_is_carried_by_the_plant_and_told_to_the_design_only_if_asked(
         for kg, way in (('1.5', 'more'), ('0.5', 'less'), ('2.5', 'more'))]
     assert ('the stall diagnosis names a payload the model does not carry in 3 cases: median '
             '1.5 kg (from -0.5 to 2.5)') in rx.report(robot, 'tanh', stalled, 1.0)
+    identify = rx.condition('armature-payload-identify')
+    assert identify.identify_at_s == rx.IDENTIFY_AT_S and not identify.payload_told
+    set_at_rest = [dataclasses.replace(carried, identified_kg=kg) for kg in (0.3, 0.5)]
+    assert ('a payload identified at rest in 2 cases: median 0.4 kg (from 0.3 to 0.5)'
+            in rx.report(robot, 'tanh', set_at_rest, 1.0))
 
 
 @pytest.mark.e2e
