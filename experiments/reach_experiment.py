@@ -232,7 +232,7 @@ class Outcome:
     # at the velocity limits, acceleration aside (nan: no q* or no limits)
     travel_s: float = math.nan
     ripple: float = math.nan  # max_j std(tau_j - g_j) in the last second / effort limit_j
-    identified_kg: float = math.nan  # the payload identified at rest (nan: none asked or set)
+    identified_kg: float = math.nan  # the payload set at rest by the identification (nan: none)
 
 
 class PositionsOnly:
@@ -342,7 +342,7 @@ def run_case(robot: Robot, model: RobotModel, gains: cl.Gains, shaping: sh.Shapi
             first = run_sampled(loop, plant, identify_at_s, delay_ticks, q_star, q_star_after_s)
             payload, _ = identify_payload(loop.clamped, sim.q_rad.tolist(),
                                           sim.qdot_rad_s.tolist(), first.tau_nm[-1].tolist())
-            if payload is not None:
+            if payload is not None and payload != model.payload:  # not just kept
                 loop.clamped.set_payload(payload)  # the model the loop's regulators share
                 identified_kg = payload.mass_kg
             held = _joined(first, run_sampled(loop, plant, total_s - identify_at_s,
