@@ -367,11 +367,12 @@ class Regulator:
         if not self.gains.gravity_compensation:
             return payload
         model = self.model
-        Y = model.payload_regressor(q)
-        old, new = ([p.mass_kg, *(p.mass_kg * c for c in p.com_m)]
-                    for p in (model.payload, payload))
-        needed = [g + sum(y[k] * (new[k] - old[k]) for k in range(4))
-                  for g, y in zip(model.gravity(q), Y.tolist())]
+        # (m, m c) of the new payload less the one in force, through Y(q)
+        old = model.payload
+        delta = [payload.mass_kg * a - old.mass_kg * b
+                 for a, b in zip((1.0, *payload.com_m), (1.0, *old.com_m))]
+        needed = [g + sum(y * d for y, d in zip(row, delta))
+                  for g, row in zip(model.gravity(q), model.payload_regressor(q).tolist())]
         for name, tau, limit in zip(model.joint_names, needed, self.effort_limits_nm):
             if abs(tau) > limit:
                 raise ModelError(

@@ -129,7 +129,9 @@ def identify_payload(regulator: Regulator, q: Sequence[float], qdot: Sequence[fl
     if fastest >= REST_SPEED_RAD_S:
         return None, (f'the arm is moving ({fastest:.3g} rad/s; at rest is below '
                       f'{REST_SPEED_RAD_S:g}): identify the payload with the arm at rest')
-    fit = fit_payload(model, q, tau_nm)
+    _, R, J = model.kinematics(list(q))  # once: the fit's regressor and the lever's axis
+    R = np.array(R)
+    fit = fit_payload(model, q, tau_nm, R, np.array(J))
     mass = model.payload_kg + fit.extra_kg
     if negligible_torque(fit.held_nm, model.effort_limits):
         return model.payload, ("the model's g(q) holds the arm here (what it holds beyond is "
@@ -145,8 +147,7 @@ def identify_payload(regulator: Regulator, q: Sequence[float], qdot: Sequence[fl
                       f'model, lighter than its payload of {model.payload_kg:g} kg: check the '
                       "URDF's masses; nothing changed")
     # the first moment this pose shows, and along gravity (unseen here) the lever in force
-    _, R, _ = model.kinematics(list(q))
-    up = np.array(R).T @ model.gravity_base_m_s2
+    up = R.T @ model.gravity_base_m_s2
     up /= np.linalg.norm(up)
     moment = model.payload_kg * np.array(model.payload_com_tip_m) + fit.extra_moment_kg_m
     com = (moment - up * (up @ moment)) / mass + up * (up @ model.payload_com_tip_m)
