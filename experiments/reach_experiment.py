@@ -233,6 +233,8 @@ class Outcome:
     travel_s: float = math.nan
     ripple: float = math.nan  # max_j std(tau_j - g_j) in the last second / effort limit_j
     identified_kg: float = math.nan  # the payload set at rest by the identification (nan: none)
+    # the rotor inertia found beyond the armature told, per joint, at the end (kg m^2)
+    armature_estimate: tuple = ()
 
 
 class PositionsOnly:
@@ -375,7 +377,8 @@ def run_case(robot: Robot, model: RobotModel, gains: cl.Gains, shaping: sh.Shapi
                       speed_ratio=float((qdot / limits).max()),
                       travel_s=(math.nan if q_star is None else
                                 float((np.abs(np.asarray(q_star) - q0) / limits).max())),
-                      ripple=torque_ripple(model, rest), identified_kg=identified_kg)
+                      ripple=torque_ripple(model, rest), identified_kg=identified_kg,
+                      armature_estimate=loop.clamped.armature_estimate)
     if not reached:
         outcome.cause = classify(model, loop, shaping, q_star, run)
     if outcome.flips_per_s > LIMIT_CYCLE_FLIPS_PER_S:
@@ -526,6 +529,12 @@ def report(robot: Robot, potential: str, outcomes: list, elapsed_s: float,
         lines.append(f'  a payload identified at rest in {len(identified)} cases: median '
                      f'{np.median(identified):.3g} kg (from {min(identified):.3g} to '
                      f'{max(identified):.3g})')
+    found = np.array([o.armature_estimate for o in outcomes if any(o.armature_estimate)])
+    if found.size:
+        lines.append(f'  rotor inertia found beyond the armature told, at the end, in '
+                     f'{len(found)} cases: per joint median '
+                     f'{np.round(np.median(found, axis=0), 4).tolist()}, max '
+                     f'{np.round(found.max(axis=0), 4).tolist()} kg m^2')
     for o in outcomes:
         if (not o.reached or o.touched or o.flips_per_s > LIMIT_CYCLE_FLIPS_PER_S
                 or o.speed_ratio > 1.0):
@@ -746,7 +755,8 @@ MAX_DELAY_TICKS = 10
 
 CONDITIONS = ('ideal', 'armature', 'armature-wrong', 'friction', 'armature-friction',
               'no-velocities', 'encoder', 'payload', 'payload-told', 'armature-payload',
-              'armature-payload-told', 'armature-payload-identify')
+              'armature-payload-told', 'armature-payload-identify', 'armature-untold',
+              'armature-untold-friction')
 # ... and in 'armature-payload-identify', the payload is identified at rest this late (s; the
 # case then runs as long again: judged at twice its duration)
 IDENTIFY_AT_S = 5.0
@@ -792,6 +802,10 @@ class Condition:
                                 f'untold payload {self.payload_share:g} x link mass',
             'armature-payload-told': f'rotor inertia {self.plant_armature:g} kg m^2 and '
                                      f'payload {self.payload_share:g} x link mass, given',
+            'armature-untold': f'rotor inertia {self.plant_armature:g} kg m^2, untold',
+            'armature-untold-friction': f'rotor inertia {self.plant_armature:g} kg m^2 and '
+                                        f'Coulomb friction {self.coulomb_effort_fraction:g} x '
+                                        'effort, both untold',
             'armature-payload-identify': f'rotor inertia {self.plant_armature:g} kg m^2, given, '
                                          f'untold payload {self.payload_share:g} x link mass, '
                                          f'identified at rest at {self.identify_at_s:g} s '
@@ -826,6 +840,9 @@ def condition(name: str, armature: float = 0.1, told_scale: float = 0.5,
                                       payload_share=payload_share),
         'armature-payload-told': Condition('armature-payload-told', armature, armature,
                                            payload_share=payload_share, payload_told=True),
+        'armature-untold': Condition('armature-untold', armature, 0.0),
+        'armature-untold-friction': Condition('armature-untold-friction', armature, 0.0,
+                                              friction_fraction),
         'armature-payload-identify': Condition('armature-payload-identify', armature,
                                                armature, payload_share=payload_share,
                                                identify_at_s=IDENTIFY_AT_S),
@@ -959,7 +976,8 @@ def run_arm(robot: Robot, cond: Condition, potential: str, count: int, seed: int
             friction_effort_share: Optional[float] = None,
             overrides: Optional[dict] = None,
             approach_time_s: Optional[float] = None,
-            cruise_fraction: Optional[float] = None, design_delays: tuple = (1,)) -> list:
+            cruise_fraction: Optional[float] = None, design_delays: tuple = (1,),
+            armature_estimation: bool = True) -> list:
     """
     Run ``count`` cases of an arm from its URDF in condition ``cond``; their outcomes.
 
@@ -968,6 +986,7 @@ def run_arm(robot: Robot, cond: Condition, potential: str, count: int, seed: int
     hidden), with ``cond``'s rotor inertia and Coulomb friction; the control period is
     1 / ``rate_hz``. ``overrides`` replace parameters of the design, by their ROS names
     (validated as the node does; ShapingError or GainsError names a bad one);
+    ``armature_estimation`` False turns the design's rotor inertia estimate off (an ablation).
     ``friction_effort_share``, ``approach_time_s``, ``cruise_fraction`` and ``design_delays``
     (its ``--delays``) are design_gains' options (:func:`arm_design`).
     """
@@ -983,6 +1002,8 @@ def run_arm(robot: Robot, cond: Condition, potential: str, count: int, seed: int
         overridden = controller_from_config(
             {**d.structure(), **d.parameters(potential), **overrides}, robot_urdf(robot))
         gains, shaping = overridden.gains, overridden.shaping
+    if not armature_estimation:
+        shaping = dataclasses.replace(shaping, armature_estimation_limit_kg_m2=())
     sim_params = {'viscous_friction': [0.0] * n,
                   'coulomb_friction': [cond.coulomb_effort_fraction * e
                                        for e in model.effort_limits],
@@ -1098,6 +1119,9 @@ def main(argv: Optional[list] = None) -> int:
                      help="design_gains' --approach-time, s (default: none)")
     arm.add_argument('--cruise-fraction', type=float, default=None,
                      help="design_gains' --cruise-fraction (default: its default)")
+    arm.add_argument('--no-armature-estimation', action='store_true',
+                     help="turn the design's estimate of the rotor inertia from the motion off "
+                     '(armature_estimation_limit zeros), to see what it does')
     arm.add_argument('--design-delays', type=int, nargs='+', default=[1],
                      help="design_gains' --delays: the ticks of delay the design checks its "
                      'sampled loop with, and one more (default: 1; --delay is the '
@@ -1200,7 +1224,8 @@ def main_arm(parser: argparse.ArgumentParser, args, overrides: dict) -> int:
                                    friction_effort_share=args.friction_effort_share,
                                    overrides=overrides, approach_time_s=args.approach_time,
                                    cruise_fraction=args.cruise_fraction,
-                                   design_delays=tuple(args.design_delays))
+                                   design_delays=tuple(args.design_delays),
+                                   armature_estimation=not args.no_armature_estimation)
             except (cl.GainsError, sh.ShapingError) as exc:
                 parser.error(f'--param: {exc}')
             shown = (dataclasses.replace(robot, duration_s=robot.duration_s + cond.identify_at_s)
@@ -1208,6 +1233,8 @@ def main_arm(parser: argparse.ArgumentParser, args, overrides: dict) -> int:
             label = ', '.join([potential, cond.describe(), args.engine]
                               + ([f'payload {payload_kg(robot, cond):.3g} kg']
                                  if cond.payload_share else [])
+                              + (['rotor inertia not estimated']
+                                 if args.no_armature_estimation else [])
                               + [f'{k} {v}' for k, v in overrides.items()])
             text.append(report(shown, label, outcomes, time.monotonic() - t0,
                                args.cruise_fraction or CRUISE_FRACTION))

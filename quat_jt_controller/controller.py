@@ -63,6 +63,16 @@ class Severity(IntEnum):
     ERROR = 40
 
 
+# The rotor inertia found is said once it has stayed within this share of itself this long
+ARMATURE_SETTLED_SHARE = 0.05
+ARMATURE_SETTLED_NS = 1_000_000_000
+
+
+def _values(told: Sequence[float], found: Sequence[float]) -> str:
+    """Return the armature told plus the one found, as design_gains --armature takes it."""
+    return ' '.join(f'{a + e:.3g}' for a, e in zip(told, found))
+
+
 class LogLine(NamedTuple):
     """A line for the node's log."""
 
@@ -162,6 +172,9 @@ class Controller:
         self._tick_clock = 0  # the clock of the last state's time: 1 its stamp, 2 its arrival
         self._tick_ns = 0  # ... and that time (ns)
         self._said_estimating = False
+        self._armature_said: set[int] = set()  # joints whose rotor inertia found was said
+        # ... and the estimate when last looked at (steady ns, kg m^2 per joint)
+        self._armature_before: tuple[int, Sequence[float]] = (started_ns, ())
         self._no_state_warn_ns = started_ns + NO_STATE_WARN_NS  # the next warning, if none yet
         # what goes out
         self._decimation = 0
@@ -256,7 +269,10 @@ class Controller:
             self._decimation = 0
             feedback = self._published_quaternion(out.R_tip_base)
         due, self._diagnostics_due = self._diagnostics_due, False
-        return Command(None if self.command_refusal else out.tau_nm, out, feedback, due, logs)
+        if self.command_refusal:  # nothing of ours reaches the plant
+            regulator.torque_withheld()
+            return Command(None, out, feedback, due, logs)
+        return Command(out.tau_nm, out, feedback, due, logs)
 
     def _estimating(self, stamp_ns: int) -> str:
         rate = self.state_rate_hz
@@ -489,6 +505,46 @@ class Controller:
                     logs += (LogLine(Severity.WARN,
                                      f'goal {said} accepted with a warning: {verdict}'),)
         return logs
+
+    def take_model_notes(self) -> tuple[LogLine, ...]:
+        """
+        Say once per joint that it moves as if it were more than twice as heavy as its model.
+
+        The regulator's ``armature_estimate``, the rotor inertia the motion shows beyond the
+        armature told, above the joint's own inertia in the model at the last state, and
+        settled: within ``ARMATURE_SETTLED_SHARE`` of what it was ``ARMATURE_SETTLED_NS``
+        before. The gains were sized for a joint that light. One M(q) when one is to be said.
+        """
+        found = self.regulator.armature_estimate
+        q = self.last_q
+        if q is None or not any(e > 0.0 for e in found):
+            return NO_LOGS
+        then_ns, before = self._armature_before
+        now_ns = self._steady_ns
+        if now_ns - then_ns < ARMATURE_SETTLED_NS:
+            return NO_LOGS
+        self._armature_before = (now_ns, found)
+        settled = [j for j, (e, b) in enumerate(zip(found, before))
+                   if e > 0.0 and abs(e - b) <= ARMATURE_SETTLED_SHARE * e
+                   and j not in self._armature_said]
+        if not settled:
+            return NO_LOGS
+        model = self.regulator.model
+        own = model.own_inertias(q)
+        heavy = [(j, found[j], own[j] - found[j]) for j in settled
+                 if found[j] > own[j] - found[j]]
+        if not heavy:
+            return NO_LOGS
+        self._armature_said.update(j for j, _, _ in heavy)
+        limits = self.regulator.shaping.armature_estimation_limit_kg_m2
+        joints = ', '.join(f'{model.joint_names[j]} {e:.3g} kg m^2 (its model {m:.3g}'
+                           + ('; at its limit, armature_estimation_limit' if e >= limits[j]
+                              else '') + ')' for j, e, m in heavy)
+        return (LogLine(Severity.WARN, (
+            f'rotor inertia the model lacks, found from the motion: {joints}. The damping, the '
+            'speed guard and the friction learning use it now (armature_estimate on '
+            '/diagnostics); the gains were sized without it. For gains sized for these joints, '
+            f'design again with --armature {_values(model.armature, found)}')),)
 
     # -- reports --------------------------------------------------------------------------
     def statuses(self, figures: dict, graph_warnings: Sequence[str] = ()

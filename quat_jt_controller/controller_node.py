@@ -237,10 +237,14 @@ class QuatJtController(Node):
         self._log(reply.logs)
 
     def _on_goal_checks(self) -> None:
-        """Take the worker's answers (the controller applies them); log; publish a new goal."""
+        """
+        Take the worker's answers (the controller applies them); log; publish a new goal.
+
+        And say what the controller found of the model (the rotor inertia the motion shows).
+        """
         ctl = self.controller
         self._goal_pose.update(ctl.goal, ctl.goal_anchor)
-        self._log(ctl.take_goal_checks())
+        self._log(ctl.take_goal_checks() + ctl.take_model_notes())
 
     def destroy_node(self) -> None:
         """Stop the goal-check worker, then destroy the node."""

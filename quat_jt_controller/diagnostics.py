@@ -195,12 +195,13 @@ def goal_status(source: str, goal: Optional[Goal], warning: str, last: Optional[
 
 
 class ConfigurationState(NamedTuple):
-    """The goal configuration in force and the friction learned, for the goal status."""
+    """The goal configuration in force, the friction learned, the rotor inertia found."""
 
     term_on: bool  # the goal-configuration term has a gain
     q_star_rad: Optional[Sequence[float]]
     in_band: Sequence[str]  # joints whose q* lies in the limit band (the band ends at q*)
     learned_friction_nm: Sequence[float] = ()
+    armature_estimate: Sequence[float] = ()  # kg m^2 per joint, while it is estimated
 
     def values(self) -> list[tuple[str, str]]:
         """Return the key-value pairs."""
@@ -211,6 +212,9 @@ class ConfigurationState(NamedTuple):
         if self.learned_friction_nm:
             out.append(('learned_friction_nm',
                         str([round(x, 4) for x in self.learned_friction_nm])))
+        if self.armature_estimate:
+            out.append(('armature_estimate',
+                        str([float(f'{x:.3g}') for x in self.armature_estimate])))
         return out
 
     def note(self, source: str) -> str:
@@ -227,9 +231,15 @@ class ConfigurationState(NamedTuple):
 
 
 def configuration_state(regulator: Regulator) -> ConfigurationState:
-    """Return the goal configuration in force and the friction learned, from the regulator."""
+    """
+    Return the goal configuration in force, the friction learned and the rotor inertia found.
+
+    From the regulator; each of the last two only while it is on.
+    """
     names = regulator.model.joint_names
+    shaping = regulator.shaping
     return ConfigurationState(
-        regulator.shaping.configuration_on, regulator.goal_configuration,
+        shaping.configuration_on, regulator.goal_configuration,
         [names[j] for j in regulator.goal_in_band()],
-        regulator.learned_friction_nm if regulator.shaping.learning_on else ())
+        regulator.learned_friction_nm if shaping.learning_on else (),
+        regulator.armature_estimate if shaping.armature_estimation_on else ())

@@ -107,6 +107,9 @@ TICK_SPEED_SHARE = (1.0 - FADE_FLOOR_FRACTION) / (1.0 + FADE_DELAY_TICKS)
 # no armature given, is taken for a URDF without its drive's rotor inertia (a warning)
 PLAUSIBLE_ACCELERATION_RAD_S2 = 5000.0
 SUGGESTED_ARMATURE = 0.1  # kg m^2, what a geared drive of a ~1 m arm reflects, as an example
+# The regulator may find at most the rotor inertia that the joint's effort limit accelerates
+# this fast (rad/s^2; m/s^2 on a slide), beyond the armature told (armature_estimate.py)
+ESTIMATED_ARMATURE_ACCELERATION_RAD_S2 = 10.0
 # A URDF velocity limit above this is taken for a placeholder (iCub's and Alex's 100 rad/s,
 # Solo's 1000, the hextilt arm's 10,000; the G1's 37 is real): a warning
 PLAUSIBLE_SPEED_RAD_S = 60.0
@@ -700,6 +703,8 @@ def design(model: RobotModel, task: cl.Task, rate_hz: float = 1000.0,
         inertial_damping=inertial.tolist(),
         inertial_damping_rate=beta_r,
         settling_damping_rate=settling,
+        armature_estimation_limit=[float(f'{v:.4g}') for v in
+                                   effort / ESTIMATED_ARMATURE_ACCELERATION_RAD_S2],
         goal_velocity_gain=GOAL_VELOCITY_GAIN,
         preferred_configuration=(model.middle_of_ranges() if preferred_configuration_rad is None
                                  else preferred_configuration_rad),

@@ -15,9 +15,10 @@ from quat_jt_controller import control_law as cl
 from quat_jt_controller import parameter_table as table
 from quat_jt_controller.gain_analysis import DELAY_MARGIN, GAIN_MARGIN, sigma_min
 from quat_jt_controller.gain_design import (
-    CARRIED_SPEED_SHARE, CARRY_STEP, DAMPING_RATIO, Design, FRICTION_LEARNING_TIME_S,
-    GRAVITY_RESERVE_SHARE, GUIDE_OVER_TASK, LIMIT_OVER_TASK, REGULAR_SIGMA_MIN, REGULAR_TRIES,
-    SAMPLES, SPEED_MARGIN, TICK_SPEED_SHARE, TORQUE_SHARE)
+    CARRIED_SPEED_SHARE, CARRY_STEP, DAMPING_RATIO, Design,
+    ESTIMATED_ARMATURE_ACCELERATION_RAD_S2, FRICTION_LEARNING_TIME_S, GRAVITY_RESERVE_SHARE,
+    GUIDE_OVER_TASK, LIMIT_OVER_TASK, REGULAR_SIGMA_MIN, REGULAR_TRIES, SAMPLES, SPEED_MARGIN,
+    TICK_SPEED_SHARE, TORQUE_SHARE)
 from quat_jt_controller.model import RobotModel
 from quat_jt_runtime.param_table import Kind, names, row, yaml_lines, yaml_value
 
@@ -194,6 +195,9 @@ def to_yaml(d: Design, potential: str = 'tanh', command: str = '',
         'friction_compensation': 'N m, the Coulomb estimates (0 = off)',
         'friction_learning_limit': 'N m, the most learned at rest on top (0 = none)',
         'friction_learning_time': 's, to learn it while stuck; it leaks as fast near the goal',
+        'armature_estimation_limit': ('kg m^2, the most rotor inertia found from the motion '
+                                      'beyond the armature: what the effort limit accelerates '
+                                      f'at {ESTIMATED_ARMATURE_ACCELERATION_RAD_S2:g} rad/s^2'),
         'friction_velocity': 'rad/s, v_eps of f tanh(qdot / v_eps)',
         'friction_error_band': '||e|| where the compensation fades out',
         'friction_position_band': 'm, the same for ||p_d - p||',

@@ -124,12 +124,15 @@ class RobotModel:
         model.armature[:] = 0.0
         for i, a in zip(self._idx, self.armature):  # velocity indices
             model.armature[i] = a
+        # the rotor inertia the motion showed beyond it (set_armature_estimate)
+        self.armature_estimate: tuple[float, ...] = (0.0,) * self.n
         self._identity_order = self._idx == list(range(self.n))
         # inertial_torque's gravity-free copy of the model (the armature in), its data and
         # buffers: made here, never in the tick
         free = pin.Model(model)
         free.gravity.setZero()
         self._inertial = (free, free.createData(), np.zeros(self.n), np.zeros(self.n))
+        self._velocity = np.zeros(self.n)  # ... and inertial_torque's velocity, when given
         self._identity_q = self._identity_order and not self._any_unbounded
         self._base_id = model.getFrameId(base_link, pin.BODY)
         self._tip_id = model.getFrameId(tip_link, pin.BODY)
@@ -188,6 +191,22 @@ class RobotModel:
         self.model.inertias[self._tip_joint] = body
         self._inertial[0].inertias[self._tip_joint] = body
         self.payload = payload
+
+    def set_armature_estimate(self, extra: Sequence[float]) -> None:
+        """
+        Add ``extra`` (kg m^2 or kg per joint, >= 0) to the armature told, in M(q), from now on.
+
+        The rotor inertia the motion shows beyond the armature told
+        (``armature_estimate.ArmatureEstimator``; the regulator that estimates it sets it, and
+        zeros when it starts): ``mass_matrix``, ``inertial_torque``, the inertias and the
+        dynamics have it from the next call; ``armature`` stays the one told. In place, a
+        write per joint: cheap enough for the tick, which alone calls it with checked values.
+        """
+        armature, free = self.model.armature, self._inertial[0].armature
+        for i, told, e in zip(self._idx, self.armature, extra):
+            armature[i] = told + e
+            free[i] = told + e
+        self.armature_estimate = tuple(extra)
 
     @property
     def payload_kg(self) -> float:
@@ -356,12 +375,15 @@ class RobotModel:
         M = np.triu(M) + np.triu(M, 1).T
         return M[np.ix_(self._idx, self._idx)]
 
-    def inertial_torque(self, q: Sequence[float], qddot: Sequence[float]) -> list[float]:
+    def inertial_torque(self, q: Sequence[float], qddot: Sequence[float],
+                        qdot: Optional[Sequence[float]] = None) -> list[float]:
         """
-        Return ``M(q) qddot`` (N m per joint), the armature included, in ``joint_names`` order.
+        Return ``M(q) qddot`` (+ ``C(q, qdot) qdot`` given ``qdot``), N m, in joint order.
 
-        The torque that went into accelerating the joints at ``qddot``: the inverse dynamics
-        at zero velocity and zero gravity (Pinocchio's RNEA on the model's gravity-free copy).
+        The armature is included. The torque that went into accelerating the joints at
+        ``qddot``: the inverse dynamics at zero velocity and zero gravity (Pinocchio's RNEA on
+        the model's gravity-free copy). With ``qdot``, at that velocity, so the Coriolis and
+        centrifugal torques the moving links take are in too (the same one RNEA).
         """
         model, data, zero, a = self._inertial
         if self._identity_order:
@@ -369,7 +391,15 @@ class RobotModel:
         else:
             for i, v in zip(self._idx, qddot):
                 a[i] = v
-        tau = pin.rnea(model, data, self._set_q(q), zero, a)
+        v = zero
+        if qdot is not None:
+            v = self._velocity
+            if self._identity_order:
+                v[:] = qdot
+            else:
+                for i, w in zip(self._idx, qdot):
+                    v[i] = w
+        tau = pin.rnea(model, data, self._set_q(q), v, a)
         return tau.tolist() if self._identity_order else [float(tau[i]) for i in self._idx]
 
     def own_inertias(self, q: Sequence[float]) -> list[float]:

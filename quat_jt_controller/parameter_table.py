@@ -243,6 +243,14 @@ SHAPING = (
               'kHz with 3 ticks of delay it goes unstable near 450/s, at 100 Hz near 45/s); '
               'design_gains checks the value it writes at the rate designed for'),
          field='settling_damping_rate_per_s'),
+    Spec('armature_estimation_limit', Kind.DOUBLE_ARRAY, joint_zeros,
+         'The most rotor inertia (kg m^2, kg for a prismatic joint) the controller may find '
+         'beyond the armature told, one per joint ({n}): while the arm moves, the torque that '
+         'accelerates each joint beyond what M(q) accounts for is fitted, and a fit known to '
+         '20% is added to the diagonal of M(q) wherever the damping, the speed guard and the '
+         'friction learning use it (the potential and g(q) hold no inertia). /diagnostics '
+         'reports it as armature_estimate. Zeros = off. Live.',
+         default_text=JOINT_ZEROS_TEXT, field='armature_estimation_limit_kg_m2', **PER_JOINT),
     Spec('goal_velocity_gain', Kind.DOUBLE, 0.0,
          'g_v in [0, 1]: for a stream of stamped goals on ~/target_pose, the joint damping '
          'acts on qdot - g_v qdot*_d, qdot*_d the velocity of the goal configuration (the '

@@ -41,15 +41,19 @@ class ClosedLoop:
     (:meth:`run`) gives it no effort limits, the sampled loop (:func:`run_sampled`) the URDF's.
     ``coulomb_nm`` adds plant friction ``-f tanh(qdot / coulomb_velocity_rad_s)`` to the ideal
     loop (the sampled loop takes its friction from the simulator). ``shaping`` turns on the
-    extensions, ``q_star`` gives the goal configuration to their joint-space term.
+    extensions, ``q_star`` gives the goal configuration to their joint-space term. ``plant``
+    is the ideal loop's robot, the model by default: its dynamics are integrated and its
+    ``M(q)`` is in ``V`` (a plant that is not the model the law reads).
     """
 
     def __init__(self, model: RobotModel, gains: cl.Gains, task: cl.Task,
                  q_desired: Sequence[float], p_desired: Optional[Sequence[float]] = None,
                  coulomb_nm: Optional[Sequence[float]] = None,
                  coulomb_velocity_rad_s: float = 0.01, shaping: Optional[Shaping] = None,
-                 q_star: Optional[Sequence[float]] = None):
+                 q_star: Optional[Sequence[float]] = None,
+                 plant: Optional[RobotModel] = None):
         self.model, self.gains, self.task = model, gains, cl.Task(task)
+        self.plant = model if plant is None else plant
         goal = Goal(tuple(q_desired), tuple(p_desired) if p_desired is not None
                     else (0.0, 0.0, 0.0))
         self.goal = goal
@@ -82,8 +86,12 @@ class ClosedLoop:
         return self.regulator.update(q, qdot).tau_nm
 
     def lyapunov(self, q: np.ndarray, qdot: np.ndarray) -> float:
-        """V = 1/2 qdot^T M(q) qdot + U_a(y_tilde(q)) + U_lim(q), Eq. (27) / (34)."""
-        return self.regulator.lyapunov(q, qdot)
+        """V = 1/2 qdot^T M(q) qdot + U_a(y_tilde(q)) + U_lim(q), Eq. (27)/(34), M the plant's."""
+        if self.plant is self.model:
+            return self.regulator.lyapunov(q, qdot)
+        v = np.asarray(qdot, float)
+        return (0.5 * float(v @ self.plant.mass_matrix(list(q)) @ v)
+                + self.regulator.potential_energy(q))
 
     def _f(self, x: np.ndarray) -> np.ndarray:
         n = self.model.n
@@ -91,7 +99,7 @@ class ClosedLoop:
         tau = self.torque(q, qdot)
         if self.coulomb_nm is not None:
             tau = [t + f for t, f in zip(tau, self.plant_friction(qdot))]
-        qddot = self.model.forward_dynamics(q, qdot, tau)
+        qddot = self.plant.forward_dynamics(q, qdot, tau)
         return np.concatenate((qdot, qddot))
 
     def run(self, q0: Sequence[float], duration_s: float, dt_s: float = 1e-3,

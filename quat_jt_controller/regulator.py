@@ -33,6 +33,7 @@ from typing import NamedTuple, Optional, Sequence
 from quat_jt_controller import control_law as cl
 from quat_jt_controller import quaternion as quat
 from quat_jt_controller import shaping as sh
+from quat_jt_controller.armature_estimate import ArmatureEstimator
 from quat_jt_controller.model import ModelError, RobotModel
 from quat_jt_runtime.payload import Payload
 
@@ -307,6 +308,13 @@ class Regulator:
         self._qdot_slow = [0.0] * self.n
         self._qddot = [0.0] * self.n
         self._accel_seeded = False  # the filter starts at the first tracked qdot
+        # the rotor inertia the motion shows beyond the armature told (armature_estimate.py),
+        # and the last tick's torque beyond gravity, which the plant got (N m; None: none yet)
+        self._armature = ArmatureEstimator(self.n)
+        self._net_nm: Optional[list[float]] = None
+        if any(model.armature_estimate):  # a new regulator starts from the model told
+            model.set_armature_estimate(self._zero)
+        self._armature_in_model = False  # this regulator put an estimate in the model
         # the limit band ending at q* (LimitBand.ending_at), cached for (band, q*): derived
         self._band_at_goal: tuple = (None, None, None)
 
@@ -403,7 +411,32 @@ class Regulator:
                                      zip(self._learned_friction_nm, limits)]
         self._held = [h if a_max > 0.0 else 0.0 for h, a_max in zip(self._held, limits)]
         self._accel_seeded = False  # the filter may have stood still while the learning was off
+        self._armature.restart()  # ... and the estimate's filters with it
+        self._keep_armature_estimate(shaping.armature_estimation_limit_kg_m2 or self._zero)
         self._law = self._law._replace(shaping=shaping, band=band)
+
+    def _keep_armature_estimate(self, limits: Sequence[float]) -> None:
+        """Keep the rotor inertia estimated within ``limits`` (forgotten if all are 0)."""
+        est = self._armature
+        if not any(a > 0.0 for a in limits):
+            est.reset()
+            self._net_nm = None
+        else:
+            est.estimate = [min(e, top) for e, top in zip(est.estimate, limits)]
+        # only the regulator that put an estimate in the model changes it (ClosedLoop's two
+        # share one model)
+        if self._armature_in_model and tuple(est.estimate) != self.model.armature_estimate:
+            self.model.set_armature_estimate(est.estimate)
+
+    @property
+    def armature_estimate(self) -> tuple[float, ...]:
+        """
+        Return the rotor inertia found beyond the armature told (kg m^2 per joint), in M(q).
+
+        Zeros until the motion shows some, or with ``armature_estimation_limit`` zero
+        (``armature_estimate.ArmatureEstimator``).
+        """
+        return tuple(self._armature.estimate)
 
     @property
     def friction_held(self) -> tuple[float, ...]:
@@ -563,7 +596,8 @@ class Regulator:
         band = self._band_at(band, q_star)
         qdot_goal = self._goal_joint_velocity
         step = dt_s if dt_s < MAX_LEARNING_STEP_S else MAX_LEARNING_STEP_S  # what counts
-        if dt_s > 0.0 and shaping.learning_on:  # the learning's acceleration estimate
+        estimating = dt_s > 0.0 and shaping.armature_estimation_on
+        if dt_s > 0.0 and (shaping.learning_on or estimating):  # the acceleration estimate
             self._track_acceleration(qdot, dt_s)
             kept = self._tick_s * TICK_MEMORY  # ... and the period its fade tops assume
             self._tick_s = step if step > kept else kept
@@ -664,6 +698,7 @@ class Regulator:
                     tau[j] += fc[j]
         if guarded is not None:
             _cancel_push(minv, tau, guarded)
+        g = None
         if gains.gravity_compensation:
             g = self.model.gravity(q)
             for j in range(n):
@@ -672,13 +707,63 @@ class Regulator:
         for t in tau:
             total += t
         if total - total != 0.0:  # NaN or Inf somewhere (inf - inf is NaN)
+            if estimating:  # the plant gets no torque of ours
+                self.torque_withheld()
             return TickOutput(list(self._zero), y, eta_e, p, R, False, False, tuple(self._zero),
                               self.task)
         if shaping.learning_on and dt_s > 0.0:  # only from a finite tick: never poisoned
             sh.learn_friction(self._learned_friction_nm, self._stuck, phi, shaping, step,
                               self._unmet, self._held)
         saturated = cl.saturate(tau, self.effort_limits_nm)
+        if estimating:
+            self._estimate_armature(q, qdot, tau, g, dt_s, shaping, own)
         return TickOutput(tau, y, eta_e, p, R, saturated, True, tuple(tau_p), self.task)
+
+    def _estimate_armature(self, q: Sequence[float], qdot: Sequence[float], tau: list[float],
+                           g: Optional[list[float]], dt_s: float, shaping: sh.Shaping,
+                           own: Optional[list[float]]) -> None:
+        """
+        Advance the rotor inertia estimate by a tick; put a new one in M(q) (armature_estimate).
+
+        The torque of the last tick beyond gravity is what the plant got while it moved to
+        this ``qdot`` (the filtered acceleration tracked this tick, over ``dt_s``); this
+        tick's ``tau`` (clamped) less ``g`` is kept for the next. After a gap longer than
+        ``MAX_LEARNING_STEP_S`` the filters start again. The Coriolis torques are taken at the
+        low-passed ``qdot``, as the torque is low-passed.
+        """
+        est = self._armature
+        if dt_s > MAX_LEARNING_STEP_S:  # states lost: the acceleration filter jumps
+            self.torque_withheld()
+        net = self._net_nm
+        if net is not None and est.track(net, qdot, shaping.friction_velocity_rad_s, dt_s):
+            model = self.model
+            slow = self._qdot_slow
+            est.sample(self._qddot, model.inertial_torque(q, self._qddot, slow),
+                       model.armature_estimate, slow, shaping.friction_velocity_rad_s)
+            if est.solve_due:
+                if own is None:
+                    own = model.own_inertias(q)
+                if est.solve(own, shaping.armature_estimation_limit_kg_m2):
+                    model.set_armature_estimate(est.estimate)
+                    self._armature_in_model = True
+        if net is None:
+            net = self._net_nm = list(tau)
+        if g is None:
+            net[:] = tau
+        else:
+            for j, t in enumerate(tau):
+                net[j] = t - g[j]
+
+    def torque_withheld(self) -> None:
+        """
+        Say that the last tick's torque does not reach the plant (a command not published).
+
+        The rotor inertia estimate reads the last torque as what the plant got: its filters
+        start again (its fits and its value are kept) and take no sample for their warm-up
+        (``armature_estimate.WARM_UP_S``). Nothing else reads it.
+        """
+        self._armature.restart()
+        self._net_nm = None
 
     def _track_acceleration(self, qdot: Sequence[float], dt_s: float) -> None:
         """

@@ -147,6 +147,9 @@ class Shaping:
     inertial_damping_rate_per_s: float = _default('inertial_damping_rate')
     # alpha (1/s): -psi alpha M(q) qdot near the goal (docs/lyapunov.md, section 11; 0 = off)
     settling_damping_rate_per_s: float = _default('settling_damping_rate')
+    # per joint, the most rotor inertia beyond the armature told that the regulator may add to
+    # M(q) from the motion (kg m^2; armature_estimate.py; 0 = not estimated)
+    armature_estimation_limit_kg_m2: tuple[float, ...] = ()
     # g_v: the joint damping acts on qdot - g_v qdot*_d of a streamed goal; 0 = off
     goal_velocity_gain: float = _default('goal_velocity_gain')
     # a_max per joint, N m: the most the friction estimate may learn at rest (0 = no learning)
@@ -193,6 +196,11 @@ class Shaping:
     def learning_on(self) -> bool:
         """Return True if some joint may learn a part of its friction estimate at rest."""
         return any(a > 0.0 for a in self.friction_learning_limit_nm)
+
+    @cached_property  # read every tick: computed once per snapshot
+    def armature_estimation_on(self) -> bool:
+        """Return True if some joint's rotor inertia is estimated from the motion."""
+        return any(a > 0.0 for a in self.armature_estimation_limit_kg_m2)
 
     @cached_property  # read every tick: computed once per snapshot
     def friction_table(self) -> tuple[tuple[float, float, float], ...]:
@@ -669,6 +677,9 @@ def describe(shaping: Shaping) -> str:
     if shaping.settling_damping_rate_per_s > 0.0:
         parts.append(f'settling damping {shaping.settling_damping_rate_per_s:g} M(q) qdot near '
                      f'the goal')
+    if shaping.armature_estimation_on:
+        parts.append(f'rotor inertia found from the motion, up to '
+                     f'{list(shaping.armature_estimation_limit_kg_m2)} kg m^2, in M(q)')
     if shaping.goal_velocity_gain > 0.0:
         parts.append(f'damping towards a streamed goal velocity, gain '
                      f'{shaping.goal_velocity_gain:g}')

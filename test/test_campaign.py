@@ -212,7 +212,8 @@ def _small_arm(tmp_path) -> tuple:
 
 
 @pytest.mark.e2e
-@pytest.mark.parametrize('name', ['armature-wrong', 'no-velocities', 'encoder'])
+@pytest.mark.parametrize('name', ['armature-wrong', 'no-velocities', 'encoder',
+                                  'armature-untold-friction'])
 def test_an_arm_from_its_urdf_runs_the_same_serial_or_parallel(tmp_path, name):
     """The design from the URDF, a MuJoCo plant with the condition's rotor inertia or states."""
     path, robot = _small_arm(tmp_path)
@@ -224,6 +225,20 @@ def test_an_arm_from_its_urdf_runs_the_same_serial_or_parallel(tmp_path, name):
         assert np.isfinite(a.q_final).all() and a.speed_ratio >= 0.0
     row = rx.table_row(robot, cond, runs[0])
     assert row.startswith(f'| small | {cond.describe()} | ') and '/2 |' in row
+
+
+@pytest.mark.unit
+def test_the_untold_rotor_inertia_conditions_tell_the_design_none():
+    """The plant's rotor inertia (and friction) as a real geared arm has them; the design 0."""
+    untold = rx.condition('armature-untold', armature=0.2)
+    both = rx.condition('armature-untold-friction', armature=0.2, friction_fraction=0.02)
+    assert (untold.plant_armature, untold.told_armature, untold.coulomb_effort_fraction) == (
+        0.2, 0.0, 0.0)
+    assert (both.plant_armature, both.told_armature, both.coulomb_effort_fraction) == (
+        0.2, 0.0, 0.02)
+    assert untold.describe() == 'rotor inertia 0.2 kg m^2, untold'
+    assert both.describe() == ('rotor inertia 0.2 kg m^2 and Coulomb friction 0.02 x effort, '
+                               'both untold')
 
 
 @pytest.mark.e2e
