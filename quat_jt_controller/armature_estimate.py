@@ -68,8 +68,9 @@ class ArmatureEstimator:
     """
     Per joint, the rotor inertia beyond the model's that the motion shows (kg m^2 or kg).
 
-    :meth:`track` every tick, :meth:`due` says when to :meth:`sample`, then :meth:`solve`.
-    ``estimate`` is the value in force; it starts at 0 and :meth:`reset` returns it there.
+    :meth:`track` every tick (True when a sample is due: :meth:`sample`), :meth:`solve` when
+    :attr:`solve_due`. ``estimate`` is the value in force; it starts at 0 and :meth:`reset`
+    returns it there; :meth:`restart` starts the filters again.
     """
 
     def __init__(self, n_joints: int) -> None:
