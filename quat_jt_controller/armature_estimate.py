@@ -75,20 +75,20 @@ class ArmatureEstimator:
 
     def __init__(self, n_joints: int) -> None:
         self.n = n_joints
-        self.estimate = [0.0] * n_joints
         self._net = [0.0] * n_joints  # low-passed u_j = tau_j - g_j(q), N m
         self._sign = [0.0] * n_joints  # low-passed tanh(qdot_j / v_eps)
-        self._sums = [[0.0] * _SUMS for _ in range(n_joints)]
-        self._seeded = False
         self._warm_s = 0.0
         self._ticks = 0
         self._since_sample_s = 0.0
         self._interval_s = 0.0  # the time between the last two samples
-        self._since_solve_s = 0.0
+        self.reset()
 
     def reset(self) -> None:
-        """Forget the fits and the estimate."""
-        self.__init__(self.n)
+        """Forget the fits and the estimate; the filters start again."""
+        self.estimate = [0.0] * self.n
+        self._sums = [[0.0] * _SUMS for _ in range(self.n)]
+        self._since_solve_s = 0.0
+        self._seeded = False
 
     def restart(self) -> None:
         """Start the filters again, as the acceleration filter does; the fits are kept."""
@@ -105,8 +105,8 @@ class ArmatureEstimator:
         net, sign = self._net, self._sign
         self._since_sample_s += dt_s
         if not self._seeded:  # as the acceleration filter: nothing before this tick
-            net[:] = [0.0] * self.n
             for j, v in enumerate(qdot):
+                net[j] = 0.0
                 sign[j] = tanh(v / v_eps)
             self._seeded = True
             self._warm_s = 0.0

@@ -515,7 +515,7 @@ class Controller:
         settled: within ``ARMATURE_SETTLED_SHARE`` of what it was ``ARMATURE_SETTLED_NS``
         before. The gains were sized for a joint that light. One M(q) when one is to be said.
         """
-        found = self.regulator.armature_estimate
+        found = self.regulator.armature_estimate  # a copy: read once
         q = self.last_q
         if q is None or not any(e > 0.0 for e in found):
             return NO_LOGS
@@ -529,14 +529,15 @@ class Controller:
                    and j not in self._armature_said]
         if not settled:
             return NO_LOGS
-        model = self.regulator.model
+        regulator = self.regulator
+        model = regulator.model
         own = model.own_inertias(q)
         heavy = [(j, found[j], own[j] - found[j]) for j in settled
                  if found[j] > own[j] - found[j]]
         if not heavy:
             return NO_LOGS
         self._armature_said.update(j for j, _, _ in heavy)
-        limits = self.regulator.shaping.armature_estimation_limit_kg_m2
+        limits = regulator.shaping.armature_estimation_limit_kg_m2
         joints = ', '.join(f'{model.joint_names[j]} {e:.3g} kg m^2 (its model {m:.3g}'
                            + ('; at its limit, armature_estimation_limit' if e >= limits[j]
                               else '') + ')' for j, e, m in heavy)
