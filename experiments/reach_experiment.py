@@ -93,6 +93,7 @@ from quat_jt_controller.goal_check import heavy_warning
 from quat_jt_controller.inverse_kinematics import goal_configuration, sampling_box
 from quat_jt_controller.model import GRAVITY_RESERVE_SHARE, RobotModel
 from quat_jt_controller.reference_sim import ClosedLoop, run_sampled, SampledRun
+from quat_jt_controller.regulator import Goal
 from quat_jt_controller.stall import identify_payload, StallDetector
 from quat_jt_runtime.param_table import names
 from quat_jt_runtime.payload import with_payload
@@ -104,6 +105,9 @@ LIMIT_CYCLE_FLIPS_PER_S = 1.0  # more sign changes of tau - g(q) in the last sec
 FLIP_FLOOR = 1e-3  # of the effort limit: smaller torques have no sign (numerical dither)
 FINAL_WINDOW_S = 0.1
 Q_STAR_AFTER_S = 0.1  # the goal-check worker's answer arrives after the goal (10-50 ms)
+# A design again (redesign.py) is in force this long after it is due: the node's worker starts
+# a Python with Pinocchio and designs (the time measured in docs/benchmark.md is less)
+REDESIGN_AFTER_S = 2.0
 DDS_GOAL_AFTER_S = 2.0  # over DDS, the goal is sent this long after the start (simulated time)
 
 
@@ -235,6 +239,54 @@ class Outcome:
     identified_kg: float = math.nan  # the payload set at rest by the identification (nan: none)
     # the rotor inertia found beyond the armature told, per joint, at the end (kg m^2)
     armature_estimate: tuple = ()
+    # (time s, the armature designed with) of each design again in force, or its error text
+    redesigns: tuple = ()
+    warm_touched: bool = False  # a stop touched in the warm-up (run_case's warm_up_s)
+    warm_speed_ratio: float = 0.0  # ... and its max |qdot_j| / velocity limit_j
+
+
+class Redesigns:
+    """
+    The gains designed again as the node does (``redesign.py``), on a case's simulated time.
+
+    :meth:`step` after each tick: when ``InertiaWatch`` says a design is due, it is made at
+    once (``redesign.redesign`` on the parameters in force) and put in force
+    ``REDESIGN_AFTER_S`` later, on both of the loop's regulators, through
+    ``controller_from_config`` (the parameters checked as the node checks them).
+    """
+
+    def __init__(self, loop: ClosedLoop, urdf_xml: str, values: dict) -> None:
+        from quat_jt_controller.redesign import InertiaWatch
+        self.loop, self.urdf_xml, self.values = loop, urdf_xml, dict(values)
+        self.watch = InertiaWatch(loop.model.armature)
+        self.pending: Optional[tuple] = None  # (in force at s, armature, regulator)
+        self.applied: list = []
+
+    def step(self, t_s: float, q: list) -> None:
+        """Look at the estimate, as the node's timer does; put a design in force when due."""
+        from quat_jt_controller.redesign import redesign
+        if self.pending is not None and t_s >= self.pending[0]:
+            _, armature, made = self.pending
+            self.pending = None
+            for regulator in (self.loop.clamped, self.loop.regulator):
+                regulator.set_gains(made.gains)
+                regulator.set_shaping(made.shaping)
+            self.applied.append((round(t_s, 3), armature))
+        found = self.loop.clamped.armature_estimate
+        settled = self.watch.settled(t_s, found)
+        if not settled or self.pending is not None:
+            return
+        armature = self.watch.due(found, self.loop.model.own_inertias(q), settled)
+        if armature is None:
+            return
+        self.watch.designed_with(armature)
+        try:
+            self.values.update(redesign(self.urdf_xml, self.values, armature))
+            made = controller_from_config(self.values, self.urdf_xml)
+        except ValueError as exc:
+            self.applied.append((round(t_s, 3), f'{type(exc).__name__}: {exc}'))
+            return
+        self.pending = (t_s + REDESIGN_AFTER_S, armature, made)
 
 
 class PositionsOnly:
@@ -302,7 +354,9 @@ def run_case(robot: Robot, model: RobotModel, gains: cl.Gains, shaping: sh.Shapi
              delay_ticks: int = 1, q_star_after_s: float = Q_STAR_AFTER_S,
              engine: str = 'pybullet', sim_armature=None, no_velocities: bool = False,
              dt_s: float = 1e-3, encoder_bits: int = 0, encoder_told: bool = True,
-             sim_payload_kg: float = 0.0, identify_at_s: float = 0.0) -> Outcome:
+             sim_payload_kg: float = 0.0, identify_at_s: float = 0.0,
+             design_values: Optional[dict] = None, warm_up_s: float = 0.0,
+             q_warm_goal: Optional[np.ndarray] = None) -> Outcome:
     """
     Run one case on the simulator core (``engine``); classify it.
 
@@ -314,18 +368,27 @@ def run_case(robot: Robot, model: RobotModel, gains: cl.Gains, shaping: sh.Shapi
     may differ). With ``identify_at_s`` > 0, at that time the payload is identified from the
     plant's state and the last torque (``stall.identify_payload``, what the node's
     ``~/identify_payload`` does) and, if one is, set on the controller's model; the run goes
-    on from there.
+    on from there. ``design_values`` are the controller's parameters (the design's, by ROS
+    name): with them and ``gain_redesign``, the gains are designed again as the node does
+    (:class:`Redesigns`). With ``warm_up_s`` > 0 the arm works before the case: from ``q0``
+    towards ``q_warm_goal``'s pose for that long, then the case's goal from where it is (the
+    case's start, in the outcome), its estimates, learned friction and gains kept.
     """
     from wrist_sim.simulator import RobotSimulator
 
-    p_d, R_d = model.forward_kinematics(qg.tolist())
-    q_d = quat.from_rotation_matrix(R_d)
-    q_star = (goal_configuration(model, q0, q_d, p_d, robot.task,
-                                 shaping.joint_limit_margin_rad,
-                                 q_preferred=shaping.preferred_configuration_rad or None,
-                                 posture_weight=shaping.posture_weight)
-              if shaping.configuration_on else None)
-    loop = ClosedLoop(model, gains, robot.task, q_d, p_d, shaping=shaping)
+    def target(q_goal: np.ndarray) -> tuple:  # the goal's pose
+        p, R = model.forward_kinematics(q_goal.tolist())
+        return quat.from_rotation_matrix(R), p
+
+    def configuration(q_from: np.ndarray, goal: tuple) -> Optional[np.ndarray]:
+        return (goal_configuration(model, q_from, goal[0], goal[1], robot.task,
+                                   shaping.joint_limit_margin_rad,
+                                   q_preferred=shaping.preferred_configuration_rad or None,
+                                   posture_weight=shaping.posture_weight)
+                if shaping.configuration_on else None)
+    q_d, p_d = target(qg)
+    first_goal = target(q_warm_goal) if warm_up_s > 0.0 else (q_d, p_d)
+    loop = ClosedLoop(model, gains, robot.task, *first_goal, shaping=shaping)
     with quiet():
         sim = RobotSimulator(with_payload(robot_urdf(robot), model.tip_link, sim_payload_kg,
                                           PAYLOAD_COM_TIP_M),
@@ -338,19 +401,37 @@ def run_case(robot: Robot, model: RobotModel, gains: cl.Gains, shaping: sh.Shapi
     plant = (PositionsOnly(sim, encoder_resolution_rad(encoder_bits), encoder_told)
              if no_velocities else sim)
     identified_kg = math.nan
+    warm = None
+    redesigns = (Redesigns(loop, robot_urdf(robot), design_values)
+                 if design_values is not None and shaping.gain_redesign else None)
+
+    def from_s(start_s: float):  # the design's look on the case's time
+        return None if redesigns is None else (
+            lambda t, q: redesigns.step(start_s + t, q))
     try:
+        if warm_up_s > 0.0:  # the arm at work before the case: to the warm-up goal
+            warm = run_sampled(loop, plant, warm_up_s, delay_ticks,
+                               configuration(q0, first_goal), q_star_after_s, from_s(0.0))
+            q0 = sim.q_rad.copy()  # the case starts where the warm-up left the arm
+            goal = Goal(tuple(q_d), tuple(p_d))
+            loop.goal = goal
+            for regulator in (loop.regulator, loop.clamped):
+                regulator.set_goal(goal)
+        q_star = configuration(q0, (q_d, p_d))
         total_s = robot.duration_s + robot.hold_s
         if identify_at_s > 0.0:
-            first = run_sampled(loop, plant, identify_at_s, delay_ticks, q_star, q_star_after_s)
+            first = run_sampled(loop, plant, identify_at_s, delay_ticks, q_star, q_star_after_s,
+                                from_s(warm_up_s))
             payload, _ = identify_payload(loop.clamped, sim.q_rad.tolist(),
                                           sim.qdot_rad_s.tolist(), first.tau_nm[-1].tolist())
             if payload is not None and payload != model.payload:  # not just kept
                 loop.clamped.set_payload(payload)  # the model the loop's regulators share
                 identified_kg = payload.mass_kg
-            held = _joined(first, run_sampled(loop, plant, total_s - identify_at_s,
-                                              delay_ticks, q_star, 0.0))
+            held = _joined(first, run_sampled(loop, plant, total_s - identify_at_s, delay_ticks,
+                                              q_star, 0.0, from_s(warm_up_s + identify_at_s)))
         else:
-            held = run_sampled(loop, plant, total_s, delay_ticks, q_star, q_star_after_s)
+            held = run_sampled(loop, plant, total_s, delay_ticks, q_star, q_star_after_s,
+                               from_s(warm_up_s))
     finally:
         sim.close()
     run = held.until(robot.duration_s)
@@ -358,12 +439,16 @@ def run_case(robot: Robot, model: RobotModel, gains: cl.Gains, shaping: sh.Shapi
     gap = float(np.minimum(held.q_rad - lower, upper - held.q_rad).min())
     position, orientation = run.final(FINAL_WINDOW_S)
     reached = (run.all_finite and orientation < robot.orientation_tol
-               and position < robot.position_tol_m)
+               and position < robot.position_tol_m and (warm is None or warm.all_finite))
     dt_s = run.t_s[1] - run.t_s[0]
     qdot = np.abs(np.diff(held.q_rad, axis=0)) / dt_s
     speed = float(qdot.max())
     limits = np.array([v if math.isfinite(v) and v > 0.0 else math.inf
                        for v in model.velocity_limits])
+    warmed = (False, 0.0)  # the warm-up's stops and speeds, said apart (the case's are the same)
+    if warm is not None:
+        warmed = (float(np.minimum(warm.q_rad - lower, upper - warm.q_rad).min()) < TOUCH_RAD,
+                  float((np.abs(np.diff(warm.q_rad, axis=0)) / dt_s / limits).max()))
     settle_tol = (robot.position_tol_m if math.isfinite(robot.position_tol_m) else math.inf)
     settled_s = run.settled_at_s(settle_tol, robot.orientation_tol)
     last = held.q_rad[int(np.searchsorted(held.t_s, held.t_s[-1] - 1.0)):]
@@ -378,7 +463,9 @@ def run_case(robot: Robot, model: RobotModel, gains: cl.Gains, shaping: sh.Shapi
                       travel_s=(math.nan if q_star is None else
                                 float((np.abs(np.asarray(q_star) - q0) / limits).max())),
                       ripple=torque_ripple(model, rest), identified_kg=identified_kg,
-                      armature_estimate=loop.clamped.armature_estimate)
+                      armature_estimate=loop.clamped.armature_estimate,
+                      redesigns=() if redesigns is None else tuple(redesigns.applied),
+                      warm_touched=warmed[0], warm_speed_ratio=warmed[1])
     if not reached:
         outcome.cause = classify(model, loop, shaping, q_star, run)
     if outcome.flips_per_s > LIMIT_CYCLE_FLIPS_PER_S:
@@ -535,6 +622,19 @@ def report(robot: Robot, potential: str, outcomes: list, elapsed_s: float,
                      f'{len(found)} cases: per joint median '
                      f'{np.round(np.median(found, axis=0), 4).tolist()}, max '
                      f'{np.round(found.max(axis=0), 4).tolist()} kg m^2')
+    if any(o.warm_speed_ratio > 0.0 for o in outcomes):
+        lines.append(f'  in the warm-ups before the cases: stops touched in '
+                     f'{sum(o.warm_touched for o in outcomes)} cases, velocity limit exceeded '
+                     f'in {sum(o.warm_speed_ratio > 1.0 for o in outcomes)} (max '
+                     f'{max(o.warm_speed_ratio for o in outcomes):.2f})')
+    designed = [o.redesigns for o in outcomes if o.redesigns]
+    if designed:
+        times = [t for r in designed for t, a in r if not isinstance(a, str)]
+        failed = [a for r in designed for _, a in r if isinstance(a, str)]
+        lines.append(f'  gains designed again for the rotor inertia found in {len(designed)} '
+                     f'cases ({len(times)} designs, in force from '
+                     + (f'{min(times):.2f} to {max(times):.2f} s' if times else '-')
+                     + (f'; {len(failed)} failed, e.g. {failed[0]}' if failed else '') + ')')
     for o in outcomes:
         if (not o.reached or o.touched or o.flips_per_s > LIMIT_CYCLE_FLIPS_PER_S
                 or o.speed_ratio > 1.0):
@@ -595,6 +695,13 @@ class Plant:
                 friction_learning_limit_nm=tuple(r * e for r, e in zip(ratio, estimate)))
         return sim_params, shaping
 
+    def parameters(self, shaping: sh.Shaping) -> dict:
+        """Return the controller parameters :meth:`apply` changed, by ROS name."""
+        if self.estimate_of_sim is None:
+            return {}
+        return {'friction_compensation': list(shaping.friction_compensation_nm),
+                'friction_learning_limit': list(shaping.friction_learning_limit_nm)}
+
 
 @dataclass(frozen=True)
 class CaseJob:
@@ -618,6 +725,9 @@ class CaseJob:
     encoder_told: bool = True
     sim_payload_kg: float = 0.0  # at the tip, PAYLOAD_COM_TIP_M in its frame
     identify_at_s: float = 0.0  # > 0: the payload identified at rest then (run_case)
+    design_values: Optional[dict] = None  # the parameters a design again reads (run_case)
+    warm_up_s: float = 0.0  # > 0: the arm works this long first, towards q_warm_goal's pose
+    q_warm_goal: Optional[np.ndarray] = None
 
 
 @functools.lru_cache(maxsize=8)
@@ -641,7 +751,8 @@ def run_job(job: CaseJob) -> Outcome:
                     sim_armature=job.sim_armature, no_velocities=job.no_velocities,
                     dt_s=job.dt_s, encoder_bits=job.encoder_bits,
                     encoder_told=job.encoder_told, sim_payload_kg=job.sim_payload_kg,
-                    identify_at_s=job.identify_at_s)
+                    identify_at_s=job.identify_at_s, design_values=job.design_values,
+                    warm_up_s=job.warm_up_s, q_warm_goal=job.q_warm_goal)
 
 
 def run_jobs(jobs: list, label: str, progress=print, workers: Optional[int] = None,
@@ -671,7 +782,13 @@ def run_robot(robot: Robot, potential: str, count: int, seed: int, delay_ticks: 
         shaping = dataclasses.replace(shaping, **ABLATIONS[without])
     sim_params, shaping = plant.apply(model, config_parameters(robot.sim_config), shaping)
     spec = model_spec(model, robot_urdf(robot))
-    jobs = [CaseJob(robot, spec, gains, shaping, sim_params, i, q0, qg, delay_ticks)
+    # a design again reads the file's parameters, as the node would (not with an ablation,
+    # which it would undo)
+    values = (None if without else {**config_parameters(robot.controller_config),
+                                    'potential': potential, **(overrides or {}),
+                                    **plant.parameters(shaping)})
+    jobs = [CaseJob(robot, spec, gains, shaping, sim_params, i, q0, qg, delay_ticks,
+                    design_values=values)
             for i, (q0, qg) in enumerate(cases(model, robot, count, seed))]
     return run_jobs(jobs, f'{robot.name} {potential}', progress, workers, ray_address)
 
@@ -977,7 +1094,8 @@ def run_arm(robot: Robot, cond: Condition, potential: str, count: int, seed: int
             overrides: Optional[dict] = None,
             approach_time_s: Optional[float] = None,
             cruise_fraction: Optional[float] = None, design_delays: tuple = (1,),
-            armature_estimation: bool = True) -> list:
+            armature_estimation: bool = True, redesign: bool = True,
+            warm_up_s: float = 0.0) -> list:
     """
     Run ``count`` cases of an arm from its URDF in condition ``cond``; their outcomes.
 
@@ -986,7 +1104,10 @@ def run_arm(robot: Robot, cond: Condition, potential: str, count: int, seed: int
     hidden), with ``cond``'s rotor inertia and Coulomb friction; the control period is
     1 / ``rate_hz``. ``overrides`` replace parameters of the design, by their ROS names
     (validated as the node does; ShapingError or GainsError names a bad one);
-    ``armature_estimation`` False turns the design's rotor inertia estimate off (an ablation).
+    ``armature_estimation`` False turns the design's rotor inertia estimate off (an ablation),
+    ``redesign`` False its design again for the rotor inertia found (``gain_redesign``).
+    With ``warm_up_s`` > 0 each case starts after that long towards the previous case's goal
+    (the last case's for the first; ``run_case``).
     ``friction_effort_share``, ``approach_time_s``, ``cruise_fraction`` and ``design_delays``
     (its ``--delays``) are design_gains' options (:func:`arm_design`).
     """
@@ -998,12 +1119,12 @@ def run_arm(robot: Robot, cond: Condition, potential: str, count: int, seed: int
                           plant_payload_kg if cond.payload_told else 0.0)
     n = model.n
     gains, shaping = d.gains(potential), d.shaping
-    if overrides:  # as a node would take the design's file with these values
-        overridden = controller_from_config(
-            {**d.structure(), **d.parameters(potential), **overrides}, robot_urdf(robot))
+    ablated = {**({} if armature_estimation else {'armature_estimation_limit': []}),
+               **({} if redesign else {'gain_redesign': False})}
+    values = {**d.structure(), **d.parameters(potential), **(overrides or {}), **ablated}
+    if overrides or ablated:  # as a node would take the design's file with these values
+        overridden = controller_from_config(values, robot_urdf(robot))
         gains, shaping = overridden.gains, overridden.shaping
-    if not armature_estimation:
-        shaping = dataclasses.replace(shaping, armature_estimation_limit_kg_m2=())
     sim_params = {'viscous_friction': [0.0] * n,
                   'coulomb_friction': [cond.coulomb_effort_fraction * e
                                        for e in model.effort_limits],
@@ -1014,10 +1135,12 @@ def run_arm(robot: Robot, cond: Condition, potential: str, count: int, seed: int
                    RobotModel(robot_urdf(robot), robot.base_link, robot.tip_link,
                               list(robot.joints), model.armature, plant_payload_kg,
                               PAYLOAD_COM_TIP_M))
+    pairs = cases(plant_model, robot, count, seed)
     jobs = [CaseJob(robot, spec, gains, shaping, sim_params, i, q0, qg, cond.delay_ticks, engine,
                     (cond.plant_armature,) * n, cond.no_velocities, 1.0 / rate_hz,
-                    cond.encoder_bits, cond.encoder_told, plant_payload_kg, cond.identify_at_s)
-            for i, (q0, qg) in enumerate(cases(plant_model, robot, count, seed))]
+                    cond.encoder_bits, cond.encoder_told, plant_payload_kg, cond.identify_at_s,
+                    values, warm_up_s, pairs[i - 1][1])
+            for i, (q0, qg) in enumerate(pairs)]
     return run_jobs(jobs, f'{robot.name} {cond.name}', progress, workers, ray_address)
 
 
@@ -1122,6 +1245,13 @@ def main(argv: Optional[list] = None) -> int:
     arm.add_argument('--no-armature-estimation', action='store_true',
                      help="turn the design's estimate of the rotor inertia from the motion off "
                      '(armature_estimation_limit zeros), to see what it does')
+    arm.add_argument('--warm-up', type=float, default=0.0,
+                     help='s: before each case the arm works this long, from its start towards '
+                     "the previous case's goal, then the case's goal from where it is: the "
+                     'estimates and a design again made on the way are in force (default 0)')
+    arm.add_argument('--no-redesign', action='store_true',
+                     help="turn the design's design again for the rotor inertia found off "
+                     '(gain_redesign false), to see what it does')
     arm.add_argument('--design-delays', type=int, nargs='+', default=[1],
                      help="design_gains' --delays: the ticks of delay the design checks its "
                      'sampled loop with, and one more (default: 1; --delay is the '
@@ -1225,7 +1355,8 @@ def main_arm(parser: argparse.ArgumentParser, args, overrides: dict) -> int:
                                    overrides=overrides, approach_time_s=args.approach_time,
                                    cruise_fraction=args.cruise_fraction,
                                    design_delays=tuple(args.design_delays),
-                                   armature_estimation=not args.no_armature_estimation)
+                                   armature_estimation=not args.no_armature_estimation,
+                                   redesign=not args.no_redesign, warm_up_s=args.warm_up)
             except (cl.GainsError, sh.ShapingError) as exc:
                 parser.error(f'--param: {exc}')
             shown = (dataclasses.replace(robot, duration_s=robot.duration_s + cond.identify_at_s)
@@ -1235,6 +1366,9 @@ def main_arm(parser: argparse.ArgumentParser, args, overrides: dict) -> int:
                                  if cond.payload_share else [])
                               + (['rotor inertia not estimated']
                                  if args.no_armature_estimation else [])
+                              + (['no design again'] if args.no_redesign else [])
+                              + ([f'after a warm-up of {args.warm_up:g} s'] if args.warm_up
+                                 else [])
                               + [f'{k} {v}' for k, v in overrides.items()])
             text.append(report(shown, label, outcomes, time.monotonic() - t0,
                                args.cruise_fraction or CRUISE_FRACTION))

@@ -29,7 +29,7 @@ everything the controller times (the watchdog, streams, decimation of diagnostic
 the log throttles).
 """
 from enum import IntEnum
-from typing import Any, NamedTuple, Optional, Sequence
+from typing import Any, Callable, Mapping, NamedTuple, Optional, Sequence
 
 from quat_jt_controller import diagnostics
 from quat_jt_controller import quaternion as quat
@@ -37,6 +37,7 @@ from quat_jt_controller.control_law import Gains
 from quat_jt_controller.goal_check import Posture
 from quat_jt_controller.goal_frames import GoalFrames
 from quat_jt_controller.goal_motion import GoalVelocityEstimator
+from quat_jt_controller.redesign import DESIGN_SHARE, InertiaWatch
 from quat_jt_controller.regulator import Goal, Regulator, TickOutput
 from quat_jt_controller.stall import identify_payload, StallDetector
 from quat_jt_runtime.joints import (DEFAULT_STATE_RATE_HZ, ForeignState, StaleState,
@@ -63,14 +64,9 @@ class Severity(IntEnum):
     ERROR = 40
 
 
-# The rotor inertia found is said once it has stayed within this share of itself this long
-ARMATURE_SETTLED_SHARE = 0.05
-ARMATURE_SETTLED_NS = 1_000_000_000
-
-
-def _values(told: Sequence[float], found: Sequence[float]) -> str:
+def _values(told: Sequence[float], found: Sequence[float] = ()) -> str:
     """Return the armature told plus the one found, as design_gains --armature takes it."""
-    return ' '.join(f'{a + e:.3g}' for a, e in zip(told, found))
+    return ' '.join(f'{a + e:.3g}' for a, e in zip(told, found or [0.0] * len(told)))
 
 
 class LogLine(NamedTuple):
@@ -131,13 +127,18 @@ class Controller:
     :param started_ns: when the node started (``steady_ns``), for :meth:`no_state_yet`.
     :param position_resolution: a count of each joint's position in the states (0: exact),
         for the velocity estimate of states without velocities.
+    :param designer: the design worker (``redesign.DesignWorker``: ``submit``, ``poll``,
+        ``busy``), or None: the gains are never designed again.
+    :param parameter_values: the parameters in force by ROS name, read when a design starts.
     """
 
     def __init__(self, regulator: Regulator, state_timeout_s: float,
                  publish_rate_divider: int, max_state_age_s: float = 0.0,
                  state_rate_hz: float = DEFAULT_STATE_RATE_HZ, checker: Optional[Any] = None,
                  started_ns: int = 0,
-                 position_resolution: Optional[Sequence[float]] = None) -> None:
+                 position_resolution: Optional[Sequence[float]] = None,
+                 designer: Optional[Any] = None,
+                 parameter_values: Optional[Callable[[], Mapping[str, Any]]] = None) -> None:
         self.regulator = regulator
         model = regulator.model
         self.checker = checker
@@ -173,8 +174,11 @@ class Controller:
         self._tick_ns = 0  # ... and that time (ns)
         self._said_estimating = False
         self._armature_said: set[int] = set()  # joints whose rotor inertia found was said
-        # ... and the estimate when last looked at (steady ns, kg m^2 per joint)
-        self._armature_before: tuple[int, Sequence[float]] = (started_ns, ())
+        # ... when it has settled, and when the gains are due a design again (its armature)
+        self._inertia = InertiaWatch(model.armature, started_ns * 1e-9)
+        self.designer = designer
+        self._parameter_values = parameter_values
+        self._designing: tuple[float, ...] = ()  # the armature of the design running
         self._no_state_warn_ns = started_ns + NO_STATE_WARN_NS  # the next warning, if none yet
         # what goes out
         self._decimation = 0
@@ -512,40 +516,88 @@ class Controller:
 
         The regulator's ``armature_estimate``, the rotor inertia the motion shows beyond the
         armature told, above the joint's own inertia in the model at the last state, and
-        settled: within ``ARMATURE_SETTLED_SHARE`` of what it was ``ARMATURE_SETTLED_NS``
-        before. The gains were sized for a joint that light. One M(q) when one is to be said.
+        settled (``redesign.InertiaWatch``). The gains were sized for a joint that light: with
+        ``gain_redesign`` and a designer, a design again is started when one is due (its
+        answer: :meth:`take_design`). One M(q) when one is to be said.
         """
         found = self.regulator.armature_estimate  # a copy: read once
         q = self.last_q
         if q is None or not any(e > 0.0 for e in found):
             return NO_LOGS
-        then_ns, before = self._armature_before
-        now_ns = self._steady_ns
-        if now_ns - then_ns < ARMATURE_SETTLED_NS:
-            return NO_LOGS
-        self._armature_before = (now_ns, found)
-        settled = [j for j, (e, b) in enumerate(zip(found, before))
-                   if e > 0.0 and abs(e - b) <= ARMATURE_SETTLED_SHARE * e
-                   and j not in self._armature_said]
+        settled = self._inertia.settled(self._steady_ns * 1e-9, found)
         if not settled:
             return NO_LOGS
         regulator = self.regulator
         model = regulator.model
         own = model.own_inertias(q)
+        logs = self._start_design(found, own, settled)
         heavy = [(j, found[j], own[j] - found[j]) for j in settled
-                 if found[j] > own[j] - found[j]]
+                 if found[j] > own[j] - found[j] and j not in self._armature_said]
         if not heavy:
-            return NO_LOGS
+            return logs
         self._armature_said.update(j for j, _, _ in heavy)
         limits = regulator.shaping.armature_estimation_limit_kg_m2
         joints = ', '.join(f'{model.joint_names[j]} {e:.3g} kg m^2 (its model {m:.3g}'
                            + ('; at its limit, armature_estimation_limit' if e >= limits[j]
                               else '') + ')' for j, e, m in heavy)
+        then = ('the gains are being designed again for them (gain_redesign)' if logs else
+                'the gains were sized without it. For gains sized for these joints, design '
+                f'again with --armature {_values(model.armature, found)}')
         return (LogLine(Severity.WARN, (
             f'rotor inertia the model lacks, found from the motion: {joints}. The damping, the '
             'speed guard and the friction learning use it now (armature_estimate on '
-            '/diagnostics); the gains were sized without it. For gains sized for these joints, '
-            f'design again with --armature {_values(model.armature, found)}')),)
+            f'/diagnostics); {then}')),) + logs
+
+    def _start_design(self, found: Sequence[float], own: Sequence[float],
+                      settled: Sequence[int]) -> tuple[LogLine, ...]:
+        """Start a design again if one is due and allowed (``gain_redesign``, a designer)."""
+        designer = self.designer
+        if (designer is None or self._parameter_values is None or designer.busy
+                or not self.regulator.shaping.gain_redesign):
+            return NO_LOGS
+        armature = self._inertia.due(found, own, settled)
+        if armature is None:
+            return NO_LOGS
+        self._inertia.designed_with(armature)  # tried once: not again for the same
+        self._designing = armature
+        designer.submit(self._parameter_values(), armature)
+        names = self.regulator.model.joint_names
+        return (LogLine(Severity.INFO, (
+            'designing the gains again for the rotor inertia found (gain_redesign): armature '
+            + _values(armature) + f' kg m^2 per joint ({", ".join(names)}), '
+            f'the armature told and {DESIGN_SHARE:g} x the estimate where it settled')),)
+
+    def take_design(self) -> tuple[Optional[dict], tuple[LogLine, ...]]:
+        """
+        Return the parameters of a design again that finished (or None), and its log.
+
+        The caller sets them as one atomic change (the node: its own parameters, checked and
+        logged as any ``ros2 param set``) and says how that went with :meth:`design_set`.
+        A design that failed leaves the gains as they are (a WARN).
+        """
+        designer = self.designer
+        answer = None if designer is None else designer.poll()
+        if answer is None:
+            return None, NO_LOGS
+        if 'error' in answer:
+            return None, (LogLine(Severity.WARN, (
+                f'the gains could not be designed again with armature '
+                f'[{_values(self._designing)}]: '
+                f'{answer["error"]}; they stay as they are')),)
+        return dict(answer['parameters']), NO_LOGS
+
+    def design_set(self, parameters: Mapping[str, Any], error: str = '') -> tuple[LogLine, ...]:
+        """Say that the parameters of a design again are in force (or why they are not)."""
+        told, armature = self._inertia.told, self._designing
+        if error:
+            return (LogLine(Severity.WARN, (
+                f'the gains designed again with armature [{_values(armature)}] were not set: '
+                f'{error}; they stay as they are')),)
+        return (LogLine(Severity.INFO, (
+            f'gains designed again for armature [{_values(armature)}] kg m^2 (told '
+            f'[{_values(told)}]): set {", ".join(sorted(parameters)) or "nothing (no change)"}. '
+            f'To start with them next time, design_gains --armature {_values(armature)} '
+            '(gain_redesign false keeps the gains as set)')),)
 
     # -- reports --------------------------------------------------------------------------
     def statuses(self, figures: dict, graph_warnings: Sequence[str] = ()

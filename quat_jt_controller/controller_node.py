@@ -20,6 +20,7 @@ from quat_jt_controller.control_law import Gains, GainsError
 from quat_jt_controller.controller import Command, Controller, GoalRequest, LogLine, Severity
 from quat_jt_controller.goal_check import GoalCheckWorker, ModelSpec
 from quat_jt_controller.model import ModelError, RobotModel
+from quat_jt_controller.redesign import DesignWorker
 from quat_jt_controller.regulator import Regulator
 from quat_jt_controller.reports import CommandReceivers, Diagnostics, Feedback, GoalPose
 from quat_jt_runtime import lifecycle
@@ -54,6 +55,8 @@ class QuatJtController(Node):
             # too, which a later node of the same name in this process would not get).
             if getattr(self, '_goal_checker', None) is not None:
                 self._goal_checker.close()
+            if getattr(self, '_designer', None) is not None:
+                self._designer.close()
             Node.destroy_node(self)
             raise
 
@@ -80,10 +83,12 @@ class QuatJtController(Node):
         self._change_log = parameters.change_log(self, reg)
         self._goal_checker = GoalCheckWorker(ModelSpec(
             cfg.urdf_xml, cfg.base_link, cfg.tip_link, cfg.joints, cfg.task))
+        self._designer = DesignWorker(cfg.urdf_xml)
         ctl = self.controller = Controller(
             reg, cfg.state_timeout_s, cfg.publish_rate_divider, cfg.max_state_age_s,
             cfg.state_rate_hz, self._goal_checker, started_ns=steady_ns(),
-            position_resolution=cfg.position_resolution)
+            position_resolution=cfg.position_resolution, designer=self._designer,
+            parameter_values=lambda: parameters.design_inputs(self))
         self.counters = ctl.counters
         self.stats = TickStats()
         self._cmd_msg = Float64MultiArray(data=[0.0] * model.n)
@@ -244,11 +249,16 @@ class QuatJtController(Node):
         """
         ctl = self.controller
         self._goal_pose.update(ctl.goal, ctl.goal_anchor)
-        self._log(ctl.take_goal_checks() + ctl.take_model_notes())
+        logs = ctl.take_goal_checks() + ctl.take_model_notes()
+        designed, said = ctl.take_design()
+        self._log(logs + said)
+        if designed is not None:  # through the parameters: checked, logged, then in force
+            self._log(ctl.design_set(designed, parameters.set_live(self, designed)))
 
     def destroy_node(self) -> None:
-        """Stop the goal-check worker, then destroy the node."""
+        """Stop the goal-check and design workers, then destroy the node."""
         self._goal_checker.close()
+        self._designer.close()
         super().destroy_node()
 
 

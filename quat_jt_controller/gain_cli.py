@@ -141,55 +141,11 @@ def _prismatic_note(urdf: str, joints: Sequence[str]) -> str:
     return text
 
 
-def main(argv: Optional[list] = None) -> int:
-    """
-    ``ros2 run quat_jt_controller design_gains`` / ``python -m ...gain_design``.
-
-    A bad argument (a number, a file, a joint, a link, a list's length) is one line on stderr
-    and status 2, as argparse's own; gains that cannot be designed for the robot, or a file
-    that cannot be written, one line and status 1.
-    """
-    from quat_jt_runtime.resources import default_urdf_xml
-
+def _add_design_options(parser: argparse.ArgumentParser) -> None:
+    """Add the options of :data:`DESIGN_OPTIONS`: the design's, that no parameter holds."""
     positive, non_negative = _number(0.0), _number(0.0, low_open=False)
-    parser = _Parser(
-        prog='design_gains', description='Compute K_p, K_v, Lambda and the '
-        'extensions of the regulator from the robot (docs/gain_design.md).')
-    parser.add_argument('--urdf', type=Path, help='URDF file (default: the bundled wrist)')
-    parser.add_argument('--base-link',
-                        help="the frame of the goals (default: the URDF's root link; base_link "
-                             'for the wrist)')
-    parser.add_argument('--tip-link',
-                        help='the link whose pose is regulated (default: the child link of '
-                             'the last revolute or continuous joint of the longest chain of '
-                             'them; tool0 for the wrist)')
-    parser.add_argument('--joints', nargs='+',
-                        help='controlled joints (default: the movable joints from the base '
-                             'link to the tip link)')
-    parser.add_argument('--task', choices=[t.value for t in cl.Task], default='orientation',
-                        help="'orientation' (y = e, Eqs. 37/38), 'pose' (y = [p_d - p; e], "
-                             "Eqs. 24/32) or 'position' (y = p_d - p: any reachable point, e.g. "
-                             'on an arm of 4 or 5 joints)')
     parser.add_argument('--effort-limits', type=positive, nargs='+',
                         help='N m per joint (default: the URDF effort limits)')
-    parser.add_argument('--armature', type=_real, nargs='+',
-                        help='rotor inertia the drives add about their joints, kg m^2: one '
-                        'value for every joint, or one per joint (default 0). Added to the '
-                        "diagonal of the URDF's M(q); written to the file as the controller's "
-                        'armature')
-    parser.add_argument('--payload-mass', type=_real, default=0.0,
-                        help='mass the tip link carries that the URDF does not list (a tool, '
-                        'a grasped part), kg (default 0); in g(q) and M(q), and written to '
-                        "the file as the controller's payload_mass")
-    parser.add_argument('--payload-com', type=_real, nargs=3, default=[0.0, 0.0, 0.0],
-                        metavar=('X', 'Y', 'Z'),
-                        help="where that mass is, m, in the tip link's frame (default 0 0 0)")
-    parser.add_argument('--rate', type=_real, default=1000.0,
-                        help='the control rate (of joint_states and commands), Hz, in '
-                        f'[{STATE_RATE_RANGE_HZ[0]:g}, {STATE_RATE_RANGE_HZ[1]:g}]; the '
-                        'sampled loop is checked at it (default 1000)')
-    parser.add_argument('--friction', type=non_negative, nargs='+',
-                        help='Coulomb friction estimates, N m per joint (default: none)')
     parser.add_argument('--friction-learning', type=non_negative, default=FRICTION_LEARNING,
                         help='how much more than the estimates the regulator may learn at '
                         f'rest, x the estimates (default {FRICTION_LEARNING:g}; 0 = none)')
@@ -210,6 +166,90 @@ def main(argv: Optional[list] = None) -> int:
                         "the slowest joint's cruising speed, for a faster approach near the "
                         'goal on an arm with slow joints (default: none, the 0.25 rad ramp; '
                         'docs/gain_design.md, section 5)')
+
+
+# design_gains' options that no controller parameter holds: the file's design_options
+# (Design.options), which a design again for the rotor inertia found reads (redesign.py)
+DESIGN_OPTIONS = {'effort_limits': 'effort_limits_nm', 'friction_learning': 'friction_learning',
+                  'friction_effort_share': 'friction_effort_share', 'delays': 'delays',
+                  'cruise_fraction': 'cruise_fraction', 'approach_time': 'approach_time_s'}
+
+
+class _OptionsParser(_Parser):
+    """The design options' parser: a bad one raises ValueError (a parameter, not a shell)."""
+
+    def error(self, message: str) -> NoReturn:
+        """Raise ValueError naming the parameter and the problem."""
+        raise ValueError(f'design_options: {message}')
+
+
+def parse_design_options(tokens: Sequence[str], n_joints: int) -> dict:
+    """
+    Return ``gain_design.design``'s keyword arguments from design_gains ``tokens``.
+
+    ``tokens`` are options of :data:`DESIGN_OPTIONS` as ``design_gains`` takes them (e.g.
+    ``['--delays', '1', '2']``); absent ones take design_gains' defaults. Raises ValueError
+    naming a bad one, another option, or a list of effort limits not of ``n_joints``.
+    """
+    parser = _OptionsParser(prog='design_options', add_help=False)
+    _add_design_options(parser)
+    args = parser.parse_args(list(tokens))
+    if args.effort_limits is not None and len(args.effort_limits) != n_joints:
+        raise ValueError(f'design_options: --effort-limits: {len(args.effort_limits)} values '
+                         f'for {n_joints} joints')
+    values = {key: getattr(args, option) for option, key in DESIGN_OPTIONS.items()}
+    values['delays'] = tuple(values['delays'])
+    return values
+
+
+def main(argv: Optional[list] = None) -> int:
+    """
+    ``ros2 run quat_jt_controller design_gains`` / ``python -m ...gain_design``.
+
+    A bad argument (a number, a file, a joint, a link, a list's length) is one line on stderr
+    and status 2, as argparse's own; gains that cannot be designed for the robot, or a file
+    that cannot be written, one line and status 1.
+    """
+    from quat_jt_runtime.resources import default_urdf_xml
+
+    non_negative = _number(0.0, low_open=False)
+    parser = _Parser(
+        prog='design_gains', description='Compute K_p, K_v, Lambda and the '
+        'extensions of the regulator from the robot (docs/gain_design.md).')
+    parser.add_argument('--urdf', type=Path, help='URDF file (default: the bundled wrist)')
+    parser.add_argument('--base-link',
+                        help="the frame of the goals (default: the URDF's root link; base_link "
+                             'for the wrist)')
+    parser.add_argument('--tip-link',
+                        help='the link whose pose is regulated (default: the child link of '
+                             'the last revolute or continuous joint of the longest chain of '
+                             'them; tool0 for the wrist)')
+    parser.add_argument('--joints', nargs='+',
+                        help='controlled joints (default: the movable joints from the base '
+                             'link to the tip link)')
+    parser.add_argument('--task', choices=[t.value for t in cl.Task], default='orientation',
+                        help="'orientation' (y = e, Eqs. 37/38), 'pose' (y = [p_d - p; e], "
+                             "Eqs. 24/32) or 'position' (y = p_d - p: any reachable point, e.g. "
+                             'on an arm of 4 or 5 joints)')
+    parser.add_argument('--armature', type=_real, nargs='+',
+                        help='rotor inertia the drives add about their joints, kg m^2: one '
+                        'value for every joint, or one per joint (default 0). Added to the '
+                        "diagonal of the URDF's M(q); written to the file as the controller's "
+                        'armature')
+    parser.add_argument('--payload-mass', type=_real, default=0.0,
+                        help='mass the tip link carries that the URDF does not list (a tool, '
+                        'a grasped part), kg (default 0); in g(q) and M(q), and written to '
+                        "the file as the controller's payload_mass")
+    parser.add_argument('--payload-com', type=_real, nargs=3, default=[0.0, 0.0, 0.0],
+                        metavar=('X', 'Y', 'Z'),
+                        help="where that mass is, m, in the tip link's frame (default 0 0 0)")
+    parser.add_argument('--rate', type=_real, default=1000.0,
+                        help='the control rate (of joint_states and commands), Hz, in '
+                        f'[{STATE_RATE_RANGE_HZ[0]:g}, {STATE_RATE_RANGE_HZ[1]:g}]; the '
+                        'sampled loop is checked at it (default 1000)')
+    parser.add_argument('--friction', type=non_negative, nargs='+',
+                        help='Coulomb friction estimates, N m per joint (default: none)')
+    _add_design_options(parser)
     parser.add_argument('--preferred-configuration', type=_number(-float('inf')), nargs='+',
                         help="rad per joint: the posture a redundant arm's goal configuration "
                         'leans to (default: the middle of the ranges)')

@@ -153,6 +153,8 @@ class Design:
     armature: tuple[float, ...] = ()  # kg m^2 per joint, in M(q) of the design (the model's)
     payload_kg: float = 0.0  # the tip link's payload, in g(q) and M(q) of the design
     payload_com_tip_m: tuple[float, ...] = (0.0, 0.0, 0.0)  # where it is, in tip_link's frame
+    # design_gains' options no other parameter holds, as it takes them (design_options)
+    options: tuple[str, ...] = ()
 
     def gains(self, potential: str = 'tanh') -> cl.Gains:
         """Return the K_p, K_v, Lambda of the design as validated Gains for ``potential``."""
@@ -183,7 +185,8 @@ class Design:
                 'payload_mass': self.payload_kg, 'payload_com': list(self.payload_com_tip_m),
                 'base_link': self.base_link, 'tip_link': self.tip_link, **defaults,
                 'state_rate': self.rate_hz,
-                'publish_rate_divider': max(1, int(round(self.rate_hz / 100.0)))}
+                'publish_rate_divider': max(1, int(round(self.rate_hz / 100.0))),
+                'design_options': list(self.options)}
 
 
 def _sample(model: RobotModel, rng: np.random.Generator, fraction: float) -> np.ndarray:
@@ -705,6 +708,7 @@ def design(model: RobotModel, task: cl.Task, rate_hz: float = 1000.0,
         settling_damping_rate=settling,
         armature_estimation_limit=[float(f'{v:.4g}') for v in
                                    effort / ESTIMATED_ARMATURE_ACCELERATION_RAD_S2],
+        gain_redesign=True,
         goal_velocity_gain=GOAL_VELOCITY_GAIN,
         preferred_configuration=(model.middle_of_ranges() if preferred_configuration_rad is None
                                  else preferred_configuration_rad),
@@ -759,7 +763,34 @@ def design(model: RobotModel, task: cl.Task, rate_hz: float = 1000.0,
     }
     return Design(task, model.joint_names, model.base_link, model.tip_link, rate_hz, kp_r,
                   kv_r, lam_r, shaping, figures, model.armature, model.payload_kg,
-                  model.payload_com_tip_m)
+                  model.payload_com_tip_m,
+                  options_argv(effort_limits_nm, delays, friction_learning,
+                               friction_effort_share, cruise_fraction, approach_time_s))
+
+
+def options_argv(effort_limits_nm: Optional[Sequence[float]], delays: Sequence[int],
+                 friction_learning: float, friction_effort_share: float,
+                 cruise_fraction: float, approach_time_s: Optional[float]) -> tuple[str, ...]:
+    """
+    Return the options of a design that no parameter holds, as design_gains takes them.
+
+    Those at design_gains' defaults are left out (``gain_cli.parse_design_options`` reads the
+    rest back); a number is written so that it reads back the same.
+    """
+    argv: list[str] = []
+    if effort_limits_nm is not None:
+        argv += ['--effort-limits', *(repr(float(e)) for e in effort_limits_nm)]
+    if tuple(int(d) for d in delays) != (1,):
+        argv += ['--delays', *(str(int(d)) for d in delays)]
+    for flag, value, default in (('--friction-learning', friction_learning, FRICTION_LEARNING),
+                                 ('--friction-effort-share', friction_effort_share,
+                                  DEFAULT_FRICTION_EFFORT_SHARE),
+                                 ('--cruise-fraction', cruise_fraction, CRUISE_FRACTION)):
+        if float(value) != default:
+            argv += [flag, repr(float(value))]
+    if approach_time_s is not None:
+        argv += ['--approach-time', repr(float(approach_time_s))]
+    return tuple(argv)
 
 
 def guide_warnings(model: RobotModel, guide: np.ndarray, bound: np.ndarray) -> list[str]:

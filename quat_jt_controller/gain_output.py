@@ -182,6 +182,7 @@ def to_yaml(d: Design, potential: str = 'tanh', command: str = '',
                                break_long_words=False)
     comments = {
         'task': 'read-only',
+        'design_options': "design_gains' options no other parameter holds",
         'potential': "'tanh' (Eq. 32/38) or 'quadratic' (Eq. 24/37); one set serves both",
         'kp': f'K_p, {axes}: a-priori torque bound within the budget',
         'kv': f'K_v, N m s/rad: damping ratio {DAMPING_RATIO:.2f} (tanh), from M(q), or '
@@ -198,6 +199,8 @@ def to_yaml(d: Design, potential: str = 'tanh', command: str = '',
         'armature_estimation_limit': ('kg m^2, the most rotor inertia found from the motion '
                                       'beyond the armature: what the effort limit accelerates '
                                       f'at {ESTIMATED_ARMATURE_ACCELERATION_RAD_S2:g} rad/s^2'),
+        'gain_redesign': ('design the gains again for a joint found twice as heavy as designed '
+                          'for (with design_options)'),
         'friction_velocity': 'rad/s, v_eps of f tanh(qdot / v_eps)',
         'friction_error_band': '||e|| where the compensation fades out',
         'friction_position_band': 'm, the same for ||p_d - p||',

@@ -12,9 +12,7 @@ thread.
 """
 from dataclasses import dataclass
 import json
-import os
 import queue
-import signal
 import subprocess
 import sys
 import threading
@@ -27,7 +25,7 @@ from quat_jt_controller.inverse_kinematics import RESIDUAL_TOLERANCE, search_goa
 from quat_jt_controller.inverse_kinematics import Search, SINGULAR_SIGMA_MIN, solve_ik, starts
 from quat_jt_controller.model import GRAVITY_RESERVE_SHARE, RobotModel
 from quat_jt_runtime.payload import Payload
-from quat_jt_runtime.realtime import start_at_normal_scheduling
+from quat_jt_runtime.worker import quiet_worker, start_worker
 
 
 def singular_warning(q: Sequence[float], sigma_min: float) -> str:
@@ -177,19 +175,7 @@ class GoalCheckWorker:
 
     def _start_process(self) -> None:
         self._ready = False  # until the new worker says it has built its model
-        # SIGINT blocked from its first instruction (a blocked mask survives exec) until it
-        # ignores it (_serve), and out of the terminal's process group: Ctrl-C is the node's.
-        # Here a SIGINT only waits until the mask is restored.
-        # Started from a real-time thread (a restart, from the tick's executor), it still
-        # begins with normal scheduling: it must never compete with the loop.
-        mask = signal.pthread_sigmask(signal.SIG_BLOCK, {signal.SIGINT})
-        try:
-            self._proc = start_at_normal_scheduling(lambda: subprocess.Popen(
-                [sys.executable, '-m', 'quat_jt_controller.goal_check'],
-                stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=None, text=True,
-                bufsize=1, start_new_session=True))
-        finally:
-            signal.pthread_sigmask(signal.SIG_SETMASK, mask)
+        self._proc = start_worker('quat_jt_controller.goal_check')
         spec = self._spec
         self._send({'urdf_xml': spec.urdf_xml, 'base_link': spec.base_link,
                     'tip_link': spec.tip_link, 'joint_names': list(spec.joint_names),
@@ -357,12 +343,7 @@ def configuration_verdict(search: Search) -> str:
 
 def _serve() -> None:
     """Worker process: a spec line, then one verdict line per request line, until EOF."""
-    signal.signal(signal.SIGINT, signal.SIG_IGN)  # the node stops it (closes its stdin)
-    signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})  # blocked since its start
-    try:
-        os.nice(10)  # advice only: leave the CPU to the 1 kHz nodes
-    except OSError:
-        pass
+    quiet_worker()
     lines = iter(sys.stdin)
     spec = json.loads(next(lines))
     model = RobotModel(spec['urdf_xml'], spec['base_link'], spec['tip_link'],

@@ -99,6 +99,13 @@ STRUCTURE = (
          "Hz, the rate of joint_states (the plant's control rate), as design_gains --rate was "
          'given: the time constant of the velocity estimate for states without velocities is '
          'one period of it.', read_only=True, bounds=STATE_RATE_RANGE_HZ),
+    Spec('design_options', Kind.STRING_ARRAY, [],
+         'The design_gains options the file was designed with that no other parameter holds '
+         '(--effort-limits, --delays, --friction-learning, --friction-effort-share, '
+         '--cruise-fraction, --approach-time), as design_gains takes them, one word an entry '
+         '(e.g. --delays, 1, 2); empty = its defaults. design_gains writes them; a design again '
+         'for the rotor inertia found from the motion (gain_redesign) reads them.', read_only=True,
+         empty_ok=True, constraints='design_gains options'),
     Spec('publish_rate_divider', Kind.INT, 10,
          '~/current_pose and the error topics are published every N-th tick (N = 10: 100 Hz '
          'at a 1 kHz state rate).', read_only=True, bounds=(1, 1000)),
@@ -251,6 +258,15 @@ SHAPING = (
          'friction learning use it (the potential and g(q) hold no inertia). /diagnostics '
          'reports it as armature_estimate. Zeros = off. Live.',
          default_text=JOINT_ZEROS_TEXT, field='armature_estimation_limit_kg_m2', **PER_JOINT),
+    Spec('gain_redesign', Kind.BOOL, False,
+         'Design the gains again when the rotor inertia estimate (armature_estimation_limit) '
+         'has settled and shows a joint more than twice as heavy as its model (then: 1.5 times '
+         "the inertia its gains were designed for): design_gains' rules, with the robot, "
+         'design_options and the armature told plus half the inertia found, in a worker '
+         'process; the live parameters that change are then set, and logged, as ros2 param '
+         'set would (docs/gain_design.md, section 6). A few times at most: each design '
+         'multiplies what some joint is designed for by more than 1.5. false = never (the '
+         'gains stay as set). Live.'),
     Spec('goal_velocity_gain', Kind.DOUBLE, 0.0,
          'g_v in [0, 1]: for a stream of stamped goals on ~/target_pose, the joint damping '
          'acts on qdot - g_v qdot*_d, qdot*_d the velocity of the goal configuration (the '

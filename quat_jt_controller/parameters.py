@@ -14,6 +14,7 @@ from typing import Any, Callable, Mapping, Optional, Sequence
 
 from quat_jt_controller import parameter_table as table
 from quat_jt_controller.control_law import gain_ceiling, Gains, MAX_LAMBDA, Task
+from quat_jt_controller.gain_cli import parse_design_options
 from quat_jt_controller.regulator import Regulator
 from quat_jt_controller.shaping import describe as describe_shaping
 from quat_jt_controller.shaping import from_parameters as shaping_from_parameters
@@ -21,10 +22,12 @@ from quat_jt_controller.shaping import Shaping
 from quat_jt_runtime.description import robot_description
 from quat_jt_runtime.joints import check_state_rate
 from quat_jt_runtime.param_table import names, row
-from quat_jt_runtime.params import ChangeLog, declare, LiveParameters
+from quat_jt_runtime.params import ChangeLog, declare, LiveParameters, rclpy_type
 from quat_jt_runtime.payload import Payload
 from quat_jt_runtime.urdf_source import Description, WithDescription
+from rclpy.exceptions import ParameterException
 from rclpy.node import Node
+from rclpy.parameter import Parameter
 
 
 @dataclass(frozen=True)
@@ -43,6 +46,7 @@ class StructuralConfig(WithDescription):
     state_rate_hz: float
     publish_rate_divider: int
     prewarm_lead_s: float  # 0: no throwaway tick before each state
+    design_options: tuple[str, ...] = ()  # design_gains' options no other parameter holds
 
     @classmethod
     def create(cls, values: Mapping[str, Any],
@@ -63,6 +67,8 @@ class StructuralConfig(WithDescription):
         resolution = table.POSITION_RESOLUTION.check(values['position_resolution'],
                                                      {'n': len(joints)})
         state_rate_hz = check_state_rate(values['state_rate'])
+        design_options = tuple(values.get('design_options') or ())
+        parse_design_options(design_options, len(joints))  # ValueError names a bad one
         return cls(task=task, joints=joints, base_link=values['base_link'],
                    tip_link=values['tip_link'], armature=armature,
                    position_resolution=resolution,
@@ -71,7 +77,8 @@ class StructuralConfig(WithDescription):
                    max_state_age_s=float(values['max_state_age']),
                    state_rate_hz=state_rate_hz,
                    publish_rate_divider=int(values['publish_rate_divider']),
-                   prewarm_lead_s=float(values['prewarm_lead']))
+                   prewarm_lead_s=float(values['prewarm_lead']),
+                   design_options=design_options)
 
 
 def declare_structural(node: Node) -> StructuralConfig:
@@ -200,3 +207,40 @@ def declare_payload(node: Node, check: Optional[Callable[[Payload], Payload]] = 
 def build_shaping(values: Mapping[str, Any], config: StructuralConfig) -> Shaping:
     """Shaping from parameter values keyed by parameter name. Raises ShapingError."""
     return shaping_from_parameters(dict(values), len(config.joints))
+
+
+# The read-only parameters a design again reads (redesign.redesign), beside the live ones
+DESIGN_STRUCTURE = ('task', 'joints', 'base_link', 'tip_link', 'state_rate', 'design_options')
+
+
+def design_inputs(node: Node) -> dict[str, Any]:
+    """Return what a design again reads: the robot's parameters and every live one."""
+    wanted = DESIGN_STRUCTURE + tuple(names(table.GAINS) + names(table.SHAPING)
+                                      + names(table.PAYLOAD))
+    return {name: node.get_parameter(name).value for name in wanted}
+
+
+def set_live(node: Node, values: Mapping[str, Any]) -> str:
+    """
+    Set live gain and extension parameters on ``node`` as one atomic change.
+
+    Each value is converted to its row's type (a design's 5 is the parameter's 5.0); the
+    node's on-set callbacks check them all, as for ``ros2 param set``. Return '' if they are
+    in force, else why not.
+    """
+    rows = {spec.name: spec for spec in tuple(table.GAINS) + tuple(table.SHAPING)}
+    try:
+        result = node.set_parameters_atomically([
+            Parameter(name, rclpy_type(rows[name].kind), _typed(rows[name].kind.label, value))
+            for name, value in values.items()])
+    except KeyError as exc:
+        return f'{exc.args[0]} is not a live parameter'
+    except (ParameterException, TypeError, ValueError) as exc:
+        return str(exc)
+    return '' if result.successful else result.reason
+
+
+def _typed(label: str, value: Any) -> Any:
+    """Return ``value`` as a parameter of type ``label`` holds it (a float for a double)."""
+    convert = {'double': float, 'int': int, 'bool': bool, 'string': str}[label.rstrip('[]')]
+    return [convert(v) for v in value] if label.endswith('[]') else convert(value)

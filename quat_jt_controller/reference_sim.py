@@ -14,7 +14,7 @@ still decreases when the compensation never exceeds the plant's friction.
 """
 from dataclasses import dataclass
 from math import tanh
-from typing import Optional, Sequence
+from typing import Callable, Optional, Sequence
 
 import numpy as np
 
@@ -163,7 +163,8 @@ class SampledRun:
 
 def run_sampled(loop: ClosedLoop, sim, duration_s: float, delay_ticks: int = 1,
                 q_star: Optional[Sequence[float]] = None,
-                q_star_after_s: float = 0.0) -> SampledRun:
+                q_star_after_s: float = 0.0,
+                on_step: Optional[Callable[[float, list], None]] = None) -> SampledRun:
     """
     Run ``loop``'s regulator on a simulator as the nodes do: sampled, delayed, held, clamped.
 
@@ -177,7 +178,9 @@ def run_sampled(loop: ClosedLoop, sim, duration_s: float, delay_ticks: int = 1,
     with no extra delay (0) while every command arrives in time: the sim steps from the state
     it published with the command computed from it. Records the errors after each step.
     ``q_star`` is given to the regulators as the goal configuration after ``q_star_after_s``
-    (the node gets it from its goal-check worker a little after the goal).
+    (the node gets it from its goal-check worker a little after the goal). ``on_step(t_s, q)``,
+    if given, is called after each step with its time and the state the regulator read, as a
+    node's timers see them (a design again, ``redesign.py``).
     """
     q_star_step = int(round(q_star_after_s / sim.dt_s)) if q_star is not None else -1
 
@@ -201,6 +204,8 @@ def run_sampled(loop: ClosedLoop, sim, duration_s: float, delay_ticks: int = 1,
             finite = False
             break
         applied = sim.step(out.tau_nm)
+        if on_step is not None:
+            on_step((k + 1) * sim.dt_s, q)
         history.append(measured())
         del history[0]
         y, _, _ = loop.error(sim.q_rad.tolist())

@@ -150,6 +150,8 @@ class Shaping:
     # per joint, the most rotor inertia beyond the armature told that the regulator may add to
     # M(q) from the motion (kg m^2; armature_estimate.py; 0 = not estimated)
     armature_estimation_limit_kg_m2: tuple[float, ...] = ()
+    # design the gains again for the rotor inertia found (redesign.py; not read by the tick)
+    gain_redesign: bool = _default('gain_redesign')
     # g_v: the joint damping acts on qdot - g_v qdot*_d of a streamed goal; 0 = off
     goal_velocity_gain: float = _default('goal_velocity_gain')
     # a_max per joint, N m: the most the friction estimate may learn at rest (0 = no learning)

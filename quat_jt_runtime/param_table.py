@@ -10,11 +10,15 @@ a core that builds the snapshot from a config file applies the node's rules), th
 from dataclasses import dataclass
 import enum
 from math import inf, isfinite
+import re
 from typing import Any, Mapping, Optional, Sequence
 
 import numpy as np
 
 from quat_jt_runtime.errors import checked_vector
+
+# A string YAML reads as that string unquoted (a name; not a number, not a flag)
+_PLAIN = re.compile(r'[A-Za-z_/][A-Za-z0-9_./-]*')
 
 
 class Kind(enum.Enum):
@@ -233,10 +237,19 @@ def yaml_value(kind: Kind, value: Any) -> str:
     if kind is Kind.INT:
         return str(int(value))
     if kind is Kind.STRING:
-        return str(value) if value else "''"
+        return yaml_string(str(value))
     if kind is Kind.DOUBLE_ARRAY:
         return '[' + ', '.join(yaml_float(v) for v in value) + ']'
+    if kind is Kind.STRING_ARRAY:
+        return '[' + ', '.join(yaml_string(str(v)) for v in value) + ']'
     return '[' + ', '.join(str(v) for v in value) + ']'
+
+
+def yaml_string(text: str) -> str:
+    """Return ``text`` as YAML reads it back as that string: plain, or single-quoted."""
+    plain = (_PLAIN.fullmatch(text) is not None
+             and text.lower() not in ('true', 'false', 'yes', 'no', 'on', 'off', 'null'))
+    return text if plain else "'" + text.replace("'", "''") + "'"
 
 
 def yaml_lines(specs: Sequence[Spec], values: Mapping[str, Any],

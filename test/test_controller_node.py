@@ -634,6 +634,40 @@ def test_real_time_closed_loop_with_the_simulator(tmp_path, model):
         h.close()
 
 
+def test_the_gains_are_designed_again_for_a_rotor_inertia_nobody_told(tmp_path):
+    """
+    The product wrist config on a MuJoCo wrist with 0.2 kg m^2 per joint that it is not told.
+
+    The controller finds the rotor inertia while the wrist moves, designs the gains again in
+    its worker, and sets them as its own parameters: ``ros2 param get`` shows them, the log
+    says what was set.
+    """
+    pytest.importorskip('mujoco')
+    ns = f'/redesign{random.randint(0, 9999)}'
+    h = Harness(tmp_path, namespace=ns)
+    try:
+        ros_args = ('-r', f'__ns:={ns}')
+        h.spawn('wrist_sim_node', {'engine': 'mujoco', 'armature': [0.2, 0.2, 0.2],
+                                   'initial_positions': [0.0, 0.0, 0.0],
+                                   'publish_clock': False}, ros_args)
+        config = local_ros.REPOSITORY / local_ros.PRODUCT_CONTROLLER_CONFIG
+        h.procs['controller_node'] = local_ros.spawn_node(
+            'controller_node', h.env, h.work_dir, params_files=(config,), ros_args=ros_args)
+        goal_pub = h.node.create_publisher(PoseStamped, f'{CONTROLLER}/target_pose', 10)
+        params = AsyncParameterClient(h.node, f'{ns}/{CONTROLLER}')
+        h.spin_until(lambda: params.services_are_ready() and
+                     goal_pub.get_subscription_count() > 0, 30.0, 'simulator and controller')
+        before = h.wait_future(params.get_parameters(['kv'])).values[0].double_array_value
+        goal_pub.publish(goal_msg(GOAL_XYZW))
+        said = h.wait_log('gains designed again for armature', timeout=120.0)
+        assert 'kv' in said, said
+        assert any(line.startswith('designing the gains again') for line in h.logs), h.logs
+        after = h.wait_future(params.get_parameters(['kv'])).values[0].double_array_value
+        assert all(a > b for a, b in zip(after, before)), (before, after)
+    finally:
+        h.close()
+
+
 def test_sigint_exits_promptly_and_bad_config_exits_nonzero(tmp_path):
     ns = f'/exittest{random.randint(0, 9999)}'
     h = Harness(tmp_path, namespace=ns)

@@ -1,0 +1,241 @@
+"""
+Gains designed again for the rotor inertia the motion shows (docs/gain_design.md, section 6).
+
+``design_gains`` sizes the gains for the inertia the URDF and the armature told give each
+joint. Where a joint's drive reflects a rotor inertia nobody told, the regulator finds it
+while the arm moves (``armature_estimate``) and puts it in ``M(q)``, which sets the damping
+right; the stiffness stays the one sized for the light joint, and such an arm crawls
+(docs/reach.md, "Rotor inertia nobody told"). Here the controller designs the gains again,
+with ``design_gains``' own rules (``gain_design.design``), the robot and options the file was
+designed with, and the rotor inertia found:
+
+- :class:`InertiaWatch` says when: a joint's estimate has settled (within
+  ``SETTLED_SHARE`` of what it was ``SETTLED_S`` before), and the inertia a design would now
+  take for the joint is more than ``GROWTH_FACTOR`` times the one its gains were designed for
+  (the first time: the joint shows more than twice the inertia of its model);
+- the design takes ``DESIGN_SHARE`` of what was found, no more: the gains are then sized for a
+  joint lighter than the one the motion shows, as in the campaign's column "told 0.05" (a
+  rotor inertia told at half the plant's), which reaches as often as the one told right
+  (measured, not proved), and an estimate up to twice too high still gives a design for no
+  more than the real joint;
+- :func:`redesign` runs the design, and returns the live parameters that change. The
+  controller node runs it in a worker process and sets them, through its parameters (checked,
+  logged, ``ros2 param get`` shows them), as a user's ``ros2 param set`` would
+  (``gain_redesign`` false: never).
+
+Each design multiplies the inertia some joint is designed for by more than ``GROWTH_FACTOR``,
+within ``armature_estimation_limit``: a few designs at most. Each is a change of the gains,
+after which docs/lyapunov.md's argument holds again (section 13). ROS-free; ``python -m
+quat_jt_controller.redesign`` is the node's worker (a request line on stdin, an answer line
+on stdout).
+"""
+import json
+import queue
+import subprocess
+import sys
+import threading
+from typing import Any, Mapping, Optional, Sequence
+
+SETTLED_SHARE = 0.05  # an estimate within this share of what it was SETTLED_S before: settled
+SETTLED_S = 1.0
+DESIGN_SHARE = 0.5  # of the rotor inertia found, what the design takes
+# a design again when it would design a joint for more than this x the inertia its gains were
+# designed for: the first, for a joint that shows more than 1 + GROWTH... (twice) its model's
+GROWTH_FACTOR = 1.5
+# Parameters the design reads, or the user chooses, that a design again does not set
+CLOSE_WAIT_S = 2.0  # a worker that does not end this long after its input closes is killed
+KEPT = frozenset(('potential', 'gravity_compensation', 'friction_compensation',
+                  'preferred_configuration', 'posture_weight', 'goal_velocity_gain',
+                  'gain_redesign'))
+
+
+class InertiaWatch:
+    """
+    Which joints' rotor inertia estimate has settled, and when the gains are due a design.
+
+    ``told`` is the armature the controller was told (kg m^2 per joint); ``designed`` the one
+    the gains in force were designed with, ``told`` until :meth:`designed_with`.
+    """
+
+    def __init__(self, told: Sequence[float], start_s: float = 0.0) -> None:
+        self.told = tuple(float(a) for a in told)
+        self.designed = self.told
+        self._then_s = start_s
+        self._before: tuple[float, ...] = ()
+
+    def settled(self, now_s: float, found: Sequence[float]) -> Optional[list[int]]:
+        """
+        Return the joints whose estimate ``found`` has settled; None between two looks.
+
+        A look every ``SETTLED_S``: settled are the joints found heavier than told (> 0)
+        whose estimate is within ``SETTLED_SHARE`` of what the last look saw.
+        """
+        if now_s - self._then_s < SETTLED_S:
+            return None
+        before, self._before, self._then_s = self._before, tuple(found), now_s
+        return [j for j, (e, b) in enumerate(zip(found, before))
+                if e > 0.0 and abs(e - b) <= SETTLED_SHARE * e]
+
+    def due(self, found: Sequence[float], own_inertia: Sequence[float],
+            settled: Sequence[int]) -> Optional[tuple[float, ...]]:
+        """
+        Return the armature to design the gains with, if a settled joint asks for one.
+
+        ``own_inertia`` is ``M_jj(q)`` per joint with the estimate ``found`` in
+        (``RobotModel.own_inertias``). A settled joint would be designed with its armature
+        told plus ``DESIGN_SHARE`` of what was found (never less than it was designed with).
+        Due when that is more than ``GROWTH_FACTOR`` times the inertia its gains were designed
+        for, for some joint; then every settled joint takes it, the others keep theirs. None
+        otherwise.
+        """
+        told, designed = self.told, self.designed
+        armature = list(designed)
+        due = False
+        for j in settled:
+            model_j = own_inertia[j] - found[j]  # the links and the armature told
+            armature[j] = max(designed[j], told[j] + DESIGN_SHARE * found[j])
+            before = model_j + designed[j] - told[j]  # the inertia designed for
+            if model_j + armature[j] - told[j] > GROWTH_FACTOR * before:
+                due = True
+        return tuple(armature) if due else None
+
+    def designed_with(self, armature: Sequence[float]) -> None:
+        """Record that the gains in force were designed with ``armature`` (or tried)."""
+        self.designed = tuple(float(a) for a in armature)
+
+
+def redesign(urdf_xml: str, values: Mapping[str, Any],
+             armature: Sequence[float]) -> dict[str, Any]:
+    """
+    Design the gains again with ``armature``; return the live parameters that change.
+
+    ``values`` are the controller's parameters in force, by ROS name: the robot
+    (``base_link``, ``tip_link``, ``joints``, ``task``, ``state_rate``), the payload, the
+    friction estimates (``friction_compensation``), ``preferred_configuration``, ``potential``
+    and ``design_options`` (the design_gains options no other parameter holds). What the user
+    chooses or the design reads (``KEPT``) is not returned. Raises ValueError (a design that
+    fails, or bad options) or ModelError.
+    """
+    from quat_jt_controller import control_law as cl
+    from quat_jt_controller.gain_cli import parse_design_options
+    from quat_jt_controller.gain_design import design
+    from quat_jt_controller.model import RobotModel
+
+    model = RobotModel(urdf_xml, values['base_link'], values['tip_link'],
+                       list(values['joints']), [float(a) for a in armature],
+                       float(values.get('payload_mass', 0.0)),
+                       list(values.get('payload_com', (0.0, 0.0, 0.0))))
+    options = parse_design_options(list(values.get('design_options', ())), model.n)
+    preferred = values.get('preferred_configuration')
+    result = design(model, cl.Task(values['task']), float(values['state_rate']),
+                    friction_nm=values.get('friction_compensation') or None,
+                    preferred_configuration_rad=list(preferred) if preferred else None,
+                    **options)
+    new = result.parameters(str(values.get('potential', 'tanh')))
+    return {name: value for name, value in new.items()
+            if name not in KEPT and value != _plain(values.get(name))}
+
+
+def _plain(value: Any) -> Any:
+    """Return ``value`` as the design writes it: a list for any array, plain numbers."""
+    if isinstance(value, (str, bytes, bool, int, float)) or value is None:
+        return value
+    if hasattr(value, 'item') and not hasattr(value, '__len__'):  # a numpy scalar
+        return value.item()
+    return [_plain(v) for v in value]  # a tuple, a list, rclpy's array.array
+
+
+class DesignWorker:
+    """
+    :func:`redesign` in a process of its own, one design at a time, never on the loop.
+
+    The process (``python -m quat_jt_controller.redesign``, started by
+    ``quat_jt_runtime.worker``: niced, out of the terminal's process group, SIGINT ignored)
+    starts with the worker, before the loop runs, and waits: starting a process from a running
+    node holds Python's lock for milliseconds, which the loop would wait (docs/benchmark.md,
+    "A design again"). It imports Pinocchio at its first design. :meth:`submit` writes one request
+    line to it and returns; a reader thread waits for the answer line, which :meth:`poll`
+    returns once: ``{'parameters': {...}}``, or ``{'error': text}`` (a design that failed, or a
+    worker that died: then every later design is refused at once, with the reason). Call
+    :meth:`close` at the end: it closes the process's input, which ends it.
+    """
+
+    def __init__(self, urdf_xml: str) -> None:
+        from quat_jt_runtime.worker import start_worker
+        self._urdf_xml = urdf_xml
+        self._busy = False
+        self._answers: queue.SimpleQueue = queue.SimpleQueue()
+        self._gone = ''  # why the process is gone ('' while it runs)
+        self._proc = start_worker('quat_jt_controller.redesign')
+        threading.Thread(target=self._read, args=(self._proc,), name='design_reader',
+                         daemon=True).start()
+
+    @property
+    def busy(self) -> bool:
+        """Tell whether a design is running (or its answer not yet taken)."""
+        return self._busy
+
+    def submit(self, values: Mapping[str, Any], armature: Sequence[float]) -> None:
+        """Ask for a design with ``armature`` on the parameters ``values`` (by ROS name)."""
+        if self._busy:
+            raise RuntimeError('a design is running')
+        self._busy = True
+        request = {'urdf_xml': self._urdf_xml, 'armature': [float(a) for a in armature],
+                   'values': {name: _plain(v) for name, v in values.items()}}
+        try:
+            self._proc.stdin.write(json.dumps(request) + '\n')
+            self._proc.stdin.flush()
+        except (OSError, ValueError):  # a broken pipe, or closed: the reader says why
+            if self._gone:
+                self._answers.put({'error': self._gone})
+
+    def _read(self, proc: subprocess.Popen) -> None:
+        for line in proc.stdout:
+            try:
+                self._answers.put(json.loads(line))
+            except ValueError:
+                pass
+        self._gone = f'the design worker exited (status {proc.wait()})'
+        if self._busy:
+            self._answers.put({'error': self._gone})
+
+    def poll(self) -> Optional[dict]:
+        """Return the answer of the design that finished since the last call, or None."""
+        try:
+            answer = self._answers.get_nowait()
+        except queue.Empty:
+            return None
+        self._busy = False
+        return answer
+
+    def close(self) -> None:
+        """End the process: a design still running is stopped, an idle worker ends itself."""
+        proc = self._proc
+        try:
+            proc.stdin.close()
+        except OSError:
+            pass
+        try:
+            proc.wait(timeout=0.0 if self._busy else CLOSE_WAIT_S)
+        except subprocess.TimeoutExpired:
+            proc.kill()
+            proc.wait()
+
+
+def _serve() -> None:
+    """Worker process: one answer line (``parameters`` or ``error``) per request line."""
+    from quat_jt_runtime.worker import quiet_worker
+    quiet_worker()
+    for line in sys.stdin:  # until the node closes it
+        try:
+            request = json.loads(line)
+            answer = {'parameters': redesign(request['urdf_xml'], request['values'],
+                                             request['armature'])}
+        except Exception as exc:  # noqa: B902 - reported to the node, which logs it
+            answer = {'error': f'{type(exc).__name__}: {exc}'}
+        sys.stdout.write(json.dumps(answer) + '\n')
+        sys.stdout.flush()
+
+
+if __name__ == '__main__':
+    _serve()

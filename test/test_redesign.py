@@ -1,0 +1,236 @@
+"""
+The gains designed again for the rotor inertia the motion shows (redesign.py), ROS-free.
+
+When a design is due, with what, how often at most; the design's options read back from the
+file; the worker process; the controller that starts it and says so; and the law with gains
+designed for half the rotor inertia the plant has: V does not increase in the ideal loop.
+"""
+import time
+
+import numpy as np
+import pytest
+from quat_jt_controller import control_law as cl
+from quat_jt_controller import gain_design as gd
+from quat_jt_controller import paper
+from quat_jt_controller import quaternion as quat
+from quat_jt_controller.controller import Controller, GoalRequest, Severity
+from quat_jt_controller.controller_config import controller_from_config
+from quat_jt_controller.gain_cli import parse_design_options
+from quat_jt_controller.model import RobotModel
+from quat_jt_controller.redesign import (DESIGN_SHARE, DesignWorker, GROWTH_FACTOR,
+                                         InertiaWatch, KEPT, redesign, SETTLED_S)
+from quat_jt_controller.reference_sim import ClosedLoop
+from quat_jt_controller.regulator import Goal, Regulator
+from quat_jt_runtime.resources import default_urdf_xml
+from robots import wrist_model
+
+pytestmark = pytest.mark.unit
+
+WAIT_S = 120.0  # the most a worker may take to start Python and Pinocchio and design
+
+
+def test_settled_joints_are_seen_once_a_look():
+    watch = InertiaWatch((0.0, 0.0), start_s=0.0)
+    assert watch.settled(0.5, (0.1, 0.0)) is None  # not yet time to look
+    assert watch.settled(SETTLED_S, (0.1, 0.0)) == []  # nothing to compare with yet
+    assert watch.settled(1.5 * SETTLED_S, (0.1, 0.0)) is None
+    assert watch.settled(2.0 * SETTLED_S, (0.102, 0.0)) == [0]  # within 5%, and found
+    assert watch.settled(3.0 * SETTLED_S, (0.2, 0.0)) == []  # moved by 96%
+
+
+def test_a_design_is_due_for_a_joint_found_twice_as_heavy_as_its_model_and_takes_half():
+    told = (0.01, 0.0, 0.0)
+    watch = InertiaWatch(told)
+    found = (0.1, 0.009, 0.5)
+    model_inertia = np.array([0.05, 0.01, 0.02])  # the links and the armature told
+    own = tuple(model_inertia + found)
+    assert watch.due(found, own, settled=[1]) is None  # shows 0.019 < 2 x 0.01
+    armature = watch.due(found, own, settled=[0, 1])  # shows 0.15 > 2 x 0.05: joint 0 due
+    assert armature == pytest.approx((0.01 + DESIGN_SHARE * 0.1, DESIGN_SHARE * 0.009, 0.0))
+    watch.designed_with(armature)
+    # designed for the model + half of what was found: the same estimate asks for nothing more
+    assert watch.due(found, own, settled=[0, 1, 2]) is not None  # joint 2, not yet designed
+    assert watch.due(found, own, settled=[0, 1]) is None
+
+
+def test_designs_stop_as_the_estimate_settles_whatever_it_grows_to():
+    """Each design multiplies a joint's designed inertia by more than GROWTH_FACTOR: a few."""
+    watch = InertiaWatch((0.0,))
+    model_inertia, most = 1e-4, 5.0
+    designs = 0
+    for found in np.geomspace(1e-6, most, 2000):  # the estimate growing to its limit
+        armature = watch.due((found,), (model_inertia + found,), [0])
+        if armature is not None:
+            watch.designed_with(armature)
+            designs += 1
+            assert armature[0] == DESIGN_SHARE * found
+    bound = np.log((model_inertia + DESIGN_SHARE * most) / model_inertia) / np.log(GROWTH_FACTOR)
+    assert 1 <= designs <= bound + 1
+
+
+def test_the_design_options_read_back_as_the_design_took_them():
+    model = wrist_model()
+    d = gd.design(model, cl.Task.ORIENTATION, delays=(1, 2), cruise_fraction=0.7,
+                  friction_effort_share=0.02, approach_time_s=1.5,
+                  effort_limits_nm=[40.0, 25.0, 15.0])
+    assert d.structure()['design_options'] == list(d.options)
+    options = parse_design_options(d.options, model.n)
+    assert options == {'effort_limits_nm': [40.0, 25.0, 15.0], 'delays': (1, 2),
+                       'friction_learning': gd.FRICTION_LEARNING,
+                       'friction_effort_share': 0.02, 'cruise_fraction': 0.7,
+                       'approach_time_s': 1.5}
+    assert gd.design(model, cl.Task.ORIENTATION).options == ()  # the defaults: nothing
+
+
+@pytest.mark.parametrize('tokens, words', [
+    (['--delays', 'one'], "'one' is not an integer"),
+    (['--armature', '0.1'], 'unrecognized arguments: --armature 0.1'),
+    (['--effort-limits', '1', '2'], '--effort-limits: 2 values for 3 joints'),
+    (['--cruise-fraction', '2'], '2 is not a finite number in (0, 1]')])
+def test_bad_design_options_are_refused_by_name(tokens, words):
+    with pytest.raises(ValueError, match='design_options') as raised:
+        parse_design_options(tokens, 3)
+    assert words in str(raised.value)
+
+
+def wrist_values(armature: tuple = (0.0, 0.0, 0.0), **options) -> tuple:
+    """Return ``(design, parameters)`` of the wrist's design, as a node holds them."""
+    model = RobotModel(default_urdf_xml(), 'base_link', 'tool0', ['joint1', 'joint2', 'joint3'],
+                       list(armature))
+    d = gd.design(model, cl.Task.ORIENTATION, delays=(1, 2), **options)
+    return d, {**d.structure(), **d.parameters('tanh')}
+
+
+def test_a_design_again_is_design_gains_with_the_armature_and_the_same_options():
+    _, values = wrist_values(friction_nm=[1.8, 0.72, 0.45])
+    armature = (0.05, 0.0, 0.2)
+    new = redesign(default_urdf_xml(), values, armature)
+    told, _ = wrist_values(armature, friction_nm=[1.8, 0.72, 0.45])
+    expected = told.parameters('tanh')
+    assert new and not set(new) & KEPT
+    for name, value in new.items():
+        assert value == expected[name], name
+    assert new['kv'][2] > values['kv'][2]  # the heavier joint is damped harder
+    unchanged = {name for name, value in expected.items()
+                 if name not in KEPT and value == values[name]}
+    assert not unchanged & set(new)  # only what changes
+
+
+def test_the_worker_designs_in_a_process_of_its_own_and_says_why_it_cannot():
+    _, values = wrist_values()
+    worker = DesignWorker(default_urdf_xml())
+    try:
+        worker.submit(values, (0.0, 0.0, 0.1))
+        assert worker.busy
+        answer = wait_for(worker.poll)
+        assert answer == {'parameters': redesign(default_urdf_xml(), values, (0.0, 0.0, 0.1))}
+        assert not worker.busy
+        worker.submit({**values, 'design_options': ['--delays', 'x']}, (0.0, 0.0, 0.1))
+        answer = wait_for(worker.poll)
+        assert 'design_options' in answer['error'], answer
+    finally:
+        worker.close()
+
+
+def test_a_design_at_a_time_and_none_once_the_worker_is_gone():
+    _, values = wrist_values()
+    worker = DesignWorker(default_urdf_xml())
+    worker.submit(values, (0.0, 0.0, 0.1))
+    with pytest.raises(RuntimeError, match='a design is running'):
+        worker.submit(values, (0.0, 0.0, 0.1))  # one at a time
+    worker.close()  # the design running is stopped, and says so
+    assert 'the design worker exited' in wait_for(worker.poll)['error']
+    worker.submit(values, (0.0, 0.0, 0.1))  # refused at once, with the reason
+    assert 'the design worker exited' in wait_for(worker.poll)['error']
+    assert not worker.busy
+
+
+def wait_for(poll, timeout_s: float = WAIT_S):
+    """Return ``poll()``'s first answer (not None) within ``timeout_s``."""
+    deadline = time.monotonic() + timeout_s
+    while time.monotonic() < deadline:
+        answer = poll()
+        if answer is not None:
+            return answer
+        time.sleep(0.01)
+    raise AssertionError(f'no answer within {timeout_s} s')
+
+
+def test_the_controller_designs_again_for_an_untold_rotor_inertia_and_says_so():
+    """
+    The design's wrist on a MuJoCo wrist with 0.2 kg m^2 per joint nobody told.
+
+    The estimate settles, a design is started with half of it, and its parameters, set as the
+    node sets them, damp the joints for their real inertia; the goal is still reached.
+    """
+    pytest.importorskip('mujoco')
+    from wrist_sim.simulator import RobotSimulator
+    d, values = wrist_values()
+    model = RobotModel(default_urdf_xml(), 'base_link', 'tool0', list(d.joints))
+    reg = Regulator(model, cl.Task.ORIENTATION, d.gains('tanh'), shaping=d.shaping)
+    worker = DesignWorker(default_urdf_xml())
+    ctl = Controller(reg, 0.5, 1, started_ns=0, designer=worker,
+                     parameter_values=lambda: values)
+    assert ctl.on_goal(GoalRequest('base_link', Goal(paper.Q_DESIRED).xyzw(), (0.0, 0.0, 0.0),
+                                   0.0), 0).accepted
+    logs, designed = [], None
+    try:
+        with RobotSimulator(default_urdf_xml(), model.joint_names, engine='mujoco',
+                            armature=(0.2,) * 3, initial_positions_rad=paper.Q_INITIAL_RAD
+                            ) as sim:
+            k = 0
+            deadline = time.monotonic() + WAIT_S
+            while time.monotonic() < deadline and (designed is None or k < 12000):
+                k += 1
+                cmd = ctl.on_state(model.joint_names, sim.q_rad.tolist(),
+                                   sim.qdot_rad_s.tolist(), 0, 0, k * 1_000_000)
+                sim.step(cmd.tau_nm)
+                if k % 50 == 0 and designed is None:
+                    logs += ctl.take_model_notes()
+                    parameters, said = ctl.take_design()
+                    logs += said
+                    if parameters is not None:  # as the node: every value checked, then set
+                        values.update(parameters)
+                        made = controller_from_config(values, default_urdf_xml())
+                        reg.set_gains(made.gains)
+                        reg.set_shaping(made.shaping)
+                        logs += ctl.design_set(parameters)
+                        designed = parameters
+            error = ctl.last.orientation_error_norm
+    finally:
+        worker.close()
+    assert designed is not None, logs
+    text = [line for level, line in logs]
+    assert any(level == Severity.INFO and line.startswith('designing the gains again')
+               for level, line in logs), text
+    assert any(level == Severity.WARN and 'are being designed again' in line
+               for level, line in logs), text
+    assert any(line.startswith('gains designed again for armature') and 'kv' in line
+               for line in text), text
+    assert all(a > b for a, b in zip(designed['kv'], d.kv))  # damped for the heavier joints
+    assert error < 0.01  # and the goal reached with the new gains
+
+
+@pytest.mark.parametrize('potential', ['tanh', 'quadratic'])
+def test_gains_designed_for_half_the_plants_rotor_inertia_leave_v_non_increasing(potential):
+    """
+    The ideal loop with every extension of a design again, on a plant that is not the model.
+
+    The plant has 0.2 kg m^2 per joint; the model none, and the estimate 0.2 in M(q); the gains
+    are designed for 0.1 (half of it, as a design again takes).
+    """
+    model = wrist_model()
+    plant = RobotModel(default_urdf_xml(), 'base_link', 'tool0', list(model.joint_names),
+                       [0.2] * 3)
+    _, values = wrist_values()
+    values.update(redesign(default_urdf_xml(), values, (0.1, 0.1, 0.1)))
+    made = controller_from_config(values, default_urdf_xml(), potential)
+    q_goal = (0.5, 1.2, -0.4)
+    _, R = model.forward_kinematics(list(q_goal))
+    loop = ClosedLoop(model, made.gains, cl.Task.ORIENTATION, quat.from_rotation_matrix(R),
+                      shaping=made.shaping, q_star=q_goal, plant=plant)
+    model.set_armature_estimate((0.2, 0.2, 0.2))
+    traj = loop.run((0.2, 0.8, 0.3), 1.0, dt_s=1e-3)
+    dV = np.diff(traj.lyapunov)
+    assert dV.max() <= 1e-9 * traj.lyapunov[0], f'V increased by {dV.max()}'
+    assert traj.lyapunov[-1] < 0.5 * traj.lyapunov[0]
