@@ -64,16 +64,18 @@ def call_service(executor, client, request, timeout_s: float = 5.0, attempts: in
     raise AssertionError(f'no reply from service {client.service_name!r} after {attempts} calls')
 
 
-def children_of(pid: int) -> list[int]:
-    """Return the processes whose parent is ``pid`` (from /proc)."""
+def children_of(pid: int, module: str = '') -> list[int]:
+    """Return the processes whose parent is ``pid`` (from /proc), running ``module`` if given."""
     out = []
     for entry in os.listdir('/proc'):
         if entry.isdigit():
             try:
                 stat = Path(f'/proc/{entry}/stat').read_text()
+                command = Path(f'/proc/{entry}/cmdline').read_bytes().split(b'\0')
             except OSError:
                 continue
-            if int(stat.rsplit(')', 1)[1].split()[1]) == pid:
+            if (int(stat.rsplit(')', 1)[1].split()[1]) == pid
+                    and (not module or module.encode() in command)):
                 out.append(int(entry))
     return out
 

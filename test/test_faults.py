@@ -162,13 +162,14 @@ def test_kill9_of_the_controller_zeroes_the_torque_and_a_restart_recovers(pair):
     pair.start('wrist_sim_node')
     ctrl = pair.start('controller_node')
     pair.running()
-    pair.spin_until(lambda: children_of(ctrl.pid), 10.0, 'the goal-check worker')
+    pair.spin_until(lambda: len(children_of(ctrl.pid)) == 2, 10.0,
+                    'the goal-check and design workers')
     workers = children_of(ctrl.pid)
     ctrl.kill()
     ctrl.wait()
     wait_log(pair, 'wrist_sim_node', r'no command for [0-9.]+ s .*torque set to zero')
-    # The goal-check worker does not outlive its controller.
-    pair.spin_until(lambda: not any(alive(w) for w in workers), 10.0, 'the worker to exit')
+    # The goal-check and design workers do not outlive their controller.
+    pair.spin_until(lambda: not any(alive(w) for w in workers), 10.0, 'the workers to exit')
     restarted = time.monotonic()
     pair.start('controller_node', 'controller_restarted')
     pair.spin_until(pair.commands_flow(restarted), 30.0, 'commands from the new controller')
@@ -327,15 +328,16 @@ def test_the_goal_check_worker_ignores_ctrl_c_and_comes_back_when_it_dies(pair):
     pair.start('wrist_sim_node')
     ctrl = pair.start('controller_node')
     pair.running('controller_node')
-    pair.spin_until(lambda: children_of(ctrl.pid), 10.0, 'the goal-check worker')
-    [first] = children_of(ctrl.pid)
+    checker = 'quat_jt_controller.goal_check'  # the design worker is a child too
+    pair.spin_until(lambda: children_of(ctrl.pid, checker), 10.0, 'the goal-check worker')
+    [first] = children_of(ctrl.pid, checker)
     os.kill(first, signal.SIGKILL)
     wait_log(pair, 'controller_node', r'\[ERROR\].*goal-check worker exited')
     since = time.monotonic()
     pair.spin_until(pair.commands_flow(since, 200), 10.0, 'commands while the worker is down')
-    pair.spin_until(lambda: [w for w in children_of(ctrl.pid) if w != first and alive(w)],
-                    30.0, 'the restarted worker')
-    [second] = [w for w in children_of(ctrl.pid) if w != first and alive(w)]
+    pair.spin_until(lambda: [w for w in children_of(ctrl.pid, checker)
+                             if w != first and alive(w)], 30.0, 'the restarted worker')
+    [second] = [w for w in children_of(ctrl.pid, checker) if w != first and alive(w)]
     # Started from the node's real-time thread, it still runs with normal scheduling.
     assert set(thread_policies(second).values()) == {('other', 0)}, second
     os.kill(second, signal.SIGINT)

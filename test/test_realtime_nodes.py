@@ -168,8 +168,8 @@ def test_composed_nodes_share_one_pinning_and_the_highest_priority(monkeypatch):
 
 @pytest.mark.dds
 @linux_only
-def test_both_nodes_run_every_thread_at_their_priority_but_the_worker(tmp_path):
-    """By default (50) in real time; read-only; the goal-check worker at normal scheduling."""
+def test_both_nodes_run_every_thread_at_their_priority_but_the_workers(tmp_path):
+    """By default (50) in real time; read-only; the goal-check and design workers not."""
     allowed = fifo_allowed(realtime.DEFAULT_THREAD_PRIORITY)
     h = _Harness(tmp_path)
     try:
@@ -190,7 +190,8 @@ def test_both_nodes_run_every_thread_at_their_priority_but_the_worker(tmp_path):
             h.spin_until(res.done, 10.0, 'set thread_priority')
             assert not res.result().results[0].successful  # read-only
         ctrl = h.procs['controller_node'].pid
-        h.spin_until(lambda: children_of(ctrl), 30.0, 'the goal-check worker')
+        h.spin_until(lambda: len(children_of(ctrl)) == 2, 30.0,
+                     'the goal-check and design workers')
         for worker in children_of(ctrl):
             assert set(thread_policies(worker).values()) == {('other', 0)}, worker
     finally:
