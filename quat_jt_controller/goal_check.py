@@ -25,7 +25,7 @@ from quat_jt_controller.inverse_kinematics import RESIDUAL_TOLERANCE, search_goa
 from quat_jt_controller.inverse_kinematics import Search, SINGULAR_SIGMA_MIN, solve_ik, starts
 from quat_jt_controller.model import GRAVITY_RESERVE_SHARE, RobotModel
 from quat_jt_runtime.payload import Payload
-from quat_jt_runtime.worker import quiet_worker, start_worker
+from quat_jt_runtime.worker import quiet_worker, read_json_lines, start_worker
 
 
 def singular_warning(q: Sequence[float], sigma_min: float) -> str:
@@ -192,11 +192,7 @@ class GoalCheckWorker:
             return False  # the reader sees the end of its output and reports the exit
 
     def _read(self, proc: subprocess.Popen) -> None:
-        for line in proc.stdout:
-            try:
-                self._done.put(json.loads(line))
-            except ValueError:
-                pass
+        read_json_lines(proc.stdout, self._done.put)
         self._done.put({'exited': proc})
 
     def submit(self, key: object, q_measured: Optional[Sequence[float]],

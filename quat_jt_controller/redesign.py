@@ -190,11 +190,8 @@ class DesignWorker:
                 self._answers.put({'error': self._gone})
 
     def _read(self, proc: subprocess.Popen) -> None:
-        for line in proc.stdout:
-            try:
-                self._answers.put(json.loads(line))
-            except ValueError:
-                pass
+        from quat_jt_runtime.worker import read_json_lines
+        read_json_lines(proc.stdout, self._answers.put)
         self._gone = f'the design worker exited (status {proc.wait()})'
         if self._busy:
             self._answers.put({'error': self._gone})

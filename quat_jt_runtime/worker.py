@@ -4,10 +4,12 @@ Worker processes of a node: slow model work (a goal check, a gain design) off it
 :func:`start_worker` starts ``python -m <module>`` as the node's goal-check and design workers
 are started, and :func:`quiet_worker` is the first thing such a worker does. ROS-free.
 """
+import json
 import os
 import signal
 import subprocess
 import sys
+from typing import Any, Callable, Iterable
 
 from quat_jt_runtime.realtime import start_at_normal_scheduling
 
@@ -41,3 +43,12 @@ def quiet_worker() -> None:
         os.nice(WORKER_NICE)
     except OSError:
         pass
+
+
+def read_json_lines(lines: Iterable[str], put: Callable[[Any], None]) -> None:
+    """Give ``put`` each JSON line of a worker's output until it ends; skip what is not JSON."""
+    for line in lines:
+        try:
+            put(json.loads(line))
+        except ValueError:
+            pass
