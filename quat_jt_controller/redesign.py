@@ -40,10 +40,11 @@ SETTLED_SHARE = 0.05  # an estimate within this share of what it was SETTLED_S b
 SETTLED_S = 1.0
 DESIGN_SHARE = 0.5  # of the rotor inertia found, what the design takes
 # a design again when it would design a joint for more than this x the inertia its gains were
-# designed for: the first, for a joint that shows more than 1 + GROWTH... (twice) its model's
+# designed for: the first time, for a joint that shows more than twice its model's inertia
+# (its model plus DESIGN_SHARE of the rest above 1.5 x its model)
 GROWTH_FACTOR = 1.5
-# Parameters the design reads, or the user chooses, that a design again does not set
 CLOSE_WAIT_S = 2.0  # a worker that does not end this long after its input closes is killed
+# Parameters the design reads, or the user chooses, that a design again does not set
 KEPT = frozenset(('potential', 'gravity_compensation', 'friction_compensation',
                   'preferred_configuration', 'posture_weight', 'goal_velocity_gain',
                   'gain_redesign'))
