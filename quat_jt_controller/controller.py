@@ -178,7 +178,6 @@ class Controller:
         self._inertia = InertiaWatch(model.armature, started_ns * 1e-9)
         self.designer = designer
         self._parameter_values = parameter_values
-        self._designing: tuple[float, ...] = ()  # the armature of the design running
         self._no_state_warn_ns = started_ns + NO_STATE_WARN_NS  # the next warning, if none yet
         # what goes out
         self._decimation = 0
@@ -559,7 +558,6 @@ class Controller:
         if armature is None:
             return NO_LOGS
         self._inertia.designed_with(armature)  # tried once: not again for the same
-        self._designing = armature
         designer.submit(self._parameter_values(), armature)
         names = self.regulator.model.joint_names
         return (LogLine(Severity.INFO, (
@@ -582,13 +580,13 @@ class Controller:
         if 'error' in answer:
             return None, (LogLine(Severity.WARN, (
                 f'the gains could not be designed again with armature '
-                f'[{_values(self._designing)}]: '
+                f'[{_values(self._inertia.designed)}]: '
                 f'{answer["error"]}; they stay as they are')),)
         return dict(answer['parameters']), NO_LOGS
 
     def design_set(self, parameters: Mapping[str, Any], error: str = '') -> tuple[LogLine, ...]:
         """Say that the parameters of a design again are in force (or why they are not)."""
-        told, armature = self._inertia.told, self._designing
+        told, armature = self._inertia.told, self._inertia.designed
         if error:
             return (LogLine(Severity.WARN, (
                 f'the gains designed again with armature [{_values(armature)}] were not set: '

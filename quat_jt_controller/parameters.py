@@ -46,7 +46,6 @@ class StructuralConfig(WithDescription):
     state_rate_hz: float
     publish_rate_divider: int
     prewarm_lead_s: float  # 0: no throwaway tick before each state
-    design_options: tuple[str, ...] = ()  # design_gains' options no other parameter holds
 
     @classmethod
     def create(cls, values: Mapping[str, Any],
@@ -67,8 +66,8 @@ class StructuralConfig(WithDescription):
         resolution = table.POSITION_RESOLUTION.check(values['position_resolution'],
                                                      {'n': len(joints)})
         state_rate_hz = check_state_rate(values['state_rate'])
-        design_options = tuple(values.get('design_options') or ())
-        parse_design_options(design_options, len(joints))  # ValueError names a bad one
+        # read by a design again (design_inputs); checked here, so a bad one stops the start
+        parse_design_options(tuple(values.get('design_options') or ()), len(joints))
         return cls(task=task, joints=joints, base_link=values['base_link'],
                    tip_link=values['tip_link'], armature=armature,
                    position_resolution=resolution,
@@ -77,8 +76,7 @@ class StructuralConfig(WithDescription):
                    max_state_age_s=float(values['max_state_age']),
                    state_rate_hz=state_rate_hz,
                    publish_rate_divider=int(values['publish_rate_divider']),
-                   prewarm_lead_s=float(values['prewarm_lead']),
-                   design_options=design_options)
+                   prewarm_lead_s=float(values['prewarm_lead']))
 
 
 def declare_structural(node: Node) -> StructuralConfig:
