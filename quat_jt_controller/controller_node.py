@@ -115,6 +115,8 @@ class QuatJtController(Node):
         for line in parameters.describe_start(cfg, reg, self._state_sub.topic_name) + [
                 describe_prewarm(cfg.prewarm_lead_s, off)]:
             self.get_logger().info(line)
+        for line in diagnostics.start_warnings(reg):
+            self.get_logger().warn(line)
 
     def _on_identify_payload(self, request: Trigger.Request, response: Trigger.Response
                              ) -> Trigger.Response:

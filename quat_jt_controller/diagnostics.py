@@ -5,7 +5,7 @@ Each function returns ``(level, message, [(key, value)])`` with levels OK, WARN,
 values of diagnostic_msgs/DiagnosticStatus); the node only wraps them into messages.
 """
 from dataclasses import dataclass
-from math import nan
+from math import isfinite, nan
 from typing import NamedTuple, Optional, Sequence
 
 from quat_jt_controller.regulator import Goal, Regulator, TickOutput
@@ -47,6 +47,18 @@ def graph_warnings(command_topic: str, command_publishers: int, node_name: str,
         warnings.append(f'{nodes_with_that_name} nodes are named {node_name}: parameters and '
                         'goals reach them both; give each its own name')
     return warnings
+
+
+def start_warnings(regulator: Regulator) -> list[str]:
+    """Return, for the log at start-up, what the URDF leaves out that the guards need."""
+    model = regulator.model
+    none = [name for name, v in zip(model.joint_names, model.velocity_limits)
+            if not (isfinite(v) and v > 0.0)]
+    if not none:
+        return []
+    return [f'no velocity limit in the URDF (0 or none) for joints {none}: the speed guard does '
+            "not hold them back (docs/lyapunov.md, section 6). Give the drives' velocity limits "
+            'in the URDF']
 
 
 def command_order_problem(joints: Sequence[str], receiver: str,

@@ -862,20 +862,32 @@ def inertia_warnings(model: RobotModel, effort: np.ndarray, inertia: np.ndarray)
 
 def speed_warnings(model: RobotModel) -> list[str]:
     """
-    Warn of URDF velocity limits no drive has (above PLAUSIBLE_SPEED_RAD_S): placeholders.
+    Warn of URDF velocity limits no drive has: placeholders, and none at all.
 
     The speed rule and the speed guard hold a joint to 0.8 of its URDF limit; a placeholder
-    holds nothing back, so a light joint that the others carry may be thrown into its stops
-    (iCub's arm, docs/reach.md, "the stop guard").
+    (above PLAUSIBLE_SPEED_RAD_S) holds nothing back, so a light joint that the others carry
+    may be thrown into its stops (iCub's arm, docs/reach.md, "the stop guard"). A joint without
+    a limit (0 in the URDF, or a continuous joint without one) is designed for
+    DEFAULT_VELOCITY, and the speed guard leaves it alone.
     """
-    fast = [f'{name} ({v:g} rad/s)' for name, v in zip(model.joint_names, model.velocity_limits)
+    pairs = list(zip(model.joint_names, model.velocity_limits))
+    fast = [f'{name} ({v:g} rad/s)' for name, v in pairs
             if isfinite(v) and v > PLAUSIBLE_SPEED_RAD_S]
-    if not fast:
-        return []
-    return [f'velocity limits no drive has: {", ".join(fast)}, likely placeholders. The speeds '
+    none = [name for name, v in pairs if not (isfinite(v) and v > 0.0)]
+    warnings = []
+    if fast:
+        warnings.append(
+            f'velocity limits no drive has: {", ".join(fast)}, likely placeholders. The speeds '
             'are held to 0.8 of the URDF limits, so on these joints nothing holds them back '
             'but the damping, and a light joint the others carry may be thrown into its '
-            "stops. Give the drives' real velocity limits in the URDF"]
+            "stops. Give the drives' real velocity limits in the URDF")
+    if none:
+        warnings.append(
+            f'no velocity limit in the URDF (0 or none): {", ".join(none)}. They are designed '
+            f'to cruise at a share of {DEFAULT_VELOCITY:.3g} rad/s, and the speed guard does '
+            "not hold them back; a drive that faults on speed may. Give the drives' velocity "
+            'limits in the URDF')
+    return warnings
 
 
 def learning_warnings(model: RobotModel, friction: np.ndarray, learning: np.ndarray,

@@ -23,6 +23,7 @@ and everything built on them.
 """
 from math import cos, sin
 from typing import Optional, Sequence
+from xml.etree import ElementTree
 
 import numpy as np
 try:
@@ -34,7 +35,7 @@ except ModuleNotFoundError as exc:  # e.g. a colcon workspace whose rosdep skipp
         'repository') from exc
 
 from quat_jt_runtime.errors import checked_vector, QuatJtError
-from quat_jt_runtime.joints import fixed_joints, movable_joints, select_joints
+from quat_jt_runtime.joints import fixed_joints, joint_rows, movable_joints, select_joints
 from quat_jt_runtime.payload import Payload, PAYLOAD_RADIUS_M
 
 # sigma_min of the task Jacobian (J_o, J_G or J_p), its position rows divided by the arm's
@@ -46,10 +47,115 @@ SINGULAR_SIGMA_MIN = 0.05
 # needs more somewhere within its limits is designed for the rest, with a warning), and past
 # which the goal check warns that a goal's pose may not be held up
 GRAVITY_RESERVE_SHARE = 0.75
+# a link's rotational inertia may have an eigenvalue down to -(this x its trace + the floor):
+# a CAD export's rounding; below, no body has it (inertial_problems)
+INERTIA_TOLERANCE = 1e-6
+INERTIA_FLOOR_KG_M2 = 1e-12
+NOT_EXPANDED = ('it is a xacro file, not expanded: run xacro on it first (xacro FILE.xacro > '
+                'FILE.urdf), or give the robot_description its launch file makes')
 
 
 class ModelError(QuatJtError):
     """The URDF, or the links and joints asked of it, cannot make a controllable model."""
+
+
+def limit_problems(urdf_xml: str) -> list[str]:
+    """
+    Return what the URDF parser refuses in a URDF's joints, one line each; [] if nothing.
+
+    The URDF format asks each revolute and prismatic joint for a ``<limit>`` with ``effort``
+    and ``velocity`` (``lower`` and ``upper`` default to 0), numbers all. urdfdom, which
+    Pinocchio and ROS read a URDF with, refuses the whole file otherwise, and its message names
+    neither the joint nor the attribute. A xacro file not expanded (an element in a namespace
+    named xacro, or ``${`` in a value) is said so: nothing else of it is read.
+    """
+    try:
+        root = ElementTree.fromstring(urdf_xml)
+    except ElementTree.ParseError:
+        return []
+    if any('xacro' in str(e.tag).partition('}')[0] or
+           any('${' in v for v in e.attrib.values()) for e in root.iter()):
+        return [NOT_EXPANDED]
+    no_limit, missing, not_numbers = [], {'effort': [], 'velocity': []}, []
+    for joint in root.iter('joint'):
+        name = joint.get('name')
+        if joint.get('type') not in ('revolute', 'prismatic'):
+            continue
+        limit = joint.find('limit')
+        if limit is None:
+            no_limit.append(name)
+            continue
+        for attribute, names in missing.items():
+            if limit.get(attribute) is None:
+                names.append(name)
+        for attribute in ('effort', 'velocity', 'lower', 'upper'):
+            try:
+                float(limit.get(attribute, 0.0))
+            except ValueError:
+                not_numbers.append(f'{name} {attribute}="{limit.get(attribute)}"')
+    asked = ' (the URDF format asks each revolute and prismatic joint for a <limit> with ' \
+        'effort and velocity; 0 says none is given)'
+    problems = [f'joints {no_limit} have no <limit>{asked}'] if no_limit else []
+    problems += [f'joints {names} have no {attribute} in their <limit>{asked}'
+                 for attribute, names in missing.items() if names]
+    if not_numbers:
+        problems.append(f'limits that are not numbers: {", ".join(not_numbers)}')
+    return problems
+
+
+def inertial_problems(urdf_xml: str, joints: Sequence[str]) -> list[str]:
+    """
+    Return the links that ``joints`` move whose ``<inertial>`` no body has, one line each.
+
+    A mass or a moment that is not a number, is not finite, a negative mass, or a rotational
+    inertia with a negative eigenvalue (below ``-INERTIA_TOLERANCE`` x its trace, less an
+    absolute ``INERTIA_FLOOR_KG_M2``: a CAD export's rounding passes). Pinocchio takes such a
+    link as it comes, or as a link without mass when the value is no number, so M(q) and g(q)
+    would be wrong with no message. Links the joints do not move (a robot's base, its other
+    limbs) are not read: a fault there does not reach the arm's model.
+    """
+    root = ElementTree.fromstring(urdf_xml)
+    rows = joint_rows(urdf_xml)
+    children: dict[str, list[str]] = {}
+    for _, _, parent, child in rows:
+        children.setdefault(parent, []).append(child)
+    moved: set[str] = set()
+    stack = [child for name, _, _, child in rows if name in set(joints)]
+    while stack:
+        link = stack.pop()
+        if link not in moved:
+            moved.add(link)
+            stack.extend(children.get(link, []))
+    problems = []
+    for link in root.iter('link'):
+        name, inertial = link.get('name'), link.find('inertial')
+        if name not in moved or inertial is None:
+            continue
+        try:
+            mass = float(inertial.find('mass').get('value', 'nan')
+                         if inertial.find('mass') is not None else 0.0)
+            moments = inertial.find('inertia')
+            values = {k: float(moments.get(k, 0.0)) if moments is not None else 0.0
+                      for k in ('ixx', 'ixy', 'ixz', 'iyy', 'iyz', 'izz')}
+        except ValueError as exc:  # float's message quotes the text
+            problems.append(f'link {name!r}: a value of its <inertial> is not a number ('
+                            f'{str(exc).rpartition(": ")[2]})')
+            continue
+        if not (np.isfinite(mass) and mass >= 0.0):
+            problems.append(f'link {name!r}: mass {mass:g} kg (a mass is finite and >= 0)')
+            continue
+        inertia = np.array([[values['ixx'], values['ixy'], values['ixz']],
+                            [values['ixy'], values['iyy'], values['iyz']],
+                            [values['ixz'], values['iyz'], values['izz']]])
+        if not np.all(np.isfinite(inertia)):
+            problems.append(f'link {name!r}: an inertia moment is not finite')
+            continue
+        lowest = float(np.linalg.eigvalsh(inertia)[0])
+        if lowest < -(INERTIA_TOLERANCE * max(float(np.trace(inertia)), 0.0)
+                      + INERTIA_FLOOR_KG_M2):
+            problems.append(f'link {name!r}: its inertia has a negative principal moment '
+                            f'({lowest:.3g} kg m^2)')
+    return problems
 
 
 class RobotModel:
@@ -81,11 +187,18 @@ class RobotModel:
         # what Pinocchio's buildReducedModel computes, without its lookup of frames by name
         # alone (it stops on a link and a joint of the same name).
         locked = [n for n in movable if n not in joint_names]
+        if limit_problems(urdf_xml) == [NOT_EXPANDED]:  # Pinocchio skips what it cannot read
+            raise ModelError(f'cannot parse the URDF: {NOT_EXPANDED}')
         try:
             model = pin.buildModelFromXML(fixed_joints(urdf_xml, locked) if locked
                                           else urdf_xml)
         except Exception as exc:  # Pinocchio raises plain RuntimeError/ValueError
-            raise ModelError(f'cannot parse the URDF: {exc}') from exc
+            why = '; '.join(limit_problems(urdf_xml)) or str(exc)
+            raise ModelError(f'cannot parse the URDF: {why}') from exc
+        unfit = inertial_problems(urdf_xml, joint_names)
+        if unfit:
+            raise ModelError(f'no body has these inertias: {"; ".join(unfit)}. Correct them in '
+                             'the URDF')
         for name in (base_link, tip_link):
             if not model.existFrame(name, pin.BODY):
                 what = (' (it names a joint; give the link)'

@@ -258,6 +258,25 @@ def test_the_design_warns_of_velocity_limits_no_drive_has():
     assert 'joint1' not in warned[0] and 'joint3' not in warned[0]
 
 
+def test_the_design_and_the_node_warn_of_joints_without_a_velocity_limit():
+    """Velocity 0 in a URDF (a CAD export writes it) says none: designed for 2 pi, unguarded."""
+    from quat_jt_controller.diagnostics import start_warnings
+    from quat_jt_controller.regulator import Regulator
+    stock = gd.design(wrist_model(), cl.Task.ORIENTATION)
+    assert not [w for w in stock.figures['warnings'] if w.startswith('no velocity limit')]
+    assert start_warnings(Regulator(wrist_model(), cl.Task.ORIENTATION, stock.gains())) == []
+    urdf = default_urdf_xml()
+    unlimited = urdf.replace('effort="30.0" velocity="6.2832"', 'effort="30.0" velocity="0"')
+    assert unlimited != urdf
+    model = RobotModel(unlimited, 'base_link', 'tool0')
+    design = gd.design(model, cl.Task.ORIENTATION)
+    warned = [w for w in design.figures['warnings'] if w.startswith('no velocity limit')]
+    assert len(warned) == 1 and ': joint2.' in warned[0] and '6.28 rad/s' in warned[0]
+    assert design.figures['velocity_limits_rad_s'][1] == pytest.approx(gd.DEFAULT_VELOCITY)
+    at_start = start_warnings(Regulator(model, cl.Task.ORIENTATION, design.gains()))
+    assert len(at_start) == 1 and "['joint2']" in at_start[0]
+
+
 def test_the_learnable_friction_comes_out_of_the_budget():
     model = wrist_model()
     friction = [1.8, 0.72, 0.45]

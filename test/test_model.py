@@ -137,6 +137,56 @@ def test_bad_urdf_is_a_model_error():
         RobotModel('<robot name="x"><link name="a"/', 'a', 'a')
 
 
+@pytest.mark.parametrize('old, new, match', [
+    ('effort="30.0" velocity="6.2832"', 'effort="30.0"',
+     r"joints \['joint2'\] have no velocity in their <limit> \(the URDF format asks"),
+    ('<limit lower="-2.6" upper="2.6" effort="30.0" velocity="6.2832"/>', '',
+     r"joints \['joint2'\] have no <limit>"),
+    ('effort="30.0"', 'effort="thirty"', r'not numbers: joint2 effort="thirty"'),
+    ('velocity="6.2832"/>', 'velocity="${max_speed}"/>', 'a xacro file, not expanded'),
+    ('</robot>', '<xacro:include xmlns:xacro="http://wiki.ros.org/xacro" filename="a.xacro"/>'
+     '</robot>', 'a xacro file, not expanded'),
+])
+def test_a_urdf_the_parser_refuses_is_refused_naming_the_joint_and_the_value(old, new, match):
+    """The URDF parser says only that the file is no URDF; the model names what in it is not."""
+    urdf = default_urdf_xml()
+    assert old in urdf
+    with pytest.raises(ModelError, match=match):
+        RobotModel(urdf.replace(old, new, 1), 'base_link', 'tool0')
+
+
+@pytest.mark.parametrize('old, new, match', [
+    ('<mass value="2.0"/>', '<mass value="nan"/>', r"'link2': mass nan kg"),
+    ('<mass value="2.0"/>', '<mass value="-2.0"/>', r"'link2': mass -2 kg"),
+    ('<mass value="2.0"/>', '<mass value="two"/>', r"'link2': a value of its <inertial> is "
+     r"not a number \('two'\)"),
+    ('ixx="0.025" ixy="0"', 'ixx="0.025" ixy="0.1"', r"'link2': its inertia has a negative "
+     'principal moment'),
+    ('ixx="0.025"', 'ixx="inf"', "'link2': an inertia moment is not finite"),
+])
+def test_inertias_no_body_has_are_refused_on_the_links_the_joints_move(old, new, match):
+    """
+    Pinocchio takes a negative mass as it comes, and one that is no number as none at all.
+
+    The same fault on a link the controlled joints do not move (here the base) does not reach
+    the arm's model: accepted, as a whole robot's URDF with a faulty link elsewhere is.
+    """
+    urdf = default_urdf_xml()
+    assert old in urdf
+    with pytest.raises(ModelError, match=match):
+        RobotModel(urdf.replace(old, new, 1), 'base_link', 'tool0')
+    base = urdf.replace('<mass value="8.0"/>', new.replace('2.0', '8.0')
+                        if 'mass' in new else '<mass value="8.0"/>', 1)
+    base = base.replace('ixx="0.1" ixy="0"', new.replace('0.025', '0.1')
+                        if 'ixx' in new else 'ixx="0.1" ixy="0"', 1)
+    RobotModel(base, 'base_link', 'tool0')
+    # a CAD export's rounding: a principal moment a hair below zero passes
+    rounded = urdf.replace('ixx="1e-7" ixy="0"', 'ixx="1e-7" ixy="1.0000001e-7"', 1)
+    assert np.linalg.eigvalsh([[1e-7, 1.0000001e-7, 0], [1.0000001e-7, 1e-7, 0],
+                               [0, 0, 1e-7]])[0] < 0.0
+    RobotModel(rounded, 'base_link', 'tool0')
+
+
 def test_inverse_inertia_is_the_inverse_of_m_in_the_callers_order():
     """M(q)^-1 as rows, symmetric, the armature in, for the chain's order and a permuted one."""
     xml = default_urdf_xml()
