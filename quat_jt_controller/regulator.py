@@ -42,10 +42,10 @@ MAX_LEARNING_STEP_S = 0.01  # a longer gap between ticks advances the friction l
 # The period the fade tops assume (shaping.fade_tops) is the longest recent time step (at most
 # the above), kept x this per tick: a burst of close states does not shorten it at once
 TICK_MEMORY = 0.999
-# A q* far from the last one (a step of up to T_j on every joint) fades in over this, so that a
-# heavy joint's step does not jolt a light one past its velocity limit through the coupling of
-# M(q) before the damping sees the motion, nor the heavy joints' rise to their cruise carry it
-# there (docs/lyapunov.md, section 5)
+# A q* far from the last one (a step of up to T_j on every joint), or a T_j raised live (from
+# the term in force), fades in over this, so that a heavy joint's step does not jolt a light
+# one past its velocity limit through the coupling of M(q) before the damping sees the motion,
+# nor the heavy joints' rise to their cruise carry it there (docs/lyapunov.md, section 5)
 CONFIGURATION_FADE_IN_S = 0.25
 
 
@@ -298,7 +298,10 @@ class Regulator:
         self._own = [0.0] * self.n  # M_jj(q) this tick (with the inertial damping)
         self._seen = [0.0] * self.n  # ... and 1 / (M(q)^-1)_jj
         self._tick_s = 0.0  # the period the fade tops assume (s; TICK_MEMORY)
-        self._lead_in = 1.0  # the share of U_c in force (CONFIGURATION_FADE_IN_S)
+        # per joint, the share of U_c in force (CONFIGURATION_FADE_IN_S), and whether some
+        # share is below 1
+        self._lead_in = [1.0] * self.n
+        self._fading = False
         self._lead_in_q_star: Optional[tuple[float, ...]] = None  # the q* it last saw
         self._lead_in_shaping: Optional[sh.Shaping] = None  # ... and the shaping it last used
         self._fade_top = [sh.FADE_TOP_FRACTION * v for v in self._speed_cap]
@@ -517,31 +520,51 @@ class Regulator:
         """
         Fade U_c in over CONFIGURATION_FADE_IN_S (ticks with a time step only).
 
-        The share restarts from 0 for a q* further than the ramp from the last one in some
-        joint (or the first), and for larger gains ``T_j`` set live; a q* that moves less (a
-        streamed goal's) keeps it. While no q* is in force (a new goal's, until the goal
-        check gives it) the share falls at the rate it rises, so a q* that comes back near
-        the last one after a gap returns at the share the gap left.
+        Each joint's share restarts from 0 for a q* further than the ramp from the last one in
+        some joint (or the first); a q* that moves less (a streamed goal's) keeps them. A gain
+        ``T_j`` raised live keeps the term in force where it was, ``s_j T_j`` (its share
+        scaled by the old gain over the new), and rises from there: neither a step up nor a
+        drop to nothing (a design again, ``redesign.py``, raises them at rest). While no q* is
+        in force (a new goal's, until the goal check gives it) the shares fall at the rate
+        they rise, so a q* that comes back near the last one after a gap returns at the
+        shares the gap left.
         """
         rate = step_s / CONFIGURATION_FADE_IN_S
+        shares = self._lead_in
+        n = self.n
         if q_star is None:
-            lead_in = self._lead_in - rate
-            self._lead_in = lead_in if lead_in > 0.0 else 0.0
+            for j in range(n):
+                share = shares[j] - rate
+                shares[j] = share if share > 0.0 else 0.0
+            self._fading = True
             return
         before = self._lead_in_shaping
         if shaping is not before:  # a new set of parameters (immutable): compare T_j once
-            if before is not None and any(t > t_old for t, t_old in zip(
-                    shaping.configuration_gain, before.configuration_gain)):
-                self._lead_in = 0.0
+            if before is not None:
+                for j, (t, t_old) in enumerate(zip(shaping.configuration_gain,
+                                                   before.configuration_gain)):
+                    if t > t_old:
+                        shares[j] *= max(t_old, 0.0) / t
+                        self._fading = True
             self._lead_in_shaping = shaping
         last = self._lead_in_q_star
         if q_star is not last:
             ramp_rad = shaping.configuration_ramp_rad
             if last is None or any(abs(a - b) > ramp_rad for a, b in zip(q_star, last)):
-                self._lead_in = 0.0
+                for j in range(n):
+                    shares[j] = 0.0
+                self._fading = True
             self._lead_in_q_star = q_star
-        lead_in = self._lead_in + rate
-        self._lead_in = lead_in if lead_in < 1.0 else 1.0
+        if self._fading:
+            fading = False
+            for j in range(n):
+                share = shares[j] + rate
+                if share < 1.0:
+                    shares[j] = share
+                    fading = True
+                else:
+                    shares[j] = 1.0
+            self._fading = fading
 
     def _band_at(self, band: Optional[sh.LimitBand],
                  q_star: Optional[tuple[float, ...]]) -> Optional[sh.LimitBand]:

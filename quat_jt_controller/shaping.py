@@ -599,19 +599,22 @@ def learn_friction(learned_nm: list[float], stuck: Sequence[float], phi: float,
 
 
 def add_configuration_torque(q: Sequence[float], q_star: Sequence[float], shaping: Shaping,
-                             tau: list[float], share: float = 1.0) -> None:
+                             tau: list[float], shares: Optional[Sequence[float]] = None
+                             ) -> None:
     """
-    Add -grad (share U_c)(q) to ``tau`` in place (docs/lyapunov.md, section 5).
+    Add -grad (sum_j s_j U_c,j)(q) to ``tau`` in place (docs/lyapunov.md, section 5).
 
     Per joint, ``x = max(0, |q - q*| - r)``; the torque is ``-sign(q - q*) T min(x / w, 1)``
-    (``r`` the radius, ``w`` the ramp), times ``share`` (in [0, 1]: the term fading in).
+    (``r`` the radius, ``w`` the ramp), times the joint's share ``s_j`` (in [0, 1]: the term
+    fading in; all 1 if None).
     """
     r = shaping.configuration_radius_rad
     w = shaping.configuration_ramp_rad
     for j, t in enumerate(shaping.configuration_gain):
         if t <= 0.0:
             continue
-        t *= share
+        if shares is not None:
+            t *= shares[j]
         d = q[j] - q_star[j]
         x = abs(d) - r
         if x > 0.0:

@@ -187,8 +187,9 @@ def test_a_far_new_q_star_fades_in_and_a_near_one_keeps_its_share():
     docs/lyapunov.md, section 5: U_c rises over CONFIGURATION_FADE_IN_S after a far q*.
 
     A near q* (a streamed goal's) keeps the share; while no q* is in force it falls at the
-    rate it rises; gains raised live restart it. Evaluations without a time step (the ideal
-    loop) apply U_c whole.
+    rate it rises; a gain raised live keeps the joint's term where it was and rises from
+    there, the other joints' untouched. Evaluations without a time step (the ideal loop) apply
+    U_c whole.
     """
     model = wrist_model()
     unlimited = [math.inf] * 3
@@ -228,8 +229,14 @@ def test_a_far_new_q_star_fades_in_and_a_near_one_keeps_its_share():
         np.testing.assert_allclose(guide(reg), [0.0, 0.0, 0.0], atol=1e-12)
     reg.set_goal_configuration(goal, [1.3, 1.6, 1.29])  # back near the last q*
     np.testing.assert_allclose(guide(reg), [2.0 * (ticks - 29) * share] * 3, atol=1e-12)
-    reg.set_shaping(sh.Shaping.create(3, configuration_gain=(2.0, 2.0, 3.0)))  # raised live
-    np.testing.assert_allclose(guide(reg), [2.0 * share, 2.0 * share, 3.0 * share], atol=1e-12)
+    for _ in range(ticks):  # (to the full share)
+        guide(reg)
+    reg.set_shaping(sh.Shaping.create(3, configuration_gain=(2.0, 1.0, 3.0)))  # set live
+    # joint3 raised: 2 N m still in force, then rising by 3 N m a fade; joint2 lowered: at once
+    np.testing.assert_allclose(guide(reg), [2.0, 1.0, 2.0 + 3.0 * share], atol=1e-12)
+    for _ in range(ticks):
+        torque = guide(reg)
+    np.testing.assert_allclose(torque, [2.0, 1.0, 3.0], atol=1e-12)
 
 
 def xarm6_case(seed: int, speed: float):
