@@ -120,7 +120,8 @@ def inertial_problems(urdf_xml: str, joints: Sequence[str]) -> list[str]:
     for _, _, parent, child in rows:
         children.setdefault(parent, []).append(child)
     moved: set[str] = set()
-    stack = [child for name, _, _, child in rows if name in set(joints)]
+    wanted = set(joints)
+    stack = [child for name, _, _, child in rows if name in wanted]
     while stack:
         link = stack.pop()
         if link not in moved:
@@ -131,10 +132,9 @@ def inertial_problems(urdf_xml: str, joints: Sequence[str]) -> list[str]:
         name, inertial = link.get('name'), link.find('inertial')
         if name not in moved or inertial is None:
             continue
+        mass_node, moments = inertial.find('mass'), inertial.find('inertia')
         try:
-            mass = float(inertial.find('mass').get('value', 'nan')
-                         if inertial.find('mass') is not None else 0.0)
-            moments = inertial.find('inertia')
+            mass = float(mass_node.get('value', 'nan') if mass_node is not None else 0.0)
             values = {k: float(moments.get(k, 0.0)) if moments is not None else 0.0
                       for k in ('ixx', 'ixy', 'ixz', 'iyy', 'iyz', 'izz')}
         except ValueError as exc:  # float's message quotes the text
