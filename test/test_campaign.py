@@ -490,6 +490,25 @@ def test_the_urdf_sweep_tells_taken_refused_and_crashed_apart(tmp_path):
 
 
 @pytest.mark.unit
+def test_each_fault_of_the_mutation_table_changes_the_urdf_and_the_model_names_it():
+    """The faults of ``urdf_sweep --mutate`` on the wrist: each refused by name, or warned of."""
+    from quat_jt_controller.model import ModelError, RobotModel
+    from quat_jt_runtime.resources import default_urdf_xml
+    urdf = default_urdf_xml()
+    faults = urdf_sweep.mutations(urdf)
+    assert len(faults) == 9 and 'mass nan on link3' in faults  # the revolute chain's end
+    for name, mutate in faults.items():
+        faulty = mutate(urdf)
+        assert faulty != urdf, name
+        if name == 'velocity="0" everywhere':
+            model = RobotModel(faulty, 'base_link', 'tool0')
+            assert model.velocity_limits == (0.0, 0.0, 0.0)
+            continue
+        with pytest.raises((ModelError, ValueError), match=r"'link3'|joint|xacro"):
+            RobotModel(faulty, 'base_link', 'tool0')
+
+
+@pytest.mark.unit
 def test_nodes_that_do_not_stop_are_all_killed_before_any_is_waited_for():
     """
     local_ros.stop_nodes: Ctrl-C in turn, then SIGKILL to every group left, then reap.

@@ -155,16 +155,22 @@ def test_a_urdf_the_parser_refuses_is_refused_naming_the_joint_and_the_value(old
         RobotModel(urdf.replace(old, new, 1), 'base_link', 'tool0')
 
 
-@pytest.mark.parametrize('old, new, match', [
-    ('<mass value="2.0"/>', '<mass value="nan"/>', r"'link2': mass nan kg"),
-    ('<mass value="2.0"/>', '<mass value="-2.0"/>', r"'link2': mass -2 kg"),
-    ('<mass value="2.0"/>', '<mass value="two"/>', r"'link2': a value of its <inertial> is "
-     r"not a number \('two'\)"),
-    ('ixx="0.025" ixy="0"', 'ixx="0.025" ixy="0.1"', r"'link2': its inertia has a negative "
-     'principal moment'),
-    ('ixx="0.025"', 'ixx="inf"', "'link2': an inertia moment is not finite"),
+LINK2_MASS, BASE_MASS = '<mass value="2.0"/>', '<mass value="8.0"/>'
+LINK2_IXY, BASE_IXY = 'ixx="0.025" ixy="0"', 'ixx="0.1" ixy="0"'
+LINK2_IXX, BASE_IXX = 'ixx="0.025"', 'ixx="0.1"'
+
+
+@pytest.mark.parametrize('link2, base, fault, match', [
+    (LINK2_MASS, BASE_MASS, '<mass value="nan"/>', r"'link2': mass nan kg"),
+    (LINK2_MASS, BASE_MASS, '<mass value="-2.0"/>', r"'link2': mass -2 kg"),
+    (LINK2_MASS, BASE_MASS, '<mass value="two"/>',
+     r"'link2': a value of its <inertial> is not a number \('two'\)"),
+    (LINK2_IXY, BASE_IXY, 'ixx="0.025" ixy="0.2"',
+     r"'link2': its inertia has a negative principal moment"),
+    (LINK2_IXX, BASE_IXX, 'ixx="inf"', "'link2': an inertia moment is not finite"),
 ])
-def test_inertias_no_body_has_are_refused_on_the_links_the_joints_move(old, new, match):
+def test_inertias_no_body_has_are_refused_on_the_links_the_joints_move(
+        link2, base, fault, match):
     """
     Pinocchio takes a negative mass as it comes, and one that is no number as none at all.
 
@@ -172,14 +178,10 @@ def test_inertias_no_body_has_are_refused_on_the_links_the_joints_move(old, new,
     the arm's model: accepted, as a whole robot's URDF with a faulty link elsewhere is.
     """
     urdf = default_urdf_xml()
-    assert old in urdf
+    assert link2 in urdf and base in urdf
     with pytest.raises(ModelError, match=match):
-        RobotModel(urdf.replace(old, new, 1), 'base_link', 'tool0')
-    base = urdf.replace('<mass value="8.0"/>', new.replace('2.0', '8.0')
-                        if 'mass' in new else '<mass value="8.0"/>', 1)
-    base = base.replace('ixx="0.1" ixy="0"', new.replace('0.025', '0.1')
-                        if 'ixx' in new else 'ixx="0.1" ixy="0"', 1)
-    RobotModel(base, 'base_link', 'tool0')
+        RobotModel(urdf.replace(link2, fault, 1), 'base_link', 'tool0')
+    RobotModel(urdf.replace(base, fault, 1), 'base_link', 'tool0')
     # a CAD export's rounding: a principal moment a hair below zero passes
     rounded = urdf.replace('ixx="1e-7" ixy="0"', 'ixx="1e-7" ixy="1.0000001e-7"', 1)
     assert np.linalg.eigvalsh([[1e-7, 1.0000001e-7, 0], [1.0000001e-7, 1e-7, 0],
