@@ -22,7 +22,7 @@ import re
 import subprocess
 import sys
 import tempfile
-from typing import Callable
+from typing import Callable, Optional
 
 from experiments.arms import example_robot_roots
 import numpy as np
@@ -34,8 +34,13 @@ from wrist_sim.simulator import ENGINES, RobotSimulator
 REASON_CHARS = 110  # of a refusal's message, in the table
 
 
-def design_outcome(urdf: Path, timeout_s: float) -> tuple[str, str]:
-    """Return ('taken' | 'refused' | 'crashed', what it said) for design_gains on ``urdf``."""
+def design_outcome(urdf: Path, timeout_s: float,
+                   warnings: Optional[list] = None) -> tuple[str, str]:
+    """
+    Return ('taken' | 'refused' | 'crashed', what it said) for design_gains on ``urdf``.
+
+    ``warnings``, if given, receives the lines of its WARNINGs.
+    """
     try:
         run = subprocess.run([sys.executable, '-m', 'quat_jt_controller.gain_design', '--urdf',
                               str(urdf), '--task', 'pose', '--out', '/dev/null'],
@@ -43,6 +48,8 @@ def design_outcome(urdf: Path, timeout_s: float) -> tuple[str, str]:
     except subprocess.TimeoutExpired:
         return 'crashed', f'no answer within {timeout_s:g} s'
     lines = [ln for ln in run.stderr.splitlines() if ln.strip()]
+    if warnings is not None:
+        warnings.extend(ln for ln in lines if 'WARNING: ' in ln)
     if 'Traceback' in run.stderr:
         return 'crashed', lines[-1] if lines else 'a traceback'
     if run.returncode == 0:
@@ -105,24 +112,18 @@ def mutation_table(urdf: Path, timeout_s: float) -> int:
             faulty = xml if mutate is None else mutate(xml)
             path = Path(tmp) / urdf.name  # its own name: design_gains' output names it
             path.write_text(faulty)
+            warned: list[str] = []
             if mutate is not None and faulty == xml:
                 kind, text = 'not applied', 'the URDF has nothing to change'
             else:
-                kind, text = design_outcome(path, timeout_s)
+                kind, text = design_outcome(path, timeout_s, warned)
             if kind == 'taken':  # each warning's head, up to its first colon
                 text = 'warns: ' + ('; '.join(
-                    line.split('WARNING: ', 1)[1].split(':')[0]
-                    for line in _warnings(path, timeout_s)) or 'nothing')
+                    line.split('WARNING: ', 1)[1].split(':')[0] for line in warned)
+                    or 'nothing')
             crashed += kind == 'crashed'
             print(f'| {name} | {cell((kind, text), 2 * REASON_CHARS)} |', flush=True)
     return 1 if crashed else 0
-
-
-def _warnings(urdf: Path, timeout_s: float) -> list[str]:
-    run = subprocess.run([sys.executable, '-m', 'quat_jt_controller.gain_design', '--urdf',
-                          str(urdf), '--task', 'pose', '--out', '/dev/null'],
-                         capture_output=True, text=True, timeout=timeout_s)
-    return [line for line in run.stderr.splitlines() if 'WARNING: ' in line]
 
 
 def cell(outcome: tuple[str, str], chars: int = REASON_CHARS) -> str:
