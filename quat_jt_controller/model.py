@@ -59,6 +59,12 @@ class ModelError(QuatJtError):
     """The URDF, or the links and joints asked of it, cannot make a controllable model."""
 
 
+def _not_expanded(root: ElementTree.Element) -> bool:
+    """Whether a parsed URDF is a xacro file not expanded: a xacro element, or ``${``."""
+    return any('xacro' in str(e.tag).partition('}')[0]
+               or any('${' in v for v in e.attrib.values()) for e in root.iter())
+
+
 def limit_problems(urdf_xml: str) -> list[str]:
     """
     Return what the URDF parser refuses in a URDF's joints, one line each; [] if nothing.
@@ -73,8 +79,7 @@ def limit_problems(urdf_xml: str) -> list[str]:
         root = ElementTree.fromstring(urdf_xml)
     except ElementTree.ParseError:
         return []
-    if any('xacro' in str(e.tag).partition('}')[0] or
-           any('${' in v for v in e.attrib.values()) for e in root.iter()):
+    if _not_expanded(root):
         return [NOT_EXPANDED]
     no_limit, missing, not_numbers = [], {'effort': [], 'velocity': []}, []
     for joint in root.iter('joint'):
@@ -187,7 +192,8 @@ class RobotModel:
         # what Pinocchio's buildReducedModel computes, without its lookup of frames by name
         # alone (it stops on a link and a joint of the same name).
         locked = [n for n in movable if n not in joint_names]
-        if limit_problems(urdf_xml) == [NOT_EXPANDED]:  # Pinocchio skips what it cannot read
+        # a xacro left in: Pinocchio would skip what it cannot read (the text is XML: above)
+        if _not_expanded(ElementTree.fromstring(urdf_xml)):
             raise ModelError(f'cannot parse the URDF: {NOT_EXPANDED}')
         try:
             model = pin.buildModelFromXML(fixed_joints(urdf_xml, locked) if locked

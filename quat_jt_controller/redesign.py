@@ -36,6 +36,8 @@ import sys
 import threading
 from typing import Any, Mapping, Optional, Sequence
 
+from quat_jt_runtime.worker import quiet_worker, read_json_lines, start_worker
+
 SETTLED_SHARE = 0.05  # an estimate within this share of what it was SETTLED_S before: settled
 SETTLED_S = 1.0
 DESIGN_SHARE = 0.5  # of the rotor inertia found, what the design takes
@@ -162,7 +164,6 @@ class DesignWorker:
     """
 
     def __init__(self, urdf_xml: str) -> None:
-        from quat_jt_runtime.worker import start_worker
         self._urdf_xml = urdf_xml
         self._busy = False
         self._answers: queue.SimpleQueue = queue.SimpleQueue()
@@ -191,7 +192,6 @@ class DesignWorker:
                 self._answers.put({'error': self._gone})
 
     def _read(self, proc: subprocess.Popen) -> None:
-        from quat_jt_runtime.worker import read_json_lines
         read_json_lines(proc.stdout, self._answers.put)
         self._gone = f'the design worker exited (status {proc.wait()})'
         if self._busy:
@@ -222,7 +222,6 @@ class DesignWorker:
 
 def _serve() -> None:
     """Worker process: one answer line (``parameters`` or ``error``) per request line."""
-    from quat_jt_runtime.worker import quiet_worker
     quiet_worker()
     for line in sys.stdin:  # until the node closes it
         try:
