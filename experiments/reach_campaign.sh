@@ -4,12 +4,14 @@
 # (e.g. --cases 100 --workers 8, or --ray-address auto). One log per arm in OUT_DIR; the
 # table rows are the lines that start with '|'. ARMS='ur3 wrist' runs only those arms;
 # ARMS='kuka_iiwa baxter_right_arm kinova_j2s6s200' (and the others in 'more') the more arms
-# below.
+# below. MODULE=experiments.redesign_time runs that module on each arm instead (it takes the
+# same arm arguments).
 set -euo pipefail
 out=${1:?usage: reach_campaign.sh OUT_DIR [reach_experiment arguments]}
 shift
 mkdir -p "$out"
 python=${PYTHON:-python}
+module=${MODULE:-experiments.reach_experiment}
 # What a user of each arm knows: its URDF, and for some the flange to regulate and the task.
 arms=(
   'ur3|--example-robot ur3'
@@ -71,7 +73,7 @@ for entry in "${arms[@]}" "${more[@]}"; do
     continue  # the more arms: only by name
   fi
   # shellcheck disable=SC2086
-  $python -m experiments.reach_experiment ${entry#*|} --potential tanh "$@" \
+  $python -m "$module" ${entry#*|} --potential tanh "$@" \
     > "$out/$name.log" 2>&1 || echo "$name: exit $?" >> "$out/failures.txt"
   grep '^| ' "$out/$name.log" | grep -v '^| arm' || true
 done

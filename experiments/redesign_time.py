@@ -9,20 +9,31 @@ time ``submit`` takes on the loop's thread, the time to the answer (the worker's
 imports Pinocchio), and how late the loop's wake-ups are, worst, over the design and over as
 long without one.
 
+With an arm from its URDF (the arguments of ``experiments.reach_experiment``: ``--urdf`` or
+``--example-robot``, ``--base-link``, ``--tip-link``, ...), that arm instead, its parameters
+``design_gains``' on the URDF alone, asked for the armature a design again takes for 0.1 kg m^2
+found per joint (``DESIGN_SHARE`` of it): the latency ``reach_experiment``'s
+``REDESIGN_AFTER_S`` stands for. Every arm of the campaign:
+
     python -m experiments.redesign_time [--rounds 3]
+    MODULE=experiments.redesign_time bash experiments/reach_campaign.sh OUT [--rounds 3]
 """
 import argparse
 import os
+from pathlib import Path
 import statistics
 import sys
 import time
 from typing import Optional
 
+from experiments import arms
 from experiments import reach_experiment as rx
-from quat_jt_controller.redesign import DesignWorker
+from quat_jt_controller import control_law as cl
+from quat_jt_controller.redesign import DESIGN_SHARE, DesignWorker
 from quat_jt_runtime.resources import config_parameters
 
 PERIOD_S = 1e-3
+FOUND_KG_M2 = 0.1  # an arm's design again: for this rotor inertia found per joint
 
 
 def loop(seconds: float, each_tick=None) -> float:
@@ -41,12 +52,10 @@ def loop(seconds: float, each_tick=None) -> float:
     return worst
 
 
-def time_design(robot: rx.Robot, rounds: int) -> dict:
+def time_design(urdf_xml: str, values: dict, armature: list, rounds: int) -> dict:
     """Return per round: submit (s), the time to the answer (s), the worst lateness (s)."""
-    values = config_parameters(robot.controller_config)
-    armature = [a + 0.1 for a in values.get('armature') or [0.0] * len(values['joints'])]
     out = {'submit': [], 'answer': [], 'late': [], 'late_idle': []}
-    worker = DesignWorker(rx.robot_urdf(robot))
+    worker = DesignWorker(urdf_xml)
     try:
         for _ in range(rounds):
             t0 = time.perf_counter()
@@ -60,32 +69,68 @@ def time_design(robot: rx.Robot, rounds: int) -> dict:
             out['late'].append(loop(60.0, answered))
             out['answer'].append(time.perf_counter() - t0)
             if 'error' in answers[-1]:
-                raise RuntimeError(f'{robot.name}: {answers[-1]["error"]}')
+                raise RuntimeError(answers[-1]['error'])
             out['late_idle'].append(loop(out['answer'][-1]))
     finally:
         worker.close()
     return out
 
 
+def product_cases() -> list:
+    """Return (row label, URDF, parameters, armature) for each product config."""
+    out = []
+    for name in ('wrist', 'xarm6', 'panda'):
+        robot = rx.ROBOTS[name]
+        values = config_parameters(robot.controller_config)
+        armature = [a + 0.1 for a in values.get('armature') or [0.0] * len(values['joints'])]
+        out.append((robot.controller_config, rx.robot_urdf(robot), values, armature))
+    return out
+
+
+def arm_case(args) -> tuple:
+    """Return (row label, URDF, parameters, armature) for the arm the arguments name."""
+    path = args.urdf or arms.example_robot_urdf(args.example_robot)
+    robot = rx.arm_robot(args.name or args.example_robot or Path(path).stem, str(path),
+                         args.base_link, args.tip_link, cl.Task(args.task))
+    model, design = rx.arm_design(robot, 0.0, 1000.0)
+    values = {**design.structure(), **design.parameters(args.potential)}
+    return (robot.name, rx.robot_urdf(robot), values, [DESIGN_SHARE * FOUND_KG_M2] * model.n)
+
+
 def main(argv: Optional[list] = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split('\n')[1])
     parser.add_argument('--rounds', type=int, default=3, help='designs per config')
+    arm = parser.add_argument_group('an arm from its URDF (as experiments.reach_experiment)')
+    arm.add_argument('--urdf', help='the URDF file')
+    arm.add_argument('--example-robot', help='a URDF of example-robot-data, by name')
+    arm.add_argument('--name', help="the row label (default: the robot's name)")
+    arm.add_argument('--base-link', help="default: the URDF's root link")
+    arm.add_argument('--tip-link', help='default: the end of the longest chain')
+    arm.add_argument('--task', default='pose', choices=[t.value for t in cl.Task])
+    arm.add_argument('--potential', default='tanh', choices=[p.value for p in cl.Potential])
     args = parser.parse_args(argv)
+    try:
+        cases = [arm_case(args)] if args.urdf or args.example_robot else product_cases()
+    except (ValueError, OSError) as exc:
+        parser.error(str(exc))
     try:
         os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(50))
         scheduling = 'SCHED_FIFO 50'
     except (AttributeError, OSError):
         scheduling = 'normal scheduling (SCHED_FIFO not permitted)'
     print(f'the loop at {scheduling}; {args.rounds} designs per config, median / worst')
-    print('| config | submit on the loop, ms | to the answer, s | loop late during it, ms '
-          '| loop late without, ms |')
+    print(f'| {"arm" if args.urdf or args.example_robot else "config"} | submit on the loop, '
+          'ms | to the answer, s | loop late during it, ms | loop late without, ms |')
     print('|---|---|---|---|---|')
-    for name in ('wrist', 'xarm6', 'panda'):
-        robot = rx.ROBOTS[name]
-        t = time_design(robot, args.rounds)
+    for label, urdf_xml, values, armature in cases:
+        try:
+            t = time_design(urdf_xml, values, armature, args.rounds)
+        except RuntimeError as exc:
+            print(f'{label}: the design failed: {exc}', file=sys.stderr)
+            return 1
         cells = [f'{statistics.median(v) * k:.2f} / {max(v) * k:.2f}' for v, k in (
             (t['submit'], 1e3), (t['answer'], 1.0), (t['late'], 1e3), (t['late_idle'], 1e3))]
-        print(f'| {robot.controller_config} | ' + ' | '.join(cells) + ' |')
+        print(f'| {label} | ' + ' | '.join(cells) + ' |')
     return 0
 
 

@@ -25,7 +25,7 @@ from quat_jt_controller.inverse_kinematics import RESIDUAL_TOLERANCE, search_goa
 from quat_jt_controller.inverse_kinematics import Search, SINGULAR_SIGMA_MIN, solve_ik, starts
 from quat_jt_controller.model import GRAVITY_RESERVE_SHARE, RobotModel
 from quat_jt_runtime.payload import Payload
-from quat_jt_runtime.worker import quiet_worker, read_json_lines, start_worker
+from quat_jt_runtime.worker import LineWriter, quiet_worker, read_json_lines, start_worker
 
 
 def singular_warning(q: Sequence[float], sigma_min: float) -> str:
@@ -124,12 +124,13 @@ class GoalCheckWorker:
     :func:`check_goal` in a separate process, fed the newest goal only, restarted if it dies.
 
     The worker is ``python -m quat_jt_controller.goal_check`` (niced), talking JSON lines over
-    its stdin/stdout; it exits when its stdin closes, so it never outlives its parent. It runs
-    in a session of its own and ignores SIGINT: a terminal's Ctrl-C reaches only the node,
-    which then closes it. A reader thread waits on its output (blocked in I/O, it holds no lock
-    the tick needs). :meth:`submit` never blocks: if a check is running, the goal waits as the
-    next one and a newer goal replaces it, so a flood of goals costs one check at a time and
-    the newest goal is always checked. :meth:`poll` returns finished verdicts.
+    its stdin/stdout (written by a ``LineWriter`` thread: a write never waits on the pipe); it
+    exits when its stdin closes, so it never outlives its parent. It runs in a session of its
+    own and ignores SIGINT: a terminal's Ctrl-C reaches only the node, which then closes it. A
+    reader thread waits on its output (blocked in I/O, it holds no lock the tick needs).
+    :meth:`submit` never blocks: if a check is running, the goal waits as the next one and a
+    newer goal replaces it, so a flood of goals costs one check at a time and the newest goal
+    is always checked. :meth:`poll` returns finished verdicts.
 
     If the worker dies, :meth:`take_failure` says so once, :attr:`available` is False, and
     :meth:`poll` starts a new worker after a back-off (``RESTART_BACKOFF_S``, reset by a verdict
@@ -138,7 +139,11 @@ class GoalCheckWorker:
     """
 
     def __init__(self, spec: ModelSpec, clock: Callable[[], float] = time.monotonic) -> None:
-        self._spec = spec
+        # each worker's first line: encoded once, so that a restart from the loop's thread
+        # only queues it (a whole robot's URDF is 100 to 200 KiB)
+        self._spec_line = json.dumps({
+            'urdf_xml': spec.urdf_xml, 'base_link': spec.base_link, 'tip_link': spec.tip_link,
+            'joint_names': list(spec.joint_names), 'task': Task(spec.task).value})
         self._clock = clock
         self._done: queue.SimpleQueue = queue.SimpleQueue()
         self._requests: dict[int, tuple[object, dict]] = {}  # id -> (key, request) sent
@@ -176,20 +181,13 @@ class GoalCheckWorker:
     def _start_process(self) -> None:
         self._ready = False  # until the new worker says it has built its model
         self._proc = start_worker('quat_jt_controller.goal_check')
-        spec = self._spec
-        self._send({'urdf_xml': spec.urdf_xml, 'base_link': spec.base_link,
-                    'tip_link': spec.tip_link, 'joint_names': list(spec.joint_names),
-                    'task': Task(spec.task).value})
+        self._writer = LineWriter(self._proc.stdin, 'goal_check_writer')
+        self._writer.put(self._spec_line)
         threading.Thread(target=self._read, args=(self._proc,), name='goal_check_reader',
                          daemon=True).start()
 
-    def _send(self, obj: dict) -> bool:
-        try:
-            self._proc.stdin.write(json.dumps(obj) + '\n')
-            self._proc.stdin.flush()
-            return True
-        except (BrokenPipeError, OSError, ValueError):
-            return False  # the reader sees the end of its output and reports the exit
+    def _send(self, obj: dict) -> None:
+        self._writer.put(json.dumps(obj))  # a worker gone: its reader reports the exit
 
     def _read(self, proc: subprocess.Popen) -> None:
         read_json_lines(proc.stdout, self._done.put)
@@ -273,6 +271,7 @@ class GoalCheckWorker:
     def _on_exit(self) -> None:
         """Hold the dead worker's check for the next one, and schedule the restart."""
         code = self._proc.poll()  # no wait on the control thread: its output has closed
+        self._writer.close()  # its writer thread ends
         if self._running is not None and self._next is None:  # re-check it after the restart
             self._next = self._requests.get(self._running)
         self._requests.clear()
@@ -310,10 +309,7 @@ class GoalCheckWorker:
         self._next = None
         self._restart_at = None
         if self._proc.poll() is None:
-            try:
-                self._proc.stdin.close()
-            except OSError:
-                pass
+            self._writer.close()
             try:
                 self._proc.wait(timeout=2.0)
             except subprocess.TimeoutExpired:

@@ -36,7 +36,7 @@ import sys
 import threading
 from typing import Any, Mapping, Optional, Sequence
 
-from quat_jt_runtime.worker import quiet_worker, read_json_lines, start_worker
+from quat_jt_runtime.worker import LineWriter, quiet_worker, read_json_lines, start_worker
 
 SETTLED_SHARE = 0.05  # an estimate within this share of what it was SETTLED_S before: settled
 SETTLED_S = 1.0
@@ -154,21 +154,24 @@ class DesignWorker:
 
     The process (``python -m quat_jt_controller.redesign``, started by
     ``quat_jt_runtime.worker``: niced, out of the terminal's process group, SIGINT ignored)
-    starts with the worker, before the loop runs, and waits: starting a process from a running
-    node holds Python's lock for milliseconds, which the loop would wait (docs/benchmark.md,
-    "A design again"). It imports Pinocchio at its first design. :meth:`submit` writes one request
-    line to it and returns; a reader thread waits for the answer line, which :meth:`poll`
-    returns once: ``{'parameters': {...}}``, or ``{'error': text}`` (a design that failed, or a
-    worker that died: then every later design is refused at once, with the reason). Call
-    :meth:`close` at the end: it closes the process's input, which ends it.
+    starts with the worker, before the loop runs, is sent the URDF, and waits: starting a
+    process from a running node holds Python's lock for milliseconds, which the loop would wait
+    (docs/benchmark.md, "A design again"). It imports Pinocchio at its first design.
+    :meth:`submit` queues one request line (the parameters and the armature) for the worker's
+    writer thread (``LineWriter``) and returns; a reader thread waits for the answer line,
+    which :meth:`poll` returns once: ``{'parameters': {...}}``, or ``{'error': text}`` (a
+    design that failed, or a worker that died: then every later design is refused at once,
+    with the reason). Call :meth:`close` at the end: it closes the process's input, which
+    ends it.
     """
 
     def __init__(self, urdf_xml: str) -> None:
-        self._urdf_xml = urdf_xml
         self._busy = False
         self._answers: queue.SimpleQueue = queue.SimpleQueue()
         self._gone = ''  # why the process is gone ('' while it runs)
         self._proc = start_worker('quat_jt_controller.redesign')
+        self._writer = LineWriter(self._proc.stdin, 'design_writer')
+        self._writer.put(json.dumps({'urdf_xml': urdf_xml}))  # once: each design reads it
         threading.Thread(target=self._read, args=(self._proc,), name='design_reader',
                          daemon=True).start()
 
@@ -182,14 +185,11 @@ class DesignWorker:
         if self._busy:
             raise RuntimeError('a design is running')
         self._busy = True
-        request = {'urdf_xml': self._urdf_xml, 'armature': [float(a) for a in armature],
-                   'values': {name: _plain(v) for name, v in values.items()}}
-        try:
-            self._proc.stdin.write(json.dumps(request) + '\n')
-            self._proc.stdin.flush()
-        except (OSError, ValueError):  # a broken pipe, or closed: the reader says why
-            if self._gone:
-                self._answers.put({'error': self._gone})
+        if self._gone:
+            self._answers.put({'error': self._gone})
+            return
+        self._writer.put(json.dumps({'armature': [float(a) for a in armature],
+                                     'values': {name: _plain(v) for name, v in values.items()}}))
 
     def _read(self, proc: subprocess.Popen) -> None:
         read_json_lines(proc.stdout, self._answers.put)
@@ -209,10 +209,7 @@ class DesignWorker:
     def close(self) -> None:
         """End the process: a design still running is stopped, an idle worker ends itself."""
         proc = self._proc
-        try:
-            proc.stdin.close()
-        except OSError:
-            pass
+        self._writer.close()
         try:
             proc.wait(timeout=0.0 if self._busy else CLOSE_WAIT_S)
         except subprocess.TimeoutExpired:
@@ -221,12 +218,21 @@ class DesignWorker:
 
 
 def _serve() -> None:
-    """Worker process: one answer line (``parameters`` or ``error``) per request line."""
+    """
+    Worker process: one answer line (``parameters`` or ``error``) per request line.
+
+    Its first line is the URDF (``{'urdf_xml': ...}``, no answer); each later line a request
+    (``armature``, ``values``).
+    """
     quiet_worker()
+    urdf_xml = ''
     for line in sys.stdin:  # until the node closes it
         try:
             request = json.loads(line)
-            answer = {'parameters': redesign(request['urdf_xml'], request['values'],
+            if 'urdf_xml' in request:
+                urdf_xml = request['urdf_xml']
+                continue
+            answer = {'parameters': redesign(urdf_xml, request['values'],
                                              request['armature'])}
         except Exception as exc:  # noqa: B902 - reported to the node, which logs it
             answer = {'error': f'{type(exc).__name__}: {exc}'}

@@ -1,10 +1,11 @@
 """
 Small ROS-free pieces the nodes are made of.
 
-Loop statistics, log throttling, joint layout, the simulator's live config and the goal-check
-worker.
+Loop statistics, log throttling, joint layout, the simulator's live config, the goal-check
+worker and the workers' input.
 """
 import math
+import os
 import time
 
 import pytest
@@ -15,6 +16,7 @@ from quat_jt_runtime.joints import ForeignState, movable_joints, StateLayout
 from quat_jt_runtime.loop_stats import LoopStats, Ring, TickStats
 from quat_jt_runtime.resources import default_urdf_xml
 from quat_jt_runtime.throttle import cause, Throttle
+from quat_jt_runtime.worker import LineWriter
 from robots import wrist_model
 from wrist_sim.config import SimConfig
 from wrist_sim.simulator import SimulatorError
@@ -141,6 +143,19 @@ def test_goal_check_is_deterministic_and_bounded_by_starts():
     verdicts = {check_goal(model, far, paper.Q_DESIRED, (0, 0, 0), Task.ORIENTATION)
                 for _ in range(3)}
     assert verdicts == {''}
+
+
+def test_lines_longer_than_a_pipe_holds_are_queued_without_waiting_for_the_reader():
+    """A whole robot's URDF to a worker that has not read yet: put returns, the lines follow."""
+    read_fd, write_fd = os.pipe()
+    writer = LineWriter(os.fdopen(write_fd, 'w'), 'test_writer')
+    long_line = 'u' * (1 << 20)  # 1 MiB: 16 times a pipe's buffer
+    writer.put(long_line)  # nobody reads yet: returns at once all the same
+    writer.put('{"id": 1}')
+    writer.close()
+    with os.fdopen(read_fd) as reader:
+        assert reader.read() == long_line + '\n{"id": 1}\n'  # in order, then closed
+    assert writer.join(timeout_s=60.0)
 
 
 def test_goal_check_worker_checks_the_newest_goal_of_a_flood():
