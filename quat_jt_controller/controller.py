@@ -563,7 +563,7 @@ class Controller:
         return (LogLine(Severity.INFO, (
             'designing the gains again for the rotor inertia found (gain_redesign): armature '
             + _values(armature) + f' kg m^2 per joint ({", ".join(names)}), '
-            f'the armature told and {DESIGN_SHARE:g} x the estimate where it settled')),)
+            f'the armature told and {DESIGN_SHARE:g} x the estimate found')),)
 
     def take_design(self) -> tuple[Optional[dict], tuple[LogLine, ...]]:
         """

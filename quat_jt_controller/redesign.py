@@ -10,14 +10,15 @@ with ``design_gains``' own rules (``gain_design.design``), the robot and options
 designed with, and the rotor inertia found:
 
 - :class:`InertiaWatch` says when: a joint's estimate has settled (within
-  ``SETTLED_SHARE`` of what it was ``SETTLED_S`` before), and the inertia a design would now
-  take for the joint is more than ``GROWTH_FACTOR`` times the one its gains were designed for
-  (the first time: the joint shows more than twice the inertia of its model);
-- the design takes ``DESIGN_SHARE`` of what was found, no more: the gains are then sized for a
-  joint lighter than the one the motion shows, as in the campaign's column "told 0.05" (a
-  rotor inertia told at half the plant's), which reaches as often as the one told right
-  (measured, not proved), and an estimate up to twice too high still gives a design for no
-  more than the real joint;
+  ``SETTLED_SHARE`` of what it was ``SETTLED_S`` before, looked at every ``LOOK_S``), and
+  the inertia a design would now take for the joint is more than ``GROWTH_FACTOR`` times the
+  one its gains were designed for (the first time: the joint shows more than twice the
+  inertia of its model);
+- the design takes ``DESIGN_SHARE`` of what was found on every joint, no more: the gains are
+  then sized for a joint lighter than the one the motion shows, as in the campaign's column
+  "told 0.05" (a rotor inertia told at half the plant's), which reaches as often as the one
+  told right (measured, not proved), and an estimate up to twice too high still gives a
+  design for no more than the real joint;
 - :func:`redesign` runs the design, and returns the live parameters that change. The
   controller node runs it in a worker process and sets them, through its parameters (checked,
   logged, ``ros2 param get`` shows them), as a user's ``ros2 param set`` would
@@ -29,6 +30,7 @@ after which docs/lyapunov.md's argument holds again (section 13). ROS-free; ``py
 quat_jt_controller.redesign`` is the node's worker (a request line on stdin, an answer line
 on stdout).
 """
+from collections import deque
 import json
 import queue
 import subprocess
@@ -38,8 +40,11 @@ from typing import Any, Mapping, Optional, Sequence
 
 from quat_jt_runtime.worker import LineWriter, quiet_worker, read_json_lines, start_worker
 
-SETTLED_SHARE = 0.05  # an estimate within this share of what it was SETTLED_S before: settled
-SETTLED_S = 1.0
+# an estimate within this share of what it was SETTLED_S before has settled: 2.5 of the
+# estimate's time constants (armature_estimate.ADOPT_TIME_S)
+SETTLED_SHARE = 0.05
+SETTLED_S = 0.5
+LOOK_S = 0.25  # the estimate is looked at this often, each look against one SETTLED_S before
 DESIGN_SHARE = 0.5  # of the rotor inertia found, what the design takes
 # a design again when it would design a joint for more than this x the inertia its gains were
 # designed for: the first time, for a joint that shows more than twice its model's inertia
@@ -64,18 +69,25 @@ class InertiaWatch:
         self.told = tuple(float(a) for a in told)
         self.designed = self.told
         self._then_s = start_s
-        self._before: tuple[float, ...] = ()
+        self._looks: deque[tuple[float, tuple[float, ...]]] = deque()  # (time s, estimate)
 
     def settled(self, now_s: float, found: Sequence[float]) -> Optional[list[int]]:
         """
         Return the joints whose estimate ``found`` has settled; None between two looks.
 
-        A look every ``SETTLED_S``: settled are the joints found heavier than told (> 0)
-        whose estimate is within ``SETTLED_SHARE`` of what the last look saw.
+        A look every ``LOOK_S``: settled are the joints found heavier than told (> 0) whose
+        estimate is within ``SETTLED_SHARE`` of what the last look at least ``SETTLED_S``
+        before saw (half a look early counts: the caller's timer is not exact). Until a look
+        is that old, none.
         """
-        if now_s - self._then_s < SETTLED_S:
+        if now_s - self._then_s < LOOK_S:
             return None
-        before, self._before, self._then_s = self._before, tuple(found), now_s
+        self._then_s = now_s
+        looks, oldest_s = self._looks, now_s - SETTLED_S + 0.5 * LOOK_S
+        while len(looks) > 1 and looks[1][0] <= oldest_s:
+            looks.popleft()  # looks[1] is old enough: looks[0] is not the one to compare with
+        before = looks[0][1] if looks and looks[0][0] <= oldest_s else ()
+        looks.append((now_s, tuple(found)))
         return [j for j, (e, b) in enumerate(zip(found, before))
                 if e > 0.0 and abs(e - b) <= SETTLED_SHARE * e]
 
@@ -85,20 +97,23 @@ class InertiaWatch:
         Return the armature to design the gains with, if a settled joint asks for one.
 
         ``own_inertia`` is ``M_jj(q)`` per joint with the estimate ``found`` in
-        (``RobotModel.own_inertias``). A settled joint would be designed with its armature
-        told plus ``DESIGN_SHARE`` of what was found (never less than it was designed with).
-        Due when that is more than ``GROWTH_FACTOR`` times the inertia its gains were designed
-        for, for some joint; then every settled joint takes it, the others keep theirs. None
-        otherwise.
+        (``RobotModel.own_inertias``). A joint would be designed with its armature told plus
+        ``DESIGN_SHARE`` of what was found (never less than it was designed with). Due when
+        that is more than ``GROWTH_FACTOR`` times the inertia its gains were designed for, for
+        some settled joint; then every joint takes it, settled or not: the joints' estimates
+        settle within a fraction of a second of one another, and a design for the first
+        alone leaves the others to a second design a worker's answer later. An estimate not
+        yet settled is most often still rising to its value; ``DESIGN_SHARE`` of it, a joint
+        lighter than the real one. None when no settled joint asks for a design.
         """
         told, designed = self.told, self.designed
         armature = list(designed)
         due = False
-        for j in settled:
-            model_j = own_inertia[j] - found[j]  # the links and the armature told
-            armature[j] = max(designed[j], told[j] + DESIGN_SHARE * found[j])
+        for j, found_j in enumerate(found):
+            model_j = own_inertia[j] - found_j  # the links and the armature told
+            armature[j] = max(designed[j], told[j] + DESIGN_SHARE * found_j)
             before = model_j + designed[j] - told[j]  # the inertia designed for
-            if model_j + armature[j] - told[j] > GROWTH_FACTOR * before:
+            if j in settled and model_j + armature[j] - told[j] > GROWTH_FACTOR * before:
                 due = True
         return tuple(armature) if due else None
 

@@ -18,7 +18,8 @@ from quat_jt_controller.controller_config import controller_from_config
 from quat_jt_controller.gain_cli import parse_design_options
 from quat_jt_controller.model import RobotModel
 from quat_jt_controller.redesign import (DESIGN_SHARE, DesignWorker, GROWTH_FACTOR,
-                                         InertiaWatch, KEPT, redesign, SETTLED_S)
+                                         InertiaWatch, KEPT, LOOK_S, redesign,
+                                         SETTLED_S)
 from quat_jt_controller.reference_sim import ClosedLoop
 from quat_jt_controller.regulator import Goal, Regulator
 from quat_jt_runtime.resources import default_urdf_xml
@@ -29,28 +30,46 @@ pytestmark = pytest.mark.unit
 WAIT_S = 120.0  # the most a worker may take to start Python and Pinocchio and design
 
 
-def test_settled_joints_are_seen_once_a_look():
+def test_settled_joints_are_seen_at_each_look_against_the_estimate_a_second_before():
     watch = InertiaWatch((0.0, 0.0), start_s=0.0)
-    assert watch.settled(0.5, (0.1, 0.0)) is None  # not yet time to look
-    assert watch.settled(SETTLED_S, (0.1, 0.0)) == []  # nothing to compare with yet
-    assert watch.settled(1.5 * SETTLED_S, (0.1, 0.0)) is None
-    assert watch.settled(2.0 * SETTLED_S, (0.102, 0.0)) == [0]  # within 5%, and found
-    assert watch.settled(3.0 * SETTLED_S, (0.2, 0.0)) == []  # moved by 96%
+    assert watch.settled(0.5 * LOOK_S, (0.1, 0.0)) is None  # not yet time to look
+    assert watch.settled(LOOK_S, (0.1, 0.0)) == []  # nothing to compare with yet
+    assert watch.settled(1.5 * LOOK_S, (0.1, 0.0)) is None
+    assert watch.settled(2.0 * LOOK_S, (0.5, 0.0)) == []  # no look SETTLED_S old yet
+    # the look SETTLED_S before saw 0.1: within 5%
+    assert watch.settled(LOOK_S + SETTLED_S, (0.102, 0.0)) == [0]
+    # against the look at 2 LOOK_S (0.5), not the one at LOOK_S (0.1): moved
+    assert watch.settled(2.0 * LOOK_S + SETTLED_S, (0.1, 0.0)) == []
+    t_s = 2.0 * LOOK_S + SETTLED_S
+    for _ in range(round(SETTLED_S / LOOK_S)):  # the same estimate for SETTLED_S
+        t_s += LOOK_S
+        seen = watch.settled(t_s, (0.1, 0.0))
+    assert seen == [0]
+    assert watch.settled(t_s + LOOK_S + 0.02, (0.2, 0.0)) == []  # a timer late; moved by 50%
+    # the look a little less than SETTLED_S before (a timer that was late) is the one
+    assert watch.settled(t_s + LOOK_S + 0.02 + SETTLED_S - 0.05, (0.2, 0.0)) == [0]
 
 
-def test_a_design_is_due_for_a_joint_found_twice_as_heavy_as_its_model_and_takes_half():
+def test_a_design_is_due_for_a_settled_joint_twice_as_heavy_and_every_joint_takes_half():
     told = (0.01, 0.0, 0.0)
     watch = InertiaWatch(told)
     found = (0.1, 0.009, 0.5)
     model_inertia = np.array([0.05, 0.01, 0.02])  # the links and the armature told
     own = tuple(model_inertia + found)
     assert watch.due(found, own, settled=[1]) is None  # shows 0.019 < 2 x 0.01
+    assert watch.due(found, own, settled=[]) is None  # joint 2 would, but has not settled
     armature = watch.due(found, own, settled=[0, 1])  # shows 0.15 > 2 x 0.05: joint 0 due
-    assert armature == pytest.approx((0.01 + DESIGN_SHARE * 0.1, DESIGN_SHARE * 0.009, 0.0))
+    # ... and every joint takes half of its estimate, joint 2 (not settled) too
+    assert armature == pytest.approx(
+        (0.01 + DESIGN_SHARE * 0.1, DESIGN_SHARE * 0.009, DESIGN_SHARE * 0.5))
     watch.designed_with(armature)
     # designed for the model + half of what was found: the same estimate asks for nothing more
-    assert watch.due(found, own, settled=[0, 1, 2]) is not None  # joint 2, not yet designed
-    assert watch.due(found, own, settled=[0, 1]) is None
+    assert watch.due(found, own, settled=[0, 1, 2]) is None
+    # joint 2 grows (due); the others' estimates fell: they keep the armature designed with
+    grown = (0.05, 0.0, 0.9)
+    armature = watch.due(grown, tuple(model_inertia + grown), [2])
+    assert armature == pytest.approx((0.01 + DESIGN_SHARE * 0.1, DESIGN_SHARE * 0.009,
+                                      DESIGN_SHARE * 0.9))
 
 
 def test_designs_stop_as_the_estimate_settles_whatever_it_grows_to():
