@@ -534,6 +534,7 @@ def test_goals_in_a_link_of_the_robot_are_placed_with_the_measured_joints(make_p
     assert node.regulator.goal == placed
     # ~/goal_pose: latched, so a viewer that joins now still gets the goal in force. It is
     # published on a timer: a first viewer waits for it (it may first get the one before) ...
+
     def placed_pose(pose: PoseStamped) -> bool:
         o = pose.pose.orientation
         return (o.x, o.y, o.z, o.w) == pytest.approx(placed.xyzw(), abs=1e-12)
