@@ -30,7 +30,7 @@ pytestmark = pytest.mark.unit
 WAIT_S = 120.0  # the most a worker may take to start Python and Pinocchio and design
 
 
-def test_settled_joints_are_seen_at_each_look_against_the_estimate_a_second_before():
+def test_settled_joints_are_seen_at_each_look_against_the_look_settled_s_before():
     watch = InertiaWatch((0.0, 0.0), start_s=0.0)
     assert watch.settled(0.5 * LOOK_S, (0.1, 0.0)) is None  # not yet time to look
     assert watch.settled(LOOK_S, (0.1, 0.0)) == []  # nothing to compare with yet
