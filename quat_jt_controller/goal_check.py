@@ -25,7 +25,8 @@ from quat_jt_controller.inverse_kinematics import RESIDUAL_TOLERANCE, search_goa
 from quat_jt_controller.inverse_kinematics import Search, SINGULAR_SIGMA_MIN, solve_ik, starts
 from quat_jt_controller.model import GRAVITY_RESERVE_SHARE, RobotModel
 from quat_jt_runtime.payload import Payload
-from quat_jt_runtime.worker import LineWriter, quiet_worker, read_json_lines, start_worker
+from quat_jt_runtime.worker import (LaunchedProcess, Launcher, LineWriter, quiet_worker,
+                                    read_json_lines)
 
 
 def singular_warning(q: Sequence[float], sigma_min: float) -> str:
@@ -117,6 +118,7 @@ class ModelSpec:
 
 
 RESTART_BACKOFF_S = (1.0, 2.0, 4.0, 8.0, 16.0, 30.0)  # after the 1st, 2nd, ... death in a row
+CLOSE_WAIT_S = 2.0  # a worker that does not end this long after its input closes is killed
 
 
 class GoalCheckWorker:
@@ -133,9 +135,11 @@ class GoalCheckWorker:
     is always checked. :meth:`poll` returns finished verdicts.
 
     If the worker dies, :meth:`take_failure` says so once, :attr:`available` is False, and
-    :meth:`poll` starts a new worker after a back-off (``RESTART_BACKOFF_S``, reset by a verdict
-    from the new one); the goal that was running or waiting is checked by the new one. Call
-    :meth:`close` at the end.
+    :meth:`poll` asks for a new worker after a back-off (``RESTART_BACKOFF_S``, reset by a
+    verdict from the new one); the goal that was running or waiting is checked by the new one.
+    Every worker is started by a ``Launcher`` process, started with this object: :meth:`poll`
+    runs on the node's loop, which a process started there would hold up for milliseconds.
+    Lines sent before the worker is there wait for it. Call :meth:`close` at the end.
     """
 
     def __init__(self, spec: ModelSpec, clock: Callable[[], float] = time.monotonic) -> None:
@@ -146,6 +150,9 @@ class GoalCheckWorker:
             'joint_names': list(spec.joint_names), 'task': Task(spec.task).value})
         self._clock = clock
         self._done: queue.SimpleQueue = queue.SimpleQueue()
+        self._launcher = Launcher()
+        self._proc: Optional[LaunchedProcess] = None  # None until the launcher started it
+        self._writer: Optional[LineWriter] = None
         self._requests: dict[int, tuple[object, dict]] = {}  # id -> (key, request) sent
         self._configurations: dict[object, Optional[list[float]]] = {}
         self._velocities: dict[object, list[float]] = {}
@@ -178,19 +185,41 @@ class GoalCheckWorker:
         wait_s = max(0.0, self._restart_at - self._clock())
         return f'{self._last_exit}; restarting in {wait_s:.1f} s'
 
+    @property
+    def pid(self) -> Optional[int]:
+        """Return the worker process's id (None while the launcher starts it)."""
+        return None if self._proc is None else self._proc.pid
+
     def _start_process(self) -> None:
+        """Ask the launcher for a worker: one short message (on the loop's thread, too)."""
         self._ready = False  # until the new worker says it has built its model
-        self._proc = start_worker('quat_jt_controller.goal_check')
-        self._writer = LineWriter(self._proc.stdin, 'goal_check_writer')
-        self._writer.put(self._spec_line)
-        threading.Thread(target=self._read, args=(self._proc,), name='goal_check_reader',
+        self._proc = self._writer = None
+        lines: queue.SimpleQueue = queue.SimpleQueue()  # the worker's input, until it is there
+        lines.put(self._spec_line)
+        self._lines = lines
+        self._launcher.start('quat_jt_controller.goal_check',
+                             lambda proc, error: self._on_started(proc, error, lines))
+
+    def _on_started(self, proc: Optional[LaunchedProcess], error: str,
+                    lines: queue.SimpleQueue) -> None:
+        """On the launcher's reader thread: serve the worker, or report why there is none."""
+        if proc is None:
+            self._done.put({'exited': None, 'error': error})
+            return
+        writer = LineWriter(proc.stdin, 'goal_check_writer', lines)
+        self._done.put({'started': proc, 'writer': writer})  # before its reader's replies
+        threading.Thread(target=self._read, args=(proc,), name='goal_check_reader',
                          daemon=True).start()
 
     def _send(self, obj: dict) -> None:
-        self._writer.put(json.dumps(obj))  # a worker gone: its reader reports the exit
+        self._lines.put(json.dumps(obj))  # a worker gone: its reader reports the exit
 
-    def _read(self, proc: subprocess.Popen) -> None:
+    def _read(self, proc: LaunchedProcess) -> None:
         read_json_lines(proc.stdout, self._done.put)
+        try:  # its output closed: the launcher tells its exit code a moment later
+            proc.wait(timeout=CLOSE_WAIT_S)
+        except subprocess.TimeoutExpired:  # told as an exit all the same: it answers no more
+            pass
         self._done.put({'exited': proc})
 
     def submit(self, key: object, q_measured: Optional[Sequence[float]],
@@ -241,8 +270,13 @@ class GoalCheckWorker:
         out = []
         while not self._done.empty():
             reply = self._done.get()
+            if 'started' in reply:
+                self._proc, self._writer = reply['started'], reply['writer']
+                continue
             if 'exited' in reply:
-                if reply['exited'] is self._proc and not self._closed:
+                if 'error' in reply and self._proc is None and not self._closed:
+                    self._on_exit(reply['error'])  # the launcher could not start one
+                elif reply['exited'] is self._proc and not self._closed:
                     self._on_exit()
                 continue
             if reply.get('ready'):
@@ -268,10 +302,13 @@ class GoalCheckWorker:
             self._start_next()
         return out
 
-    def _on_exit(self) -> None:
+    def _on_exit(self, not_started: str = '') -> None:
         """Hold the dead worker's check for the next one, and schedule the restart."""
-        code = self._proc.poll()  # no wait on the control thread: its output has closed
-        self._writer.close()  # its writer thread ends
+        if not_started:
+            code = None
+        else:
+            code = self._proc.poll()  # the reader waited for it (None: not told)
+            self._writer.close()  # its writer thread ends
         if self._running is not None and self._next is None:  # re-check it after the restart
             self._next = self._requests.get(self._running)
         self._requests.clear()
@@ -279,7 +316,8 @@ class GoalCheckWorker:
         backoff_s = RESTART_BACKOFF_S[min(self._deaths_in_a_row, len(RESTART_BACKOFF_S) - 1)]
         self._deaths_in_a_row += 1
         self._restart_at = self._clock() + backoff_s
-        self._last_exit = ('the goal-check worker exited'
+        self._last_exit = (f'the goal-check worker could not be started: {not_started}'
+                           if not_started else 'the goal-check worker exited'
                            + ('' if code is None else f' (exit code {code})'))
         self._failure = (f'{self._last_exit}: goal checks and goal configurations are '
                          f'unavailable; restarting it in {backoff_s:g} s')
@@ -308,13 +346,22 @@ class GoalCheckWorker:
         self._closed = True
         self._next = None
         self._restart_at = None
-        if self._proc.poll() is None:
-            self._writer.close()
+        self._lines.put(None)  # a worker still to come ends as soon as it starts
+        while not self._done.empty():  # one started since the last poll
+            reply = self._done.get()
+            if 'started' in reply:
+                self._proc, self._writer = reply['started'], reply['writer']
+        proc = self._proc
+        if proc is not None and proc.poll() is None:
             try:
-                self._proc.wait(timeout=2.0)
+                proc.wait(timeout=CLOSE_WAIT_S)
             except subprocess.TimeoutExpired:
-                self._proc.kill()
-                self._proc.wait()
+                proc.kill()
+                try:
+                    proc.wait(timeout=CLOSE_WAIT_S)
+                except subprocess.TimeoutExpired:
+                    pass
+        self._launcher.close()
 
 
 def configuration_verdict(search: Search) -> str:
@@ -337,7 +384,10 @@ def _serve() -> None:
     """Worker process: a spec line, then one verdict line per request line, until EOF."""
     quiet_worker()
     lines = iter(sys.stdin)
-    spec = json.loads(next(lines))
+    first = next(lines, None)
+    if first is None:  # the node closed the input before sending the model: nothing to do
+        return
+    spec = json.loads(first)
     model = RobotModel(spec['urdf_xml'], spec['base_link'], spec['tip_link'],
                        spec['joint_names'])
     task = Task(spec['task'])

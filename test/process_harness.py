@@ -80,6 +80,15 @@ def children_of(pid: int, module: str = '') -> list[int]:
     return out
 
 
+def descendants_of(pid: int, module: str = '') -> list[int]:
+    """Return the processes below ``pid`` at any depth, running ``module`` if given."""
+    below, parents = [], [pid]
+    while parents:
+        parents = [child for parent in parents for child in children_of(parent)]
+        below += parents
+    return [child for parent in [pid] + below for child in children_of(parent, module)]
+
+
 def alive(pid: int) -> bool:
     """Tell whether ``pid`` runs (exists and is not a zombie)."""
     try:

@@ -18,7 +18,7 @@ from typing import Callable
 from cpus import thread_policies
 from experiments import local_ros
 from geometry_msgs.msg import PoseStamped
-from process_harness import alive, call_service, children_of, ProcessHarnessMixin
+from process_harness import alive, call_service, descendants_of, ProcessHarnessMixin
 import pytest
 from quat_jt_controller import paper
 from quat_jt_controller import quaternion as quat
@@ -162,13 +162,13 @@ def test_kill9_of_the_controller_zeroes_the_torque_and_a_restart_recovers(pair):
     pair.start('wrist_sim_node')
     ctrl = pair.start('controller_node')
     pair.running()
-    pair.spin_until(lambda: len(children_of(ctrl.pid)) == 2, 10.0,
-                    'the goal-check and design workers')
-    workers = children_of(ctrl.pid)
+    pair.spin_until(lambda: len(descendants_of(ctrl.pid)) == 3, 10.0,
+                    'the worker launcher, the goal-check and design workers')
+    workers = descendants_of(ctrl.pid)
     ctrl.kill()
     ctrl.wait()
     wait_log(pair, 'wrist_sim_node', r'no command for [0-9.]+ s .*torque set to zero')
-    # The goal-check and design workers do not outlive their controller.
+    # The launcher, the goal-check and design workers do not outlive their controller.
     pair.spin_until(lambda: not any(alive(w) for w in workers), 10.0, 'the workers to exit')
     restarted = time.monotonic()
     pair.start('controller_node', 'controller_restarted')
@@ -328,17 +328,19 @@ def test_the_goal_check_worker_ignores_ctrl_c_and_comes_back_when_it_dies(pair):
     pair.start('wrist_sim_node')
     ctrl = pair.start('controller_node')
     pair.running('controller_node')
-    checker = 'quat_jt_controller.goal_check'  # the design worker is a child too
-    pair.spin_until(lambda: children_of(ctrl.pid, checker), 10.0, 'the goal-check worker')
-    [first] = children_of(ctrl.pid, checker)
+    checker = 'quat_jt_controller.goal_check'  # the launcher's child, the design worker the node's
+    pair.spin_until(lambda: descendants_of(ctrl.pid, checker), 10.0,
+                    'the goal-check worker')
+    [first] = descendants_of(ctrl.pid, checker)
     os.kill(first, signal.SIGKILL)
     wait_log(pair, 'controller_node', r'\[ERROR\].*goal-check worker exited')
     since = time.monotonic()
     pair.spin_until(pair.commands_flow(since, 200), 10.0, 'commands while the worker is down')
-    pair.spin_until(lambda: [w for w in children_of(ctrl.pid, checker)
+    pair.spin_until(lambda: [w for w in descendants_of(ctrl.pid, checker)
                              if w != first and alive(w)], 30.0, 'the restarted worker')
-    [second] = [w for w in children_of(ctrl.pid, checker) if w != first and alive(w)]
-    # Started from the node's real-time thread, it still runs with normal scheduling.
+    [second] = [w for w in descendants_of(ctrl.pid, checker) if w != first and alive(w)]
+    # Started again by the launcher (the node starts no process while it runs), it runs
+    # with normal scheduling.
     assert set(thread_policies(second).values()) == {('other', 0)}, second
     os.kill(second, signal.SIGINT)
     pair.send_paper_goal()

@@ -13,7 +13,7 @@ from typing import Optional
 
 from cpus import fifo_allowed, linux_only, thread_cpus, thread_policies, two_cpus
 from experiments import local_ros
-from process_harness import children_of, ProcessHarnessMixin
+from process_harness import descendants_of, ProcessHarnessMixin
 import pytest
 from quat_jt_runtime import lifecycle
 from quat_jt_runtime import realtime
@@ -190,9 +190,9 @@ def test_both_nodes_run_every_thread_at_their_priority_but_the_workers(tmp_path)
             h.spin_until(res.done, 10.0, 'set thread_priority')
             assert not res.result().results[0].successful  # read-only
         ctrl = h.procs['controller_node'].pid
-        h.spin_until(lambda: len(children_of(ctrl)) == 2, 30.0,
-                     'the goal-check and design workers')
-        for worker in children_of(ctrl):
+        h.spin_until(lambda: len(descendants_of(ctrl)) == 3, 30.0,
+                     'the worker launcher, the goal-check and design workers')
+        for worker in descendants_of(ctrl):
             assert set(thread_policies(worker).values()) == {('other', 0)}, worker
     finally:
         h.close()

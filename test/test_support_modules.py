@@ -158,6 +158,44 @@ def test_lines_longer_than_a_pipe_holds_are_queued_without_waiting_for_the_reade
     assert writer.join(timeout_s=60.0)
 
 
+def test_a_launcher_starts_workers_hands_their_pipes_over_and_reports_their_exits():
+    """What a node's Launcher process starts: pipes as a Popen's, exits as its returncode."""
+    import json
+    import os
+    import queue
+    import signal
+    import subprocess
+    from quat_jt_runtime.worker import Launcher
+    started: queue.SimpleQueue = queue.SimpleQueue()
+    launcher = Launcher()
+    try:
+        for _ in range(2):
+            launcher.start('quat_jt_controller.redesign', lambda *got: started.put(got))
+        first, error = started.get(timeout=30.0)
+        second, _ = started.get(timeout=30.0)
+        assert error == '' and first.pid != second.pid and os.getpid() not in (first.pid,
+                                                                               second.pid)
+        first.stdin.write(json.dumps({'urdf_xml': '<robot name="x"/>'}) + '\n')
+        first.stdin.write(json.dumps({'armature': [0.1], 'values': {}}) + '\n')
+        assert 'error' in json.loads(first.stdout.readline())  # the worker answered
+        first.kill()
+        assert first.wait(timeout=30.0) == -9 and first.poll() == -9
+        second.stdin.close()  # a worker ends when its input closes
+        assert second.wait(timeout=30.0) == 0
+        launcher.start('quat_jt_controller.redesign', lambda *got: started.put(got))
+        third, _ = started.get(timeout=30.0)
+        with pytest.raises(subprocess.TimeoutExpired):
+            third.wait(timeout=0.05)  # running: its exit not told
+        os.kill(launcher.pid, signal.SIGKILL)  # the launcher gone: a start says so
+        launcher.start('quat_jt_controller.redesign', lambda *got: started.put(got))
+        none, reason = started.get(timeout=30.0)
+        assert none is None and 'worker launcher' in reason, reason
+        assert third.wait(timeout=30.0) is None  # its exit can no longer be told
+        third.stdin.close()
+    finally:
+        launcher.close()
+
+
 def test_goal_check_worker_checks_the_newest_goal_of_a_flood():
     model = wrist_model()
     worker = GoalCheckWorker(ModelSpec(default_urdf_xml(), 'base_link', 'tool0',
@@ -180,10 +218,16 @@ def test_goal_check_worker_checks_the_newest_goal_of_a_flood():
         worker.close()
 
 
-def test_goal_check_worker_that_dies_says_so_once_and_restarts_after_its_back_off():
-    """Killed mid-check: one failure, unavailable until the back-off ends, then the check again."""
+def test_goal_check_worker_that_dies_says_so_once_and_restarts_after_its_back_off(monkeypatch):
+    """
+    Killed mid-check: one failure, unavailable until the back-off ends, then the check again.
+
+    The new worker is the launcher's: the node's process starts none (a ``Popen`` there would
+    hold its loop up).
+    """
     import os
     import signal
+    import subprocess
     from quat_jt_controller.goal_check import RESTART_BACKOFF_S
     now = [0.0]
     model = wrist_model()
@@ -192,9 +236,13 @@ def test_goal_check_worker_that_dies_says_so_once_and_restarts_after_its_back_of
                              clock=lambda: now[0])
     try:
         assert worker.available and worker.unavailable_reason == ''
-        os.kill(worker._proc.pid, signal.SIGKILL)
-        worker.submit('paper', [0.0, 0.0, 0.0], paper.Q_DESIRED, (0, 0, 0))
         deadline = time.monotonic() + 30.0
+        while worker.pid is None and time.monotonic() < deadline:  # the launcher starts it
+            assert worker.poll() == []
+            time.sleep(0.01)
+        first_pid = worker.pid
+        os.kill(first_pid, signal.SIGKILL)
+        worker.submit('paper', [0.0, 0.0, 0.0], paper.Q_DESIRED, (0, 0, 0))
         while worker.available and time.monotonic() < deadline:
             assert worker.poll() == []
             time.sleep(0.01)
@@ -205,13 +253,22 @@ def test_goal_check_worker_that_dies_says_so_once_and_restarts_after_its_back_of
         assert worker.poll() == [] and not worker.available and worker.restarts == 0
         now[0] += RESTART_BACKOFF_S[0]
         verdicts = []
-        while not verdicts and time.monotonic() < deadline:
-            verdicts += worker.poll()
-            time.sleep(0.01)
+        with monkeypatch.context() as patched:  # the node itself starts no process to restart
+            patched.setattr(subprocess, 'Popen', forbidden_popen)
+            while not verdicts and time.monotonic() < deadline:
+                verdicts += worker.poll()
+                time.sleep(0.01)
         assert worker.restarts == 1 and worker.available
         assert verdicts == [('paper', '')]  # the goal that waited is checked by the new one
+        assert worker.pid not in (None, first_pid)
+        with pytest.raises(ChildProcessError):  # the launcher's child, not this process's
+            os.waitpid(worker.pid, os.WNOHANG)
     finally:
         worker.close()
+
+
+def forbidden_popen(*args, **kwargs):
+    raise AssertionError('a process started from the node while its loop runs')
 
 
 def test_goal_check_unavailability_is_a_diagnostics_warning():
