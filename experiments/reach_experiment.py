@@ -106,7 +106,7 @@ FLIP_FLOOR = 1e-3  # of the effort limit: smaller torques have no sign (numerica
 FINAL_WINDOW_S = 0.1
 Q_STAR_AFTER_S = 0.1  # the goal-check worker's answer arrives after the goal (10-50 ms)
 # A design again (redesign.py) is in force this long after it is due: the node's worker
-# designs (its first design imports Pinocchio); about the median answer on the campaign's arms
+# designs (Pinocchio imported as it starts); about the median answer on the campaign's arms
 # with a campaign beside the worker, less than the worst (docs/benchmark.md, "A design again")
 REDESIGN_AFTER_S = 1.0
 DDS_GOAL_AFTER_S = 2.0  # over DDS, the goal is sent this long after the start (simulated time)

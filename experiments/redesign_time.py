@@ -5,9 +5,9 @@ For each product config, the node's ``DesignWorker`` (started before the loop, a
 starts it) is asked to design the gains again with 0.1 kg m^2 more armature per joint while
 this process runs a 1 kHz loop of sleeps, as the node's executor waits for states: at
 SCHED_FIFO 50 where permitted (the node's default), else with normal scheduling. Printed: the
-time ``submit`` takes on the loop's thread, the time to the answer (the worker's first design
-imports Pinocchio), and how late the loop's wake-ups are, worst, over the design and over as
-long without one.
+time ``submit`` takes on the loop's thread, the time to the answer (asked once the worker has
+imported what a design needs, as it does while the node starts), and how late the loop's
+wake-ups are, worst, over the design and over as long without one.
 
 With an arm from its URDF (the arguments of ``experiments.reach_experiment``: ``--urdf`` or
 ``--example-robot``, ``--base-link``, ``--tip-link``, ...), that arm instead, its parameters
@@ -57,6 +57,9 @@ def time_design(urdf_xml: str, values: dict, armature: list, rounds: int) -> dic
     out = {'submit': [], 'answer': [], 'late': [], 'late_idle': []}
     worker = DesignWorker(urdf_xml)
     try:
+        deadline = time.monotonic() + 60.0  # started with the node, it is ready long before
+        while not worker.ready and time.monotonic() < deadline:  # its first design
+            time.sleep(0.01)
         for _ in range(rounds):
             t0 = time.perf_counter()
             worker.submit(values, armature)

@@ -171,7 +171,8 @@ class DesignWorker:
     ``quat_jt_runtime.worker``: niced, out of the terminal's process group, SIGINT ignored)
     starts with the worker, before the loop runs, is sent the URDF, and waits: starting a
     process from a running node holds Python's lock for milliseconds, which the loop would wait
-    (docs/benchmark.md, "A design again"). It imports Pinocchio at its first design.
+    (docs/benchmark.md, "A design again"). It imports what a design needs (Pinocchio) as it
+    starts, niced, and then says it is :attr:`ready`.
     :meth:`submit` queues one request line (the parameters and the armature) for the worker's
     writer thread (``LineWriter``) and returns; a reader thread waits for the answer line,
     which :meth:`poll` returns once: ``{'parameters': {...}}``, or ``{'error': text}`` (a
@@ -182,6 +183,7 @@ class DesignWorker:
 
     def __init__(self, urdf_xml: str) -> None:
         self._busy = False
+        self._ready = False
         self._answers: queue.SimpleQueue = queue.SimpleQueue()
         self._gone = ''  # why the process is gone ('' while it runs)
         self._proc = start_worker('quat_jt_controller.redesign')
@@ -206,11 +208,22 @@ class DesignWorker:
         self._writer.put(json.dumps({'armature': [float(a) for a in armature],
                                      'values': {name: _plain(v) for name, v in values.items()}}))
 
+    @property
+    def ready(self) -> bool:
+        """Tell whether the worker has imported what a design needs (it answers at once)."""
+        return self._ready
+
     def _read(self, proc: subprocess.Popen) -> None:
-        read_json_lines(proc.stdout, self._answers.put)
+        read_json_lines(proc.stdout, self._take)
         self._gone = f'the design worker exited (status {proc.wait()})'
         if self._busy:
             self._answers.put({'error': self._gone})
+
+    def _take(self, line: Any) -> None:
+        if isinstance(line, dict) and line.get('ready'):
+            self._ready = True
+        else:
+            self._answers.put(line)
 
     def poll(self) -> Optional[dict]:
         """Return the answer of the design that finished since the last call, or None."""
@@ -236,10 +249,16 @@ def _serve() -> None:
     """
     Worker process: one answer line (``parameters`` or ``error``) per request line.
 
-    Its first line is the URDF (``{'urdf_xml': ...}``, no answer); each later line a request
-    (``armature``, ``values``).
+    It first imports what a design needs and says ``{'ready': true}``. Its first input line is
+    the URDF (``{'urdf_xml': ...}``, no answer); each later line a request (``armature``,
+    ``values``).
     """
     quiet_worker()
+    # what a design needs (Pinocchio among it), imported now, while the node starts, rather
+    # than at the first design: that one then answers as fast as the next
+    from quat_jt_controller import gain_cli, gain_design  # noqa: F401
+    sys.stdout.write(json.dumps({'ready': True}) + '\n')
+    sys.stdout.flush()
     urdf_xml = ''
     for line in sys.stdin:  # until the node closes it
         try:

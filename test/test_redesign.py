@@ -139,6 +139,8 @@ def test_the_worker_designs_in_a_process_of_its_own_and_says_why_it_cannot():
     _, values = wrist_values()
     worker = DesignWorker(default_urdf_xml())
     try:
+        # it imports what a design needs as it starts, not at the first design
+        wait_for(lambda: worker.ready or None)
         worker.submit(values, (0.0, 0.0, 0.1))
         assert worker.busy
         answer = wait_for(worker.poll)

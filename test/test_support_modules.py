@@ -177,6 +177,7 @@ def test_a_launcher_starts_workers_hands_their_pipes_over_and_reports_their_exit
                                                                                second.pid)
         first.stdin.write(json.dumps({'urdf_xml': '<robot name="x"/>'}) + '\n')
         first.stdin.write(json.dumps({'armature': [0.1], 'values': {}}) + '\n')
+        assert json.loads(first.stdout.readline()) == {'ready': True}
         assert 'error' in json.loads(first.stdout.readline())  # the worker answered
         first.kill()
         assert first.wait(timeout=30.0) == -9 and first.poll() == -9
