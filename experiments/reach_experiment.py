@@ -274,10 +274,9 @@ class Redesigns:
                 regulator.set_shaping(made.shaping)
             self.applied.append((round(t_s, 3), armature))
         found = self.loop.clamped.armature_estimate
-        settled = self.watch.settled(t_s, found)
-        if not settled or self.pending is not None:
-            return
-        armature = self.watch.due(found, self.loop.model.own_inertias(q), settled)
+        if self.watch.settled(t_s, found) is None or self.pending is not None:
+            return  # not a look, or a design on its way
+        armature = self.watch.due(found, self.loop.model.own_inertias(q))
         if armature is None:
             return
         self.watch.designed_with(armature)

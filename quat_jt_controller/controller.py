@@ -516,20 +516,20 @@ class Controller:
         The regulator's ``armature_estimate``, the rotor inertia the motion shows beyond the
         armature told, above the joint's own inertia in the model at the last state, and
         settled (``redesign.InertiaWatch``). The gains were sized for a joint that light: with
-        ``gain_redesign`` and a designer, a design again is started when one is due (its
-        answer: :meth:`take_design`). One M(q) when one is to be said.
+        ``gain_redesign`` and a designer, a design again is started at a look when one is due,
+        the estimate settled or not (its answer: :meth:`take_design`). One M(q) a look.
         """
         found = self.regulator.armature_estimate  # a copy: read once
         q = self.last_q
         if q is None or not any(e > 0.0 for e in found):
             return NO_LOGS
         settled = self._inertia.settled(self._steady_ns * 1e-9, found)
-        if not settled:
+        if settled is None:  # not a look
             return NO_LOGS
         regulator = self.regulator
         model = regulator.model
         own = model.own_inertias(q)
-        logs = self._start_design(found, own, settled)
+        logs = self._start_design(found, own)
         heavy = [(j, found[j], own[j] - found[j]) for j in settled
                  if found[j] > own[j] - found[j] and j not in self._armature_said]
         if not heavy:
@@ -539,7 +539,8 @@ class Controller:
         joints = ', '.join(f'{model.joint_names[j]} {e:.3g} kg m^2 (its model {m:.3g}'
                            + ('; at its limit, armature_estimation_limit' if e >= limits[j]
                               else '') + ')' for j, e, m in heavy)
-        then = ('the gains are being designed again for them (gain_redesign)' if logs else
+        then = ('the gains are being designed again for them (gain_redesign)'
+                if self._redesigning else
                 'the gains were sized without it. For gains sized for these joints, design '
                 f'again with --armature {_values(model.armature, found)}')
         return (LogLine(Severity.WARN, (
@@ -547,14 +548,19 @@ class Controller:
             'speed guard and the friction learning use it now (armature_estimate on '
             f'/diagnostics); {then}')),) + logs
 
-    def _start_design(self, found: Sequence[float], own: Sequence[float],
-                      settled: Sequence[int]) -> tuple[LogLine, ...]:
+    @property
+    def _redesigning(self) -> bool:
+        """Tell whether the gains are designed again when due (``gain_redesign``, a designer)."""
+        return (self.designer is not None and self._parameter_values is not None
+                and self.regulator.shaping.gain_redesign)
+
+    def _start_design(self, found: Sequence[float],
+                      own: Sequence[float]) -> tuple[LogLine, ...]:
         """Start a design again if one is due and allowed (``gain_redesign``, a designer)."""
         designer = self.designer
-        if (designer is None or self._parameter_values is None or designer.busy
-                or not self.regulator.shaping.gain_redesign):
+        if not self._redesigning or designer.busy:
             return NO_LOGS
-        armature = self._inertia.due(found, own, settled)
+        armature = self._inertia.due(found, own)
         if armature is None:
             return NO_LOGS
         self._inertia.designed_with(armature)  # tried once: not again for the same

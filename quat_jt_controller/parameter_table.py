@@ -260,9 +260,9 @@ SHAPING = (
          default_text=JOINT_ZEROS_TEXT, field='armature_estimation_limit_kg_m2', **PER_JOINT),
     Spec('gain_redesign', Kind.BOOL, False,
          'Design the gains again when the rotor inertia estimate (armature_estimation_limit) '
-         'has settled and shows a joint more than twice as heavy as its model (then: 1.5 times '
-         "the inertia its gains were designed for): design_gains' rules, with the robot, "
-         'design_options and the armature told plus half the inertia found, in a worker '
+         'shows a joint more than twice as heavy as its model, settled or still rising (then: '
+         "1.5 times the inertia its gains were designed for): design_gains' rules, with the "
+         'robot, design_options and the armature told plus half the inertia found, in a worker '
          'process; the live parameters that change are then set, and logged, as ros2 param '
          'set would (docs/gain_design.md, section 6). A few times at most: each design '
          'multiplies what some joint is designed for by more than 1.5. false = never (the '

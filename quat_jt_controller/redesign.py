@@ -9,11 +9,11 @@ right; the stiffness stays the one sized for the light joint, and such an arm cr
 with ``design_gains``' own rules (``gain_design.design``), the robot and options the file was
 designed with, and the rotor inertia found:
 
-- :class:`InertiaWatch` says when: a joint's estimate has settled (within
-  ``SETTLED_SHARE`` of what it was ``SETTLED_S`` before, looked at every ``LOOK_S``), and
-  the inertia a design would now take for the joint is more than ``GROWTH_FACTOR`` times the
-  one its gains were designed for (the first time: the joint shows more than twice the
-  inertia of its model);
+- :class:`InertiaWatch` says when: at a look (every ``LOOK_S``), the inertia a design would
+  now take for some joint is more than ``GROWTH_FACTOR`` times the one its gains were designed
+  for (the first time: the joint shows more than twice the inertia of its model), its
+  estimate settled or still rising; and which joints' estimates have settled (within
+  ``SETTLED_SHARE`` of what they were ``SETTLED_S`` before), which the controller says;
 - the design takes ``DESIGN_SHARE`` of what was found on every joint, no more: the gains are
   then sized for a joint lighter than the one the motion shows, as in the campaign's column
   "told 0.05" (a rotor inertia told at half the plant's), which reaches as often as the one
@@ -59,7 +59,7 @@ KEPT = frozenset(('potential', 'gravity_compensation', 'friction_compensation',
 
 class InertiaWatch:
     """
-    Which joints' rotor inertia estimate has settled, and when the gains are due a design.
+    When the gains are due a design for the rotor inertia found, and which estimates settled.
 
     ``told`` is the armature the controller was told (kg m^2 per joint); ``designed`` the one
     the gains in force were designed with, ``told`` until :meth:`designed_with`.
@@ -91,20 +91,23 @@ class InertiaWatch:
         return [j for j, (e, b) in enumerate(zip(found, before))
                 if e > 0.0 and abs(e - b) <= SETTLED_SHARE * e]
 
-    def due(self, found: Sequence[float], own_inertia: Sequence[float],
-            settled: Sequence[int]) -> Optional[tuple[float, ...]]:
+    def due(self, found: Sequence[float],
+            own_inertia: Sequence[float]) -> Optional[tuple[float, ...]]:
         """
-        Return the armature to design the gains with, if a settled joint asks for one.
+        Return the armature to design the gains with, if some joint asks for one.
 
         ``own_inertia`` is ``M_jj(q)`` per joint with the estimate ``found`` in
         (``RobotModel.own_inertias``). A joint would be designed with its armature told plus
         ``DESIGN_SHARE`` of what was found (never less than it was designed with). Due when
         that is more than ``GROWTH_FACTOR`` times the inertia its gains were designed for, for
-        some settled joint; then every joint takes it, settled or not: the joints' estimates
-        settle within a fraction of a second of one another, and a design for the first
-        alone leaves the others to a second design a worker's answer later. An estimate not
-        yet settled is most often still rising to its value; ``DESIGN_SHARE`` of it, a joint
-        lighter than the real one. None when no settled joint asks for a design.
+        some joint; then every joint takes it. The estimate need not have settled: one still
+        rising to its value (the estimator adopts a fit over ``ADOPT_TIME_S``, at most
+        doubling an inertia per solve) is below it, and ``DESIGN_SHARE`` of it a joint
+        lighter than the real one; the next look asks again once it has grown by
+        ``GROWTH_FACTOR``. Waiting for it to settle held a joint that started late (one a
+        friction held until its learned push freed it) on gains sized for its light model
+        for a second or more (docs/reach.md, "A design for an estimate still rising"). None
+        when no joint asks for a design.
         """
         told, designed = self.told, self.designed
         armature = list(designed)
@@ -113,7 +116,7 @@ class InertiaWatch:
             model_j = own_inertia[j] - found_j  # the links and the armature told
             armature[j] = max(designed[j], told[j] + DESIGN_SHARE * found_j)
             before = model_j + designed[j] - told[j]  # the inertia designed for
-            if j in settled and model_j + armature[j] - told[j] > GROWTH_FACTOR * before:
+            if model_j + armature[j] - told[j] > GROWTH_FACTOR * before:
                 due = True
         return tuple(armature) if due else None
 
