@@ -159,12 +159,13 @@ class Launcher:
 
     Starting a process from a running node holds Python's lock for milliseconds, which its
     loop then waits for (docs/benchmark.md, "A worker started again"). The launcher
-    (``python -m quat_jt_runtime.worker``, started by :func:`start_worker` as any worker, with
-    the node, before its loop runs) starts each worker asked for and hands over its pipes
-    through a Unix socket. :meth:`start` sends one short message and returns; the launcher's
-    reader thread, a thread of the node started with the launcher, calls ``on_started`` with
-    the :class:`LaunchedProcess` (or None and the reason), and reports each exit to it. Call
-    :meth:`close` at the end (after the workers' input is closed).
+    (``python -m quat_jt_runtime.worker``, started as :func:`start_worker` starts a worker,
+    with the node, before its loop runs, a Unix socket its input) starts each worker asked for
+    and hands its pipes over through that socket. :meth:`start` sends one short message and
+    returns; the launcher's reader thread, a thread of the node started with the launcher,
+    calls ``on_started`` with the :class:`LaunchedProcess` (or None and the reason), and
+    reports each exit to it. Call :meth:`close` at the end (after the workers' input is
+    closed).
     """
 
     def __init__(self) -> None:
@@ -203,8 +204,8 @@ class Launcher:
         Ask for ``python -m module``, started as :func:`start_worker` starts it.
 
         ``on_started(process, '')``, or ``on_started(None, reason)``, is called later, on the
-        launcher's reader thread: a thread of normal priority, where the caller may start the
-        threads that serve the worker.
+        launcher's reader thread, not the caller's: the threads that serve the worker may be
+        started there, off the loop.
         """
         with self._lock:
             self._next_id += 1
@@ -273,9 +274,9 @@ def _serve_launcher() -> None:
     Its input is a socket to the node (one JSON message a request): ``{'start': module,
     'id': k}`` is answered ``{'id': k, 'pid': pid}`` with the worker's input and output pipes
     attached (or ``{'id': k, 'error': text}``), and ``{'exited': pid, 'code': code}`` when that
-    worker ends; ``{'kill': pid}`` kills it. Its own priority stays the node's (its workers
-    lower theirs); it ends when the node closes the socket, and its workers when the node
-    closes their input.
+    worker ends; ``{'kill': pid}`` kills it. It runs with normal scheduling, not niced (its
+    workers nice themselves); it ends when the node closes the socket, and its workers when
+    the node closes their input.
     """
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the node ends it (closes the socket)
     signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
