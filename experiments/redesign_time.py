@@ -52,6 +52,15 @@ def loop(seconds: float, each_tick=None) -> float:
     return worst
 
 
+def loop_scheduling() -> str:
+    """Put this process at SCHED_FIFO 50, the node's default, if permitted; say which."""
+    try:
+        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(50))
+        return 'SCHED_FIFO 50'
+    except (AttributeError, OSError):
+        return 'normal scheduling (SCHED_FIFO not permitted)'
+
+
 def time_design(urdf_xml: str, values: dict, armature: list, rounds: int) -> dict:
     """Return per round: submit (s), the time to the answer (s), the worst lateness (s)."""
     out = {'submit': [], 'answer': [], 'late': [], 'late_idle': []}
@@ -116,12 +125,7 @@ def main(argv: Optional[list] = None) -> int:
         cases = [arm_case(args)] if args.urdf or args.example_robot else product_cases()
     except (ValueError, OSError) as exc:
         parser.error(str(exc))
-    try:
-        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(50))
-        scheduling = 'SCHED_FIFO 50'
-    except (AttributeError, OSError):
-        scheduling = 'normal scheduling (SCHED_FIFO not permitted)'
-    print(f'the loop at {scheduling}; {args.rounds} designs per config, median / worst')
+    print(f'the loop at {loop_scheduling()}; {args.rounds} designs per config, median / worst')
     print(f'| {"arm" if args.urdf or args.example_robot else "config"} | submit on the loop, '
           'ms | to the answer, s | loop late during it, ms | loop late without, ms |')
     print('|---|---|---|---|---|')

@@ -22,7 +22,7 @@ import time
 from typing import Optional
 
 from experiments import reach_experiment as rx
-from experiments.redesign_time import loop
+from experiments.redesign_time import loop, loop_scheduling
 from quat_jt_controller.control_law import Task
 from quat_jt_controller.goal_check import GoalCheckWorker, ModelSpec, RESTART_BACKOFF_S
 from quat_jt_runtime.resources import config_parameters
@@ -110,12 +110,8 @@ def main(argv: Optional[list] = None) -> int:
     parser = argparse.ArgumentParser(description=__doc__.split('\n')[1])
     parser.add_argument('--rounds', type=int, default=5, help='restarts per config')
     args = parser.parse_args(argv)
-    try:
-        os.sched_setscheduler(0, os.SCHED_FIFO, os.sched_param(50))
-        scheduling = 'SCHED_FIFO 50'
-    except (AttributeError, OSError):
-        scheduling = 'normal scheduling (SCHED_FIFO not permitted)'
-    print(f'the loop at {scheduling}; {args.rounds} restarts per config, median / worst')
+    print(f'the loop at {loop_scheduling()}; {args.rounds} restarts per config, '
+          'median / worst')
     print('| config | longest poll on the loop, ms | loop late from the kill to the first '
           'answer, ms | to the first answer, s | loop late without, ms |')
     print('|---|---|---|---|---|')
