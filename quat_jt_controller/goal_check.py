@@ -26,7 +26,7 @@ from quat_jt_controller.inverse_kinematics import Search, SINGULAR_SIGMA_MIN, so
 from quat_jt_controller.model import GRAVITY_RESERVE_SHARE, RobotModel
 from quat_jt_runtime.payload import Payload
 from quat_jt_runtime.worker import (LaunchedProcess, Launcher, LineWriter, quiet_worker,
-                                    read_json_lines)
+                                    read_json_lines, WORKER_CLOSE_WAIT_S)
 
 
 def singular_warning(q: Sequence[float], sigma_min: float) -> str:
@@ -118,7 +118,6 @@ class ModelSpec:
 
 
 RESTART_BACKOFF_S = (1.0, 2.0, 4.0, 8.0, 16.0, 30.0)  # after the 1st, 2nd, ... death in a row
-CLOSE_WAIT_S = 2.0  # a worker that does not end this long after its input closes is killed
 
 
 class GoalCheckWorker:
@@ -217,7 +216,7 @@ class GoalCheckWorker:
     def _read(self, proc: LaunchedProcess) -> None:
         read_json_lines(proc.stdout, self._done.put)
         try:  # its output closed: the launcher tells its exit code a moment later
-            proc.wait(timeout=CLOSE_WAIT_S)
+            proc.wait(timeout=WORKER_CLOSE_WAIT_S)
         except subprocess.TimeoutExpired:  # told as an exit all the same: it answers no more
             pass
         self._done.put({'exited': proc})
@@ -354,11 +353,11 @@ class GoalCheckWorker:
         proc = self._proc
         if proc is not None and proc.poll() is None:
             try:
-                proc.wait(timeout=CLOSE_WAIT_S)
+                proc.wait(timeout=WORKER_CLOSE_WAIT_S)
             except subprocess.TimeoutExpired:
                 proc.kill()
                 try:
-                    proc.wait(timeout=CLOSE_WAIT_S)
+                    proc.wait(timeout=WORKER_CLOSE_WAIT_S)
                 except subprocess.TimeoutExpired:
                     pass
         self._launcher.close()

@@ -38,7 +38,8 @@ import sys
 import threading
 from typing import Any, Mapping, Optional, Sequence
 
-from quat_jt_runtime.worker import LineWriter, quiet_worker, read_json_lines, start_worker
+from quat_jt_runtime.worker import (LineWriter, quiet_worker, read_json_lines, start_worker,
+                                    WORKER_CLOSE_WAIT_S)
 
 # an estimate within this share of what it was SETTLED_S before has settled: 2.5 of the
 # estimate's time constants (armature_estimate.ADOPT_TIME_S)
@@ -50,7 +51,6 @@ DESIGN_SHARE = 0.5  # of the rotor inertia found, what the design takes
 # designed for: the first time, for a joint that shows more than twice its model's inertia
 # (its model plus DESIGN_SHARE of the rest above 1.5 x its model)
 GROWTH_FACTOR = 1.5
-CLOSE_WAIT_S = 2.0  # a worker that does not end this long after its input closes is killed
 # Parameters the design reads, or the user chooses, that a design again does not set
 KEPT = frozenset(('potential', 'gravity_compensation', 'friction_compensation',
                   'preferred_configuration', 'posture_weight', 'goal_velocity_gain',
@@ -242,7 +242,7 @@ class DesignWorker:
         proc = self._proc
         self._writer.close()
         try:
-            proc.wait(timeout=0.0 if self._busy else CLOSE_WAIT_S)
+            proc.wait(timeout=0.0 if self._busy else WORKER_CLOSE_WAIT_S)
         except subprocess.TimeoutExpired:
             proc.kill()
             proc.wait()

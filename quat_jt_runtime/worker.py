@@ -20,6 +20,8 @@ from typing import Any, Callable, IO, Iterable, Optional, Sequence
 from quat_jt_runtime.realtime import start_at_normal_scheduling
 
 WORKER_NICE = 10  # advice only: leave the CPU to the 1 kHz nodes
+# a worker (or the launcher) not gone this long after its input closes is killed
+WORKER_CLOSE_WAIT_S = 2.0
 
 
 def start_worker(module: str) -> subprocess.Popen:
@@ -113,7 +115,6 @@ class LineWriter:
 
 
 LAUNCH_MESSAGE_BYTES = 4096  # a launcher message: a module name, a pid, an exit code
-LAUNCHER_CLOSE_WAIT_S = 2.0  # a launcher not gone this long after its socket closes is killed
 
 
 class LaunchedProcess:
@@ -259,11 +260,11 @@ class Launcher:
         except OSError:
             pass
         try:
-            self._proc.wait(timeout=LAUNCHER_CLOSE_WAIT_S)
+            self._proc.wait(timeout=WORKER_CLOSE_WAIT_S)
         except subprocess.TimeoutExpired:
             self._proc.kill()
             self._proc.wait()
-        self._reader.join(LAUNCHER_CLOSE_WAIT_S)
+        self._reader.join(WORKER_CLOSE_WAIT_S)
         self._sock.close()
 
 
