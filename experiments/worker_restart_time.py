@@ -24,9 +24,9 @@ from typing import Optional
 from experiments import reach_experiment as rx
 from experiments.redesign_time import loop, loop_scheduling
 from quat_jt_controller.control_law import Task
-from quat_jt_controller.goal_check import GoalCheckWorker, ModelSpec, RESTART_BACKOFF_S
+from quat_jt_controller.goal_check import GoalCheckWorker, ModelSpec
 from quat_jt_runtime.resources import config_parameters
-from quat_jt_runtime.worker import start_worker
+from quat_jt_runtime.worker import RESTART_BACKOFF_S, start_worker
 
 POLL_TICKS = 50  # the node's goal-check timer: 50 ms
 READY_WITHIN_S = 60.0

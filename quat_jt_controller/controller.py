@@ -128,7 +128,7 @@ class Controller:
     :param position_resolution: a count of each joint's position in the states (0: exact),
         for the velocity estimate of states without velocities.
     :param designer: the design worker (``redesign.DesignWorker``: ``submit``, ``poll``,
-        ``busy``), or None: the gains are never designed again.
+        ``take_failure``, ``busy``), or None: the gains are never designed again.
     :param parameter_values: the parameters in force by ROS name, read when a design starts.
     """
 
@@ -577,18 +577,24 @@ class Controller:
 
         The caller sets them as one atomic change (the node: its own parameters, checked and
         logged as any ``ros2 param set``) and says how that went with :meth:`design_set`.
-        A design that failed leaves the gains as they are (a WARN).
+        A design that failed leaves the gains as they are (a WARN); a worker that died is said
+        once (an ERROR: it starts again by itself).
         """
         designer = self.designer
-        answer = None if designer is None else designer.poll()
-        if answer is None:
+        if designer is None:
             return None, NO_LOGS
+        answer = designer.poll()
+        failure = designer.take_failure()
+        logs = NO_LOGS if failure is None else (
+            LogLine(Severity.ERROR, f'{failure}; regulation goes on'),)
+        if answer is None:
+            return None, logs
         if 'error' in answer:
-            return None, (LogLine(Severity.WARN, (
+            return None, logs + (LogLine(Severity.WARN, (
                 f'the gains could not be designed again with armature '
                 f'[{_values(self._inertia.designed)}]: '
                 f'{answer["error"]}; they stay as they are')),)
-        return dict(answer['parameters']), NO_LOGS
+        return dict(answer['parameters']), logs
 
     def design_set(self, parameters: Mapping[str, Any], error: str = '') -> tuple[LogLine, ...]:
         """Say that the parameters of a design again are in force (or why they are not)."""

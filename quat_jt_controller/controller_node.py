@@ -29,6 +29,7 @@ from quat_jt_runtime.params import declare_realtime, history_qos
 from quat_jt_runtime.payload import Payload
 from quat_jt_runtime.prewarm_timer import describe_prewarm, prewarm_off_reason, PrewarmTimer
 from quat_jt_runtime.resources import bundled_urdf_hint
+from quat_jt_runtime.worker import Launcher
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.parameter import Parameter
@@ -53,10 +54,7 @@ class QuatJtController(Node):
         except BaseException:
             # A node that cannot start gives its handles back at once (its /rosout logger
             # too, which a later node of the same name in this process would not get).
-            if getattr(self, '_goal_checker', None) is not None:
-                self._goal_checker.close()
-            if getattr(self, '_designer', None) is not None:
-                self._designer.close()
+            self._close_workers()
             Node.destroy_node(self)
             raise
 
@@ -81,9 +79,13 @@ class QuatJtController(Node):
             self, check=self._check_payload, on_apply=reg.set_payload)
         reg.set_payload(self.payload.current)
         self._change_log = parameters.change_log(self, reg)
+        # the workers' launcher: a process started now, before the loop, that starts each
+        # worker (again, after a death) so that the node never starts one while it runs
+        self._launcher = Launcher()
         self._goal_checker = GoalCheckWorker(ModelSpec(
-            cfg.urdf_xml, cfg.base_link, cfg.tip_link, cfg.joints, cfg.task))
-        self._designer = DesignWorker(cfg.urdf_xml)
+            cfg.urdf_xml, cfg.base_link, cfg.tip_link, cfg.joints, cfg.task),
+            launcher=self._launcher)
+        self._designer = DesignWorker(cfg.urdf_xml, launcher=self._launcher)
         ctl = self.controller = Controller(
             reg, cfg.state_timeout_s, cfg.publish_rate_divider, cfg.max_state_age_s,
             cfg.state_rate_hz, self._goal_checker, started_ns=steady_ns(),
@@ -257,10 +259,15 @@ class QuatJtController(Node):
         if designed is not None:  # through the parameters: checked, logged, then in force
             self._log(ctl.design_set(designed, parameters.set_live(self, designed)))
 
+    def _close_workers(self) -> None:
+        """Stop the goal-check and design workers, then their launcher (any started)."""
+        for name in ('_goal_checker', '_designer', '_launcher'):
+            if getattr(self, name, None) is not None:
+                getattr(self, name).close()
+
     def destroy_node(self) -> None:
-        """Stop the goal-check and design workers, then destroy the node."""
-        self._goal_checker.close()
-        self._designer.close()
+        """Stop the goal-check and design workers and their launcher, then destroy the node."""
+        self._close_workers()
         super().destroy_node()
 
 

@@ -12,10 +12,7 @@ thread.
 """
 from dataclasses import dataclass
 import json
-import queue
-import subprocess
 import sys
-import threading
 import time
 from typing import Callable, NamedTuple, Optional, Sequence
 
@@ -25,8 +22,7 @@ from quat_jt_controller.inverse_kinematics import RESIDUAL_TOLERANCE, search_goa
 from quat_jt_controller.inverse_kinematics import Search, SINGULAR_SIGMA_MIN, solve_ik, starts
 from quat_jt_controller.model import GRAVITY_RESERVE_SHARE, RobotModel
 from quat_jt_runtime.payload import Payload
-from quat_jt_runtime.worker import (LaunchedProcess, Launcher, LineWriter, quiet_worker,
-                                    read_json_lines, WORKER_CLOSE_WAIT_S)
+from quat_jt_runtime.worker import answer, Launcher, quiet_worker, SupervisedWorker
 
 
 def singular_warning(q: Sequence[float], sigma_min: float) -> str:
@@ -117,9 +113,6 @@ class ModelSpec:
     task: Task
 
 
-RESTART_BACKOFF_S = (1.0, 2.0, 4.0, 8.0, 16.0, 30.0)  # after the 1st, 2nd, ... death in a row
-
-
 class GoalCheckWorker:
     """
     :func:`check_goal` in a separate process, fed the newest goal only, restarted if it dies.
@@ -133,93 +126,56 @@ class GoalCheckWorker:
     newer goal replaces it, so a flood of goals costs one check at a time and the newest goal
     is always checked. :meth:`poll` returns finished verdicts.
 
-    If the worker dies, :meth:`take_failure` says so once, :attr:`available` is False, and
-    :meth:`poll` asks for a new worker after a back-off (``RESTART_BACKOFF_S``, reset by a
-    verdict from the new one); the goal that was running or waiting is checked by the new one.
-    Every worker is started by a ``Launcher`` process, started with this object: :meth:`poll`
-    runs on the node's loop, which a process started there would hold up for milliseconds.
-    Lines sent before the worker is there wait for it. Call :meth:`close` at the end.
+    The process is a ``SupervisedWorker``'s (``quat_jt_runtime.worker``): started by the
+    node's ``Launcher`` process (``launcher``, or one of its own), as :meth:`poll` runs on the
+    node's loop, which a process started there would hold up for milliseconds. If the worker
+    dies, :meth:`take_failure` says so once, :attr:`available` is False, and :meth:`poll` asks
+    for a new worker after a back-off (``RESTART_BACKOFF_S``, reset by a verdict from the new
+    one); the goal that was running or waiting is checked by the new one. Call :meth:`close`
+    at the end.
     """
 
-    def __init__(self, spec: ModelSpec, clock: Callable[[], float] = time.monotonic) -> None:
+    def __init__(self, spec: ModelSpec, clock: Callable[[], float] = time.monotonic,
+                 launcher: Optional[Launcher] = None) -> None:
         # each worker's first line: encoded once, so that a restart from the loop's thread
         # only queues it (a whole robot's URDF is 100 to 200 KiB)
-        self._spec_line = json.dumps({
+        spec_line = json.dumps({
             'urdf_xml': spec.urdf_xml, 'base_link': spec.base_link, 'tip_link': spec.tip_link,
             'joint_names': list(spec.joint_names), 'task': Task(spec.task).value})
-        self._clock = clock
-        self._done: queue.SimpleQueue = queue.SimpleQueue()
-        self._launcher = Launcher()
-        self._proc: Optional[LaunchedProcess] = None  # None until the launcher started it
-        self._writer: Optional[LineWriter] = None
         self._requests: dict[int, tuple[object, dict]] = {}  # id -> (key, request) sent
         self._configurations: dict[object, Optional[list[float]]] = {}
         self._velocities: dict[object, list[float]] = {}
         self._next_id = 0
         self._running: Optional[int] = None
         self._next: Optional[tuple[object, dict]] = None
-        self._deaths_in_a_row = 0
-        self._restart_at: Optional[float] = None
-        self._failure: Optional[str] = None
-        self._last_exit = ''
-        self.restarts = 0
-        self._closed = False
-        self._start_process()
+        self._worker = SupervisedWorker(
+            'quat_jt_controller.goal_check', spec_line, 'the goal-check worker',
+            'goal checks and goal configurations are unavailable', launcher, clock)
 
     @property
     def available(self) -> bool:
         """Tell whether a worker process is up (False from its death until its restart)."""
-        return self._restart_at is None
+        return self._worker.available
 
     @property
     def ready(self) -> bool:
         """Tell whether the worker has built its model and answers checks at once."""
-        return self._ready and self.available
+        return self._worker.ready
 
     @property
     def unavailable_reason(self) -> str:
         """Say why checks are unavailable, and when the worker restarts ('' if available)."""
-        if self._restart_at is None:
-            return ''
-        wait_s = max(0.0, self._restart_at - self._clock())
-        return f'{self._last_exit}; restarting in {wait_s:.1f} s'
+        return self._worker.unavailable_reason
 
     @property
     def pid(self) -> Optional[int]:
         """Return the worker process's id (None while the launcher starts it)."""
-        return None if self._proc is None else self._proc.pid
+        return self._worker.pid
 
-    def _start_process(self) -> None:
-        """Ask the launcher for a worker: one short message (on the loop's thread, too)."""
-        self._ready = False  # until the new worker says it has built its model
-        self._proc = self._writer = None
-        lines: queue.SimpleQueue = queue.SimpleQueue()  # the worker's input, until it is there
-        lines.put(self._spec_line)
-        self._lines = lines
-        self._launcher.start('quat_jt_controller.goal_check',
-                             lambda proc, error: self._on_started(proc, error, lines))
-
-    def _on_started(self, proc: Optional[LaunchedProcess], error: str,
-                    lines: queue.SimpleQueue) -> None:
-        """On the launcher's reader thread: serve the worker, or report why there is none."""
-        if proc is None:
-            self._done.put({'exited': None, 'error': error})
-            return
-        writer = LineWriter(proc.stdin, 'goal_check_writer', lines)
-        self._done.put({'started': proc, 'writer': writer})  # before its reader's replies
-        threading.Thread(target=self._read, args=(proc,), name='goal_check_reader',
-                         daemon=True).start()
-
-    def _send(self, obj: dict) -> None:
-        self._lines.put(json.dumps(obj))  # a worker gone: its reader reports the exit
-
-    def _read(self, proc: LaunchedProcess) -> None:
-        read_json_lines(proc.stdout, self._done.put)
-        try:  # its output closed: the launcher tells its exit code a moment later
-            proc.wait(timeout=WORKER_CLOSE_WAIT_S)
-        except subprocess.TimeoutExpired:  # told as an exit all the same: it answers no more
-            pass
-        self._done.put({'exited': proc})
+    @property
+    def restarts(self) -> int:
+        """Return how many times a worker was started again."""
+        return self._worker.restarts
 
     def submit(self, key: object, q_measured: Optional[Sequence[float]],
                q_desired: Sequence[float], p_desired: Sequence[float],
@@ -257,7 +213,7 @@ class GoalCheckWorker:
         self._next_id += 1
         self._requests[self._next_id] = (key, request)
         self._running = self._next_id
-        self._send({'id': self._next_id, **request})
+        self._worker.send(json.dumps({'id': self._next_id, **request}))
 
     @property
     def busy(self) -> bool:
@@ -267,24 +223,13 @@ class GoalCheckWorker:
     def poll(self) -> list[tuple[object, str]]:
         """Return ``[(key, verdict)]`` of the checks finished since the last call."""
         out = []
-        while not self._done.empty():
-            reply = self._done.get()
-            if 'started' in reply:
-                self._proc, self._writer = reply['started'], reply['writer']
-                continue
-            if 'exited' in reply:
-                if 'error' in reply and self._proc is None and not self._closed:
-                    self._on_exit(reply['error'])  # the launcher could not start one
-                elif reply['exited'] is self._proc and not self._closed:
-                    self._on_exit()
-                continue
-            if reply.get('ready'):
-                self._ready = True
+        replies, died = self._worker.poll()
+        for reply in replies:
+            if not isinstance(reply, dict):
                 continue
             key = self._requests.pop(reply.get('id'), (None, None))[0]
             if reply.get('id') == self._running:
                 self._running = None
-            self._deaths_in_a_row = 0
             if reply.get('configuration') is not None and key is not None:
                 try:
                     self._configurations[key] = reply['configuration']
@@ -293,38 +238,18 @@ class GoalCheckWorker:
                 except TypeError:  # an unhashable key: nobody can take it
                     pass
             out.append((key, str(reply.get('verdict', ''))))
-        if self._restart_at is not None and self._clock() >= self._restart_at:
-            self._restart_at = None
-            self.restarts += 1
-            self._start_process()
+        if died:  # the check it ran is held for the next worker
+            if self._running is not None and self._next is None:
+                self._next = self._requests.get(self._running)
+            self._requests.clear()
+            self._running = None
         if self._running is None and self._next is not None and self.available:
             self._start_next()
         return out
 
-    def _on_exit(self, not_started: str = '') -> None:
-        """Hold the dead worker's check for the next one, and schedule the restart."""
-        if not_started:
-            code = None
-        else:
-            code = self._proc.poll()  # the reader waited for it (None: not told)
-            self._writer.close()  # its writer thread ends
-        if self._running is not None and self._next is None:  # re-check it after the restart
-            self._next = self._requests.get(self._running)
-        self._requests.clear()
-        self._running = None
-        backoff_s = RESTART_BACKOFF_S[min(self._deaths_in_a_row, len(RESTART_BACKOFF_S) - 1)]
-        self._deaths_in_a_row += 1
-        self._restart_at = self._clock() + backoff_s
-        self._last_exit = (f'the goal-check worker could not be started: {not_started}'
-                           if not_started else 'the goal-check worker exited'
-                           + ('' if code is None else f' (exit code {code})'))
-        self._failure = (f'{self._last_exit}: goal checks and goal configurations are '
-                         f'unavailable; restarting it in {backoff_s:g} s')
-
     def take_failure(self) -> Optional[str]:
         """Return (once) what happened to the worker since the last call, or None."""
-        failure, self._failure = self._failure, None
-        return failure
+        return self._worker.take_failure()
 
     def take_configuration(self, key: object) -> Optional[list[float]]:
         """Return (once) the goal configuration found for ``key``, or None if none was."""
@@ -342,25 +267,8 @@ class GoalCheckWorker:
 
     def close(self) -> None:
         """Stop the worker (closing its stdin ends it); idempotent."""
-        self._closed = True
         self._next = None
-        self._restart_at = None
-        self._lines.put(None)  # a worker still to come ends as soon as it starts
-        while not self._done.empty():  # one started since the last poll
-            reply = self._done.get()
-            if 'started' in reply:
-                self._proc, self._writer = reply['started'], reply['writer']
-        proc = self._proc
-        if proc is not None and proc.poll() is None:
-            try:
-                proc.wait(timeout=WORKER_CLOSE_WAIT_S)
-            except subprocess.TimeoutExpired:
-                proc.kill()
-                try:
-                    proc.wait(timeout=WORKER_CLOSE_WAIT_S)
-                except subprocess.TimeoutExpired:
-                    pass
-        self._launcher.close()
+        self._worker.close()
 
 
 def configuration_verdict(search: Search) -> str:
@@ -390,8 +298,8 @@ def _serve() -> None:
     model = RobotModel(spec['urdf_xml'], spec['base_link'], spec['tip_link'],
                        spec['joint_names'])
     task = Task(spec['task'])
-    sys.stdout.write(json.dumps({'ready': True}) + '\n')  # checks are answered at once now
-    sys.stdout.flush()
+    if not answer({'ready': True}):  # checks are answered at once now (the node is gone)
+        return
     q_last: Optional[list[float]] = None  # the last q*: the warm start of the next search
     for line in lines:
         request = json.loads(line)
@@ -418,10 +326,9 @@ def _serve() -> None:
                                                       task).tolist()
         except Exception as exc:  # noqa: B902 - reported to the node, which logs it
             verdict = f'the goal check failed: {exc!r}'
-        sys.stdout.write(json.dumps({'id': request['id'], 'verdict': verdict,
-                                     'configuration': configuration,
-                                     'configuration_velocity': velocity}) + '\n')
-        sys.stdout.flush()
+        if not answer({'id': request['id'], 'verdict': verdict, 'configuration': configuration,
+                       'configuration_velocity': velocity}):
+            return
 
 
 if __name__ == '__main__':

@@ -32,13 +32,11 @@ on stdout).
 """
 from collections import deque
 import json
-import queue
-import subprocess
 import sys
-import threading
-from typing import Any, Mapping, Optional, Sequence
+import time
+from typing import Any, Callable, Mapping, Optional, Sequence
 
-from quat_jt_runtime.worker import (LineWriter, quiet_worker, read_json_lines, start_worker,
+from quat_jt_runtime.worker import (answer, Launcher, quiet_worker, SupervisedWorker,
                                     WORKER_CLOSE_WAIT_S)
 
 # an estimate within this share of what it was SETTLED_S before has settled: 2.5 of the
@@ -170,82 +168,87 @@ class DesignWorker:
     """
     :func:`redesign` in a process of its own, one design at a time, never on the loop.
 
-    The process (``python -m quat_jt_controller.redesign``, started by
-    ``quat_jt_runtime.worker``: niced, out of the terminal's process group, SIGINT ignored)
-    starts with the worker, before the loop runs, is sent the URDF, and waits: starting a
-    process from a running node holds Python's lock for milliseconds, which the loop would wait
-    (docs/benchmark.md, "A design again"). It imports what a design needs (Pinocchio) as it
-    starts, niced, and then says it is :attr:`ready`.
-    :meth:`submit` queues one request line (the parameters and the armature) for the worker's
-    writer thread (``LineWriter``) and returns; a reader thread waits for the answer line,
-    which :meth:`poll` returns once: ``{'parameters': {...}}``, or ``{'error': text}`` (a
-    design that failed, or a worker that died: then every later design is refused at once,
-    with the reason). Call :meth:`close` at the end: it closes the process's input, which
-    ends it.
+    The process (``python -m quat_jt_controller.redesign``, niced, out of the terminal's
+    process group, SIGINT ignored) is a ``SupervisedWorker``'s (``quat_jt_runtime.worker``):
+    started by the node's ``Launcher`` process (``launcher``, or one of its own) as the node
+    starts, sent the URDF, and started again after a back-off when it dies, as the goal-check
+    worker is; the node never starts a process while its loop runs (docs/benchmark.md, "A
+    worker started again"). It imports what a design needs (Pinocchio) as it starts, niced,
+    and then says it is :attr:`ready`. :meth:`submit` queues one request line (the parameters
+    and the armature) for the worker's writer thread (``LineWriter``) and returns; a reader
+    thread waits for the answer line, which :meth:`poll` returns once: ``{'parameters':
+    {...}}``, or ``{'error': text}`` (a design that failed, a worker that died during it, or
+    one asked for while no worker is up: refused at once, with the reason). :meth:`poll` also
+    starts the next worker when its back-off is over; :meth:`take_failure` says once that a
+    worker died. Call :meth:`close` at the end: it closes the process's input, which ends it.
     """
 
-    def __init__(self, urdf_xml: str) -> None:
+    def __init__(self, urdf_xml: str, launcher: Optional[Launcher] = None,
+                 clock: Callable[[], float] = time.monotonic) -> None:
         self._busy = False
-        self._ready = False
-        self._answers: queue.SimpleQueue = queue.SimpleQueue()
-        self._gone = ''  # why the process is gone ('' while it runs)
-        self._proc = start_worker('quat_jt_controller.redesign')
-        self._writer = LineWriter(self._proc.stdin, 'design_writer')
-        self._writer.put(json.dumps({'urdf_xml': urdf_xml}))  # once: each design reads it
-        threading.Thread(target=self._read, args=(self._proc,), name='design_reader',
-                         daemon=True).start()
+        self._refusal: Optional[dict] = None  # the answer to a design asked for in vain
+        # once per worker: each design reads it
+        self._worker = SupervisedWorker(
+            'quat_jt_controller.redesign', json.dumps({'urdf_xml': urdf_xml}),
+            'the design worker', 'the gains cannot be designed again until it is back',
+            launcher, clock)
 
     @property
     def busy(self) -> bool:
         """Tell whether a design is running (or its answer not yet taken)."""
         return self._busy
 
+    @property
+    def ready(self) -> bool:
+        """Tell whether the worker has imported what a design needs (it answers at once)."""
+        return self._worker.ready
+
+    @property
+    def pid(self) -> Optional[int]:
+        """Return the worker process's id (None while the launcher starts it)."""
+        return self._worker.pid
+
+    @property
+    def restarts(self) -> int:
+        """Return how many times a worker was started again."""
+        return self._worker.restarts
+
     def submit(self, values: Mapping[str, Any], armature: Sequence[float]) -> None:
         """Ask for a design with ``armature`` on the parameters ``values`` (by ROS name)."""
         if self._busy:
             raise RuntimeError('a design is running')
         self._busy = True
-        if self._gone:
-            self._answers.put({'error': self._gone})
+        if not self._worker.available:
+            self._refusal = {'error': self._worker.unavailable_reason}
             return
-        self._writer.put(json.dumps({'armature': [float(a) for a in armature],
-                                     'values': {name: _plain(v) for name, v in values.items()}}))
-
-    @property
-    def ready(self) -> bool:
-        """Tell whether the worker has imported what a design needs (it answers at once)."""
-        return self._ready
-
-    def _read(self, proc: subprocess.Popen) -> None:
-        read_json_lines(proc.stdout, self._take)
-        self._gone = f'the design worker exited (status {proc.wait()})'
-        if self._busy:
-            self._answers.put({'error': self._gone})
-
-    def _take(self, line: Any) -> None:
-        if isinstance(line, dict) and line.get('ready'):
-            self._ready = True
-        else:
-            self._answers.put(line)
+        self._worker.send(json.dumps({
+            'armature': [float(a) for a in armature],
+            'values': {name: _plain(v) for name, v in values.items()}}))
 
     def poll(self) -> Optional[dict]:
         """Return the answer of the design that finished since the last call, or None."""
-        try:
-            answer = self._answers.get_nowait()
-        except queue.Empty:
+        replies, died = self._worker.poll()
+        reply = None
+        if self._refusal is not None:
+            reply, self._refusal = self._refusal, None
+        elif replies:  # one design at a time: one answer
+            reply = replies[-1]
+        elif died and self._busy:  # its design is lost with it
+            reply = {'error': self._worker.last_exit}
+        if reply is None:
             return None
         self._busy = False
-        return answer
+        return reply
+
+    def take_failure(self) -> Optional[str]:
+        """Return (once) what happened to the worker since the last call, or None."""
+        return self._worker.take_failure()
 
     def close(self) -> None:
         """End the process: a design still running is stopped, an idle worker ends itself."""
-        proc = self._proc
-        self._writer.close()
-        try:
-            proc.wait(timeout=0.0 if self._busy else WORKER_CLOSE_WAIT_S)
-        except subprocess.TimeoutExpired:
-            proc.kill()
-            proc.wait()
+        self._worker.close(0.0 if self._busy else WORKER_CLOSE_WAIT_S)
+        if self._busy and self._refusal is None:
+            self._refusal = {'error': self._worker.unavailable_reason}
 
 
 def _serve() -> None:
@@ -260,8 +263,8 @@ def _serve() -> None:
     # what a design needs (Pinocchio among it), imported now, while the node starts, rather
     # than at the first design: that one then answers as fast as the next
     from quat_jt_controller import gain_cli, gain_design  # noqa: F401
-    sys.stdout.write(json.dumps({'ready': True}) + '\n')
-    sys.stdout.flush()
+    if not answer({'ready': True}):  # the node is gone
+        return
     urdf_xml = ''
     for line in sys.stdin:  # until the node closes it
         try:
@@ -269,12 +272,12 @@ def _serve() -> None:
             if 'urdf_xml' in request:
                 urdf_xml = request['urdf_xml']
                 continue
-            answer = {'parameters': redesign(urdf_xml, request['values'],
-                                             request['armature'])}
+            reply = {'parameters': redesign(urdf_xml, request['values'],
+                                            request['armature'])}
         except Exception as exc:  # noqa: B902 - reported to the node, which logs it
-            answer = {'error': f'{type(exc).__name__}: {exc}'}
-        sys.stdout.write(json.dumps(answer) + '\n')
-        sys.stdout.flush()
+            reply = {'error': f'{type(exc).__name__}: {exc}'}
+        if not answer(reply):
+            return
 
 
 if __name__ == '__main__':

@@ -1,11 +1,13 @@
 """
 Worker processes of a node: slow model work (a goal check, a gain design) off its loop.
 
-:func:`start_worker` starts ``python -m <module>`` as the node's goal-check and design workers
-are started, and :func:`quiet_worker` is the first thing such a worker does; a
-:class:`LineWriter` writes to its input, :func:`read_json_lines` reads its output. A worker
-started again while the node runs is started by a :class:`Launcher`, a process of the node's
-started with it (``python -m quat_jt_runtime.worker``). ROS-free.
+A node's goal-check and design workers are each a :class:`SupervisedWorker`: ``python -m
+<module>``, started by a :class:`Launcher` (a process of the node's started with it, ``python
+-m quat_jt_runtime.worker``, so that the node never starts a process while its loop runs), and
+started again after a back-off when it dies. :func:`start_worker` is how the launcher starts
+one, and :func:`quiet_worker` the first thing such a worker does; a :class:`LineWriter` writes
+to its input, :func:`read_json_lines` reads its output, and the worker writes it with
+:func:`answer`. ROS-free.
 """
 import json
 import os
@@ -15,6 +17,7 @@ import socket
 import subprocess
 import sys
 import threading
+import time
 from typing import Any, Callable, IO, Iterable, Optional, Sequence
 
 from quat_jt_runtime.realtime import start_at_normal_scheduling
@@ -22,6 +25,7 @@ from quat_jt_runtime.realtime import start_at_normal_scheduling
 WORKER_NICE = 10  # advice only: leave the CPU to the 1 kHz nodes
 # a worker (or the launcher) not gone this long after its input closes is killed
 WORKER_CLOSE_WAIT_S = 2.0
+RESTART_BACKOFF_S = (1.0, 2.0, 4.0, 8.0, 16.0, 30.0)  # after the 1st, 2nd, ... death in a row
 
 
 def start_worker(module: str) -> subprocess.Popen:
@@ -55,6 +59,22 @@ def quiet_worker() -> None:
         os.nice(WORKER_NICE)
     except OSError:
         pass
+
+
+def answer(message: Any) -> bool:
+    """
+    In a worker: write ``message`` as a JSON line to the node; False if the node reads no more.
+
+    The node gone (or a worker it never took, the launcher's copy closed), the write fails:
+    stdout then goes to /dev/null, so that Python's flush at exit is quiet too.
+    """
+    try:
+        sys.stdout.write(json.dumps(message) + '\n')
+        sys.stdout.flush()
+        return True
+    except BrokenPipeError:
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())
+        return False
 
 
 def read_json_lines(lines: Iterable[str], put: Callable[[Any], None]) -> None:
@@ -266,6 +286,182 @@ class Launcher:
             self._proc.wait()
         self._reader.join(WORKER_CLOSE_WAIT_S)
         self._sock.close()
+
+
+class SupervisedWorker:
+    """
+    One worker process at a time, started by a :class:`Launcher`, started again when it dies.
+
+    ``python -m module`` reads ``first_line`` first (each new worker does), then the lines
+    :meth:`send` queues, and answers with JSON lines. Its ``{'ready': true}`` line sets
+    :attr:`ready` (on its reader thread); :meth:`poll` returns the other lines, in order, and
+    says whether the worker died since the last call. Then :meth:`take_failure` says so once
+    (and what is ``unavailable`` until it is back), :attr:`available` is False, and a
+    :meth:`poll` after the back-off (``RESTART_BACKOFF_S``, longer after each death in a row,
+    reset by an answer) asks the launcher for a new worker. Lines sent before a worker is
+    there wait for it; lines sent while none is available are dropped: the owner holds or
+    refuses its work.
+
+    No method but :meth:`close` waits or starts a process: they run on the node's loop. The
+    launcher is ``launcher`` (the node's, shared by its workers) or one of its own, closed
+    with it.
+    """
+
+    def __init__(self, module: str, first_line: str, label: str, unavailable: str,
+                 launcher: Optional[Launcher] = None,
+                 clock: Callable[[], float] = time.monotonic) -> None:
+        self.label = label  # 'the goal-check worker'
+        self.restarts = 0
+        self.last_exit = ''  # how the last worker ended ('' before any death)
+        self._module = module
+        self._first_line = first_line
+        self._unavailable = unavailable
+        self._clock = clock
+        self._events: queue.SimpleQueue = queue.SimpleQueue()  # from the launcher and readers
+        self._owns_launcher = launcher is None
+        self._launcher = Launcher() if launcher is None else launcher
+        self._proc: Optional[LaunchedProcess] = None  # None until a poll took it
+        self._current: Optional[LaunchedProcess] = None  # ... until the launcher started it
+        self._writer: Optional[LineWriter] = None
+        self._lines: queue.SimpleQueue = queue.SimpleQueue()
+        self._ready = False
+        self._deaths_in_a_row = 0
+        self._restart_at: Optional[float] = None
+        self._failure: Optional[str] = None
+        self._closed = False
+        self._start_process()
+
+    @property
+    def available(self) -> bool:
+        """Tell whether a worker is up or starting (False from a death until its restart)."""
+        return self._restart_at is None and not self._closed
+
+    @property
+    def ready(self) -> bool:
+        """Tell whether the worker said it is ready to answer at once (no poll needed)."""
+        return self._ready and self.available
+
+    @property
+    def pid(self) -> Optional[int]:
+        """Return the worker process's id (None while the launcher starts it); needs no poll."""
+        current = self._current
+        return None if current is None else current.pid
+
+    @property
+    def unavailable_reason(self) -> str:
+        """Say why the worker is unavailable, and when it restarts ('' if available)."""
+        if self._closed:
+            return f'{self.label} was closed'
+        if self._restart_at is None:
+            return ''
+        wait_s = max(0.0, self._restart_at - self._clock())
+        return f'{self.last_exit}; restarting in {wait_s:.1f} s'
+
+    def send(self, line: str) -> None:
+        """Queue ``line`` (one JSON text) for the worker; never waits."""
+        self._lines.put(line)  # a worker gone: its reader reports the exit
+
+    def poll(self) -> tuple[list, bool]:
+        """Return the worker's answers since the last call and whether it died after them."""
+        answers, died = [], False
+        while not self._events.empty():
+            kind, value, writer = self._events.get()
+            if kind == 'started':
+                self._proc, self._writer = value, writer
+            elif kind == 'not started':
+                if self._proc is None and not self._closed:
+                    died = self._on_exit(value)
+            elif kind == 'exited':
+                if value is self._proc and not self._closed:
+                    died = self._on_exit()
+            else:
+                self._deaths_in_a_row = 0  # the worker works
+                answers.append(value)
+        if self._restart_at is not None and self._clock() >= self._restart_at:
+            self._restart_at = None
+            self.restarts += 1
+            self._start_process()
+        return answers, died
+
+    def take_failure(self) -> Optional[str]:
+        """Return (once) what happened to the worker since the last call, or None."""
+        failure, self._failure = self._failure, None
+        return failure
+
+    def close(self, wait_s: float = WORKER_CLOSE_WAIT_S) -> None:
+        """End the worker (its input closes; killed after ``wait_s``); idempotent."""
+        self._closed = True
+        self._restart_at = None
+        self._lines.put(None)  # a worker still to come ends as soon as it starts
+        while not self._events.empty():  # one started since the last poll
+            kind, value, writer = self._events.get()
+            if kind == 'started':
+                self._proc, self._writer = value, writer
+        proc = self._proc
+        if proc is not None and proc.poll() is None:
+            try:
+                proc.wait(timeout=wait_s)
+            except subprocess.TimeoutExpired:
+                proc.kill()
+                try:
+                    proc.wait(timeout=WORKER_CLOSE_WAIT_S)
+                except subprocess.TimeoutExpired:
+                    pass
+        if self._owns_launcher:
+            self._launcher.close()
+
+    def _start_process(self) -> None:
+        """Ask the launcher for a worker: one short message (on the loop's thread, too)."""
+        self._ready = False  # until the new worker says it is
+        self._proc = self._current = self._writer = None
+        lines: queue.SimpleQueue = queue.SimpleQueue()  # the worker's input, until it is there
+        lines.put(self._first_line)
+        self._lines = lines
+        self._launcher.start(self._module,
+                             lambda proc, error: self._on_started(proc, error, lines))
+
+    def _on_started(self, proc: Optional[LaunchedProcess], error: str,
+                    lines: queue.SimpleQueue) -> None:
+        """On the launcher's reader thread: serve the worker, or report why there is none."""
+        if proc is None:
+            self._events.put(('not started', error, None))
+            return
+        self._current = proc
+        name = self._module.rsplit('.', 1)[-1]
+        writer = LineWriter(proc.stdin, f'{name}_writer', lines)
+        self._events.put(('started', proc, writer))  # before its reader's lines
+        threading.Thread(target=self._read, args=(proc,), name=f'{name}_reader',
+                         daemon=True).start()
+
+    def _read(self, proc: LaunchedProcess) -> None:
+        def take(line: Any) -> None:
+            if isinstance(line, dict) and line.get('ready'):
+                self._ready = True  # said at once, without a poll: this is the current worker
+            else:
+                self._events.put(('line', line, None))
+        read_json_lines(proc.stdout, take)
+        try:  # its output closed: the launcher tells its exit code a moment later
+            proc.wait(timeout=WORKER_CLOSE_WAIT_S)
+        except subprocess.TimeoutExpired:  # told as an exit all the same: it answers no more
+            pass
+        self._events.put(('exited', proc, None))
+
+    def _on_exit(self, not_started: str = '') -> bool:
+        """Schedule the restart after the back-off, and say what happened."""
+        if not_started:
+            code = None
+        else:
+            code = self._proc.poll()  # the reader waited for it (None: not told)
+            self._writer.close()  # its writer thread ends
+        self._ready = False
+        backoff_s = RESTART_BACKOFF_S[min(self._deaths_in_a_row, len(RESTART_BACKOFF_S) - 1)]
+        self._deaths_in_a_row += 1
+        self._restart_at = self._clock() + backoff_s
+        self.last_exit = (f'{self.label} could not be started: {not_started}' if not_started
+                          else f'{self.label} exited'
+                          + ('' if code is None else f' (exit code {code})'))
+        self._failure = f'{self.last_exit}: {self._unavailable}; restarting it in {backoff_s:g} s'
+        return True
 
 
 def _serve_launcher() -> None:

@@ -318,37 +318,44 @@ def test_ctrl_c_again_and_again_during_shutdown_still_exits_0(pair, executable):
     assert 'Traceback' not in pair.log(executable), pair.log(executable)
 
 
-def test_the_goal_check_worker_ignores_ctrl_c_and_comes_back_when_it_dies(pair):
+def test_the_workers_ignore_ctrl_c_and_come_back_when_they_die(pair):
     """
-    The worker dies before any goal: one ERROR, regulation goes on, the worker restarts.
+    Both workers die before any goal: one ERROR each, regulation goes on, each starts again.
 
-    Then the new worker gets a SIGINT (as it would from a terminal, were it in the node's
-    group): it ignores it, and is still there when the next goal has been reached.
+    Then the new workers get a SIGINT (as they would from a terminal, were they in the node's
+    group): they ignore it, and are still there when the next goal has been reached.
     """
     pair.start('wrist_sim_node')
     ctrl = pair.start('controller_node')
     pair.running('controller_node')
-    checker = 'quat_jt_controller.goal_check'  # the launcher's child, the design worker the node's
-    pair.spin_until(lambda: descendants_of(ctrl.pid, checker), 10.0,
-                    'the goal-check worker')
-    [first] = descendants_of(ctrl.pid, checker)
-    os.kill(first, signal.SIGKILL)
-    wait_log(pair, 'controller_node', r'\[ERROR\].*goal-check worker exited')
+    workers = {'quat_jt_controller.goal_check': 'goal-check worker exited',  # the launcher's
+               'quat_jt_controller.redesign': 'design worker exited'}  # children, both
+    pair.spin_until(lambda: all(descendants_of(ctrl.pid, m) for m in workers), 10.0,
+                    'the goal-check and design workers')
+    first = {m: descendants_of(ctrl.pid, m)[0] for m in workers}
+    for module, said in workers.items():
+        os.kill(first[module], signal.SIGKILL)
+        wait_log(pair, 'controller_node', rf'\[ERROR\].*{said}')
     since = time.monotonic()
-    pair.spin_until(pair.commands_flow(since, 200), 10.0, 'commands while the worker is down')
-    pair.spin_until(lambda: [w for w in descendants_of(ctrl.pid, checker)
-                             if w != first and alive(w)], 30.0, 'the restarted worker')
-    [second] = [w for w in descendants_of(ctrl.pid, checker) if w != first and alive(w)]
-    # Started again by the launcher (the node starts no process while it runs), it runs
-    # with normal scheduling.
-    assert set(thread_policies(second).values()) == {('other', 0)}, second
-    os.kill(second, signal.SIGINT)
+    pair.spin_until(pair.commands_flow(since, 200), 10.0, 'commands while the workers are down')
+
+    def started_again(module: str) -> list:
+        return [w for w in descendants_of(ctrl.pid, module) if w != first[module] and alive(w)]
+    pair.spin_until(lambda: all(started_again(m) for m in workers), 30.0,
+                    'the workers started again')
+    second = [started_again(m)[0] for m in workers]
+    for pid in second:
+        # Started again by the launcher (the node starts no process while it runs), it runs
+        # with normal scheduling.
+        assert set(thread_policies(pid).values()) == {('other', 0)}, pid
+        os.kill(pid, signal.SIGINT)
     pair.send_paper_goal()
     pair.spin_until(lambda: pair.error_norm() < 1e-2, 30.0, 'the paper goal')
-    assert alive(second) and ctrl.poll() is None, pair.logs()
+    assert all(alive(pid) for pid in second) and ctrl.poll() is None, pair.logs()
     assert local_ros.stop_node(ctrl) == 0, pair.logs()
     text = pair.log('controller_node')
-    assert text.count('goal-check worker exited') == 1, text[-3000:]
+    for said in workers.values():
+        assert text.count(said) == 1, text[-3000:]
     assert 'Traceback' not in text and 'accepted with a warning' not in text, text[-3000:]
 
 

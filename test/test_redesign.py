@@ -156,17 +156,100 @@ def test_the_worker_designs_in_a_process_of_its_own_and_says_why_it_cannot():
         worker.close()
 
 
-def test_a_design_at_a_time_and_none_once_the_worker_is_gone():
+def test_a_design_at_a_time_and_none_once_the_worker_is_closed():
     _, values = wrist_values()
     worker = DesignWorker(default_urdf_xml())
     worker.submit(values, (0.0, 0.0, 0.1))
     with pytest.raises(RuntimeError, match='a design is running'):
         worker.submit(values, (0.0, 0.0, 0.1))  # one at a time
     worker.close()  # the design running is stopped, and says so
-    assert 'the design worker exited' in wait_for(worker.poll)['error']
+    assert 'the design worker was closed' in wait_for(worker.poll)['error']
     worker.submit(values, (0.0, 0.0, 0.1))  # refused at once, with the reason
-    assert 'the design worker exited' in wait_for(worker.poll)['error']
+    assert 'the design worker was closed' in wait_for(worker.poll)['error']
     assert not worker.busy
+
+
+def test_a_design_worker_that_dies_says_so_once_and_is_started_again(monkeypatch):
+    """
+    Killed: said once, a design in the back-off refused with the reason, then a new worker.
+
+    The new worker is the launcher's (the node's process starts none), and designs; killed
+    during a design, that design's answer is the reason.
+    """
+    import os
+    import signal
+    import subprocess
+    from quat_jt_runtime.worker import RESTART_BACKOFF_S
+    now = [0.0]
+    _, values = wrist_values()
+    worker = DesignWorker(default_urdf_xml(), clock=lambda: now[0])
+    try:
+        wait_for(lambda: worker.ready or None)
+        first_pid = worker.pid
+        os.kill(first_pid, signal.SIGKILL)
+        failure = wait_for(lambda: worker.poll() or worker.take_failure())  # no design: no answer
+        assert failure == ('the design worker exited (exit code -9): the gains cannot be '
+                           'designed again until it is back; restarting it in 1 s'), failure
+        assert worker.take_failure() is None  # said once
+        assert not worker.ready and worker.restarts == 0
+        worker.submit(values, (0.0, 0.0, 0.1))
+        refused = wait_for(worker.poll)['error']
+        assert 'the design worker exited (exit code -9); restarting in 1.0 s' == refused
+        now[0] += RESTART_BACKOFF_S[0]
+        with monkeypatch.context() as patched:  # the node itself starts no process
+            patched.setattr(subprocess, 'Popen', forbidden_popen)
+            worker.poll()
+        assert worker.restarts == 1
+        wait_for(lambda: worker.ready or None)
+        assert worker.pid not in (None, first_pid)
+        with pytest.raises(ChildProcessError):  # the launcher's child, not this process's
+            os.waitpid(worker.pid, os.WNOHANG)
+        worker.submit(values, (0.0, 0.0, 0.1))
+        assert 'parameters' in wait_for(worker.poll)
+        # killed during a design: its answer is why
+        worker.submit(values, (0.0, 0.0, 0.2))
+        os.kill(worker.pid, signal.SIGKILL)
+        reply = wait_for(worker.poll)
+        assert reply == {'error': 'the design worker exited (exit code -9)'}, reply
+        failure = worker.take_failure()
+        assert failure.startswith('the design worker exited (exit code -9): the gains cannot '
+                                  'be designed again until it is back; restarting it in ')
+    finally:
+        worker.close()
+
+
+def forbidden_popen(*args, **kwargs):
+    raise AssertionError('a process started from the node while its loop runs')
+
+
+class DeadDesigner:
+    """A design worker that has just died: its failure is told once."""
+
+    busy = False
+
+    def __init__(self) -> None:
+        self.failure = 'the design worker exited (exit code -9): ...; restarting it in 1 s'
+
+    def poll(self):
+        return None
+
+    def take_failure(self):
+        failure, self.failure = self.failure, None
+        return failure
+
+
+def test_the_controller_says_once_that_the_design_worker_died():
+    d, values = wrist_values()
+    model = RobotModel(default_urdf_xml(), 'base_link', 'tool0', list(d.joints))
+    reg = Regulator(model, cl.Task.ORIENTATION, d.gains('tanh'), shaping=d.shaping)
+    ctl = Controller(reg, 0.5, 1, started_ns=0, designer=DeadDesigner(),
+                     parameter_values=lambda: values)
+    designed, logs = ctl.take_design()
+    assert designed is None
+    assert [tuple(line) for line in logs] == [(Severity.ERROR, (
+        'the design worker exited (exit code -9): ...; restarting it in 1 s; regulation goes '
+        'on'))]
+    assert ctl.take_design() == (None, ())
 
 
 def wait_for(poll, timeout_s: float = WAIT_S):

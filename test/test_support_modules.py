@@ -229,7 +229,7 @@ def test_goal_check_worker_that_dies_says_so_once_and_restarts_after_its_back_of
     import os
     import signal
     import subprocess
-    from quat_jt_controller.goal_check import RESTART_BACKOFF_S
+    from quat_jt_runtime.worker import RESTART_BACKOFF_S
     now = [0.0]
     model = wrist_model()
     worker = GoalCheckWorker(ModelSpec(default_urdf_xml(), 'base_link', 'tool0',
