@@ -46,6 +46,15 @@ EXAMPLE_ROBOTS = {
     # two arms held out until the stop guard was done (docs/reach.md, "Two arms held out")
     'human': 'human_description/robots/human.urdf',  # shoulders of three joints, massless links
     'simple_humanoid': 'simple_humanoid_description/urdf/simple_humanoid.urdf',
+    # nine chains first run at 075c417 (docs/reach.md, "Nine chains no one had run")
+    'g1_hand': 'g1_description/urdf/g1_29dof_with_hand_rev_1_0.urdf',
+    'alex_sake': 'alex_description/urdf/alex_sake_hands.urdf',
+    'icub_reduced': 'icub_description/robots/icub_reduced.urdf',
+    'ur3_limited': 'ur_description/urdf/ur3_joint_limited_robot.urdf',
+    'ur5_gripper': 'ur_description/urdf/ur5_gripper.urdf',
+    'panda_collision': 'panda_description/urdf/panda_collision.urdf',
+    'finger_edu': 'finger_edu_description/robots/finger_edu.urdf',
+    'a1': 'a1_description/urdf/a1.urdf',  # a quadruped: one leg's chain
 }
 
 

@@ -63,6 +63,21 @@ more=(
     --tip-link left_hand'
   'simple_humanoid_left_arm|--example-robot simple_humanoid --name simple_humanoid_left_arm
     --base-link torso --tip-link l_wrist'
+  # nine chains no one had run, each from the link it hangs from to its flange (a finger's and
+  # a leg's tip for a position task; docs/reach.md, "Nine chains no one had run")
+  'g1_right_arm|--example-robot g1_hand --name g1_right_arm --base-link torso_link
+    --tip-link right_wrist_yaw_link'
+  'romeo_right_arm|--example-robot romeo --name romeo_right_arm --tip-link r_wrist'
+  'alex_sake_right_arm|--example-robot alex_sake --name alex_sake_right_arm --base-link Torso
+    --tip-link RightGripperYawLink'
+  'icub_reduced_right_arm|--example-robot icub_reduced --name icub_reduced_right_arm
+    --base-link chest --tip-link r_hand'
+  'ur3_limited|--example-robot ur3_limited'
+  'ur5_gripper|--example-robot ur5_gripper'
+  'panda_collision|--example-robot panda_collision'
+  'finger_edu|--example-robot finger_edu --tip-link finger_tip_link --task position'
+  'a1_front_left_leg|--example-robot a1 --name a1_front_left_leg --base-link trunk
+    --tip-link FL_foot --task position'
 )
 for entry in "${arms[@]}" "${more[@]}"; do
   name=${entry%%|*}
