@@ -128,7 +128,8 @@ class Controller:
     :param position_resolution: a count of each joint's position in the states (0: exact),
         for the velocity estimate of states without velocities.
     :param designer: the design worker (``redesign.DesignWorker``: ``submit``, ``poll``,
-        ``take_failure``, ``busy``), or None: the gains are never designed again.
+        ``take_failure``, ``busy``, ``ready``, ``unavailable_reason``), or None: the gains are
+        never designed again.
     :param parameter_values: the parameters in force by ROS name, read when a design starts.
     """
 
@@ -621,6 +622,9 @@ class Controller:
         regulator, checker = self.regulator, self.checker
         unavailable = 'no goal-check worker' if checker is None else checker.unavailable_reason
         ready = checker is not None and checker.ready
+        designer = self.designer
+        designs = ((designer.ready, designer.unavailable_reason) if self._redesigning
+                   else None)
         return [
             ('control loop', *diagnostics.loop_status(
                 figures, not self.last_state_ns, self.stopped, self.counters, graph_warnings,
@@ -628,7 +632,7 @@ class Controller:
             ('goal', *diagnostics.goal_status(
                 self.goal_source, regulator.goal, self.goal_warning, self.last, self.last_qdot,
                 self.has_position, self.counters, unavailable, ready,
-                diagnostics.configuration_state(regulator))),
+                diagnostics.configuration_state(regulator), designs)),
             ('stall', *self.stall.status())]
 
     def _rejection(self, topic: str, reason: str) -> tuple[LogLine, ...]:

@@ -158,13 +158,16 @@ def loop_status(figures: dict, waiting: bool, stopped: bool, counters: Counters,
 def goal_status(source: str, goal: Optional[Goal], warning: str, last: Optional[TickOutput],
                 qdot: Optional[Sequence[float]], with_position: bool, counters: Counters,
                 goal_check_unavailable: str = '', goal_check_ready: bool = True,
-                configuration: Optional['ConfigurationState'] = None) -> Status:
+                configuration: Optional['ConfigurationState'] = None,
+                designs: Optional[tuple[bool, str]] = None) -> Status:
     """
     Report the goal: its source, the A1/A2 advice, the errors, a near-180-degree warning.
 
     ``goal_check_unavailable`` says why goal checks are not being made ('' when they are);
     ``goal_check_ready`` is False while the worker is still building its model ('starting').
     ``configuration`` gives the goal configuration q* and the friction learned at rest.
+    ``designs``, where the gains are designed again (``gain_redesign``), is the design
+    worker's ``(ready, unavailable_reason)``; None: no key.
     """
     level = OK
     messages = [{'none': 'no goal (no joint state yet)',
@@ -201,6 +204,13 @@ def goal_status(source: str, goal: Optional[Goal], warning: str, last: Optional[
         note = configuration.note(source)
         if note:
             messages.append(note)
+    if designs is not None:
+        design_ready, design_unavailable = designs
+        if design_unavailable:
+            level = WARN
+            messages.append(f'designs again unavailable (gain_redesign): {design_unavailable}')
+        values.append(('design_worker', 'unavailable' if design_unavailable else
+                       'available' if design_ready else 'starting'))
     values += [('accepted_goals_total', str(counters.accepted_goals)),
                ('rejected_goals_total', str(counters.rejected_goals))]
     return level, '; '.join(messages), values

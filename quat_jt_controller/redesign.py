@@ -209,6 +209,11 @@ class DesignWorker:
         return self._worker.pid
 
     @property
+    def unavailable_reason(self) -> str:
+        """Say why designs are refused, and when the worker restarts ('' if available)."""
+        return self._worker.unavailable_reason
+
+    @property
     def restarts(self) -> int:
         """Return how many times a worker was started again."""
         return self._worker.restarts

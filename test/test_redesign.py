@@ -5,11 +5,13 @@ When a design is due, with what, how often at most; the design's options read ba
 file; the worker process; the controller that starts it and says so; and the law with gains
 designed for half the rotor inertia the plant has: V does not increase in the ideal loop.
 """
+from dataclasses import replace
 import time
 
 import numpy as np
 import pytest
 from quat_jt_controller import control_law as cl
+from quat_jt_controller import diagnostics
 from quat_jt_controller import gain_design as gd
 from quat_jt_controller import paper
 from quat_jt_controller import quaternion as quat
@@ -226,6 +228,8 @@ class DeadDesigner:
     """A design worker that has just died: its failure is told once."""
 
     busy = False
+    ready = False
+    unavailable_reason = 'the design worker exited (exit code -9); restarting in 0.6 s'
 
     def __init__(self) -> None:
         self.failure = 'the design worker exited (exit code -9): ...; restarting it in 1 s'
@@ -250,6 +254,15 @@ def test_the_controller_says_once_that_the_design_worker_died():
         'the design worker exited (exit code -9): ...; restarting it in 1 s; regulation goes '
         'on'))]
     assert ctl.take_design() == (None, ())
+    # ... and /diagnostics says so while it is down (a WARN of the goal status)
+    figures = {'control_rate_hz': 0.0, 'ticks_in_window': 0, 'saturated_ticks': 0}
+    _, goal, _ = ctl.statuses(figures)
+    assert goal[1] == diagnostics.WARN and ('design_worker', 'unavailable') in goal[3]
+    assert ('designs again unavailable (gain_redesign): the design worker exited (exit code '
+            '-9); restarting in 0.6 s') in goal[2]
+    ctl.regulator.set_shaping(replace(ctl.regulator.shaping, gain_redesign=False))
+    _, goal, _ = ctl.statuses(figures)  # designs off: nothing said of the worker
+    assert not any(key == 'design_worker' for key, _ in goal[3])
 
 
 def wait_for(poll, timeout_s: float = WAIT_S):
