@@ -46,7 +46,7 @@ EXAMPLE_ROBOTS = {
     # two arms held out until the stop guard was done (docs/reach.md, "Two arms held out")
     'human': 'human_description/robots/human.urdf',  # shoulders of three joints, massless links
     'simple_humanoid': 'simple_humanoid_description/urdf/simple_humanoid.urdf',
-    # nine chains first run at 075c417 (docs/reach.md, "Nine chains no one had run")
+    # nine chains first run at 75ded70 (docs/reach.md, "Nine chains no one had run")
     'g1_hand': 'g1_description/urdf/g1_29dof_with_hand_rev_1_0.urdf',
     'alex_sake': 'alex_description/urdf/alex_sake_hands.urdf',
     'icub_reduced': 'icub_description/robots/icub_reduced.urdf',
