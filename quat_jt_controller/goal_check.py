@@ -22,7 +22,8 @@ from quat_jt_controller.inverse_kinematics import RESIDUAL_TOLERANCE, search_goa
 from quat_jt_controller.inverse_kinematics import Search, SINGULAR_SIGMA_MIN, solve_ik, starts
 from quat_jt_controller.model import GRAVITY_RESERVE_SHARE, RobotModel
 from quat_jt_runtime.payload import Payload
-from quat_jt_runtime.worker import answer, Launcher, quiet_worker, SupervisedWorker
+from quat_jt_runtime.worker import (answer, Launcher, quiet_worker, SupervisedWorker,
+                                    WorkerOwner)
 
 
 def singular_warning(q: Sequence[float], sigma_min: float) -> str:
@@ -113,7 +114,7 @@ class ModelSpec:
     task: Task
 
 
-class GoalCheckWorker:
+class GoalCheckWorker(WorkerOwner):
     """
     :func:`check_goal` in a separate process, fed the newest goal only, restarted if it dies.
 
@@ -129,7 +130,7 @@ class GoalCheckWorker:
     The process is a ``SupervisedWorker``'s (``quat_jt_runtime.worker``): started by the
     node's ``Launcher`` process (``launcher``, or one of its own), as :meth:`poll` runs on the
     node's loop, which a process started there would hold up for milliseconds. If the worker
-    dies, :meth:`take_failure` says so once, :attr:`available` is False, and :meth:`poll` asks
+    dies, ``take_failure`` says so once, ``available`` is False, and :meth:`poll` asks
     for a new worker after a back-off (``RESTART_BACKOFF_S``, reset by a verdict from the new
     one); the goal that was running or waiting is checked by the new one. Call :meth:`close`
     at the end.
@@ -151,31 +152,6 @@ class GoalCheckWorker:
         self._worker = SupervisedWorker(
             'quat_jt_controller.goal_check', spec_line, 'the goal-check worker',
             'goal checks and goal configurations are unavailable', launcher, clock)
-
-    @property
-    def available(self) -> bool:
-        """Tell whether a worker process is up (False from its death until its restart)."""
-        return self._worker.available
-
-    @property
-    def ready(self) -> bool:
-        """Tell whether the worker has built its model and answers checks at once."""
-        return self._worker.ready
-
-    @property
-    def unavailable_reason(self) -> str:
-        """Say why checks are unavailable, and when the worker restarts ('' if available)."""
-        return self._worker.unavailable_reason
-
-    @property
-    def pid(self) -> Optional[int]:
-        """Return the worker process's id (None while the launcher starts it)."""
-        return self._worker.pid
-
-    @property
-    def restarts(self) -> int:
-        """Return how many times a worker was started again."""
-        return self._worker.restarts
 
     def submit(self, key: object, q_measured: Optional[Sequence[float]],
                q_desired: Sequence[float], p_desired: Sequence[float],
@@ -246,10 +222,6 @@ class GoalCheckWorker:
         if self._running is None and self._next is not None and self.available:
             self._start_next()
         return out
-
-    def take_failure(self) -> Optional[str]:
-        """Return (once) what happened to the worker since the last call, or None."""
-        return self._worker.take_failure()
 
     def take_configuration(self, key: object) -> Optional[list[float]]:
         """Return (once) the goal configuration found for ``key``, or None if none was."""

@@ -37,7 +37,7 @@ import time
 from typing import Any, Callable, Mapping, Optional, Sequence
 
 from quat_jt_runtime.worker import (answer, Launcher, quiet_worker, SupervisedWorker,
-                                    WORKER_CLOSE_WAIT_S)
+                                    WORKER_CLOSE_WAIT_S, WorkerOwner)
 
 # an estimate within this share of what it was SETTLED_S before has settled: 2.5 of the
 # estimate's time constants (armature_estimate.ADOPT_TIME_S)
@@ -164,7 +164,7 @@ def _plain(value: Any) -> Any:
     return [_plain(v) for v in value]  # a tuple, a list, rclpy's array.array
 
 
-class DesignWorker:
+class DesignWorker(WorkerOwner):
     """
     :func:`redesign` in a process of its own, one design at a time, never on the loop.
 
@@ -174,13 +174,14 @@ class DesignWorker:
     starts, sent the URDF, and started again after a back-off when it dies, as the goal-check
     worker is; the node never starts a process while its loop runs (docs/benchmark.md, "A
     worker started again"). It imports what a design needs (Pinocchio) as it starts, niced,
-    and then says it is :attr:`ready`. :meth:`submit` queues one request line (the parameters
+    and then says it is ``ready``. :meth:`submit` queues one request line (the parameters
     and the armature) for the worker's writer thread (``LineWriter``) and returns; a reader
     thread waits for the answer line, which :meth:`poll` returns once: ``{'parameters':
     {...}}``, or ``{'error': text}`` (a design that failed, a worker that died during it, or
     one asked for while no worker is up: refused at once, with the reason). :meth:`poll` also
-    starts the next worker when its back-off is over; :meth:`take_failure` says once that a
-    worker died. Call :meth:`close` at the end: it closes the process's input, which ends it.
+    starts the next worker when its back-off is over; ``take_failure`` says once that a
+    worker died (``WorkerOwner``). Call :meth:`close` at the end: it closes the process's
+    input, which ends it.
     """
 
     def __init__(self, urdf_xml: str, launcher: Optional[Launcher] = None,
@@ -197,26 +198,6 @@ class DesignWorker:
     def busy(self) -> bool:
         """Tell whether a design is running (or its answer not yet taken)."""
         return self._busy
-
-    @property
-    def ready(self) -> bool:
-        """Tell whether the worker has imported what a design needs (it answers at once)."""
-        return self._worker.ready
-
-    @property
-    def pid(self) -> Optional[int]:
-        """Return the worker process's id (None while the launcher starts it)."""
-        return self._worker.pid
-
-    @property
-    def unavailable_reason(self) -> str:
-        """Say why designs are refused, and when the worker restarts ('' if available)."""
-        return self._worker.unavailable_reason
-
-    @property
-    def restarts(self) -> int:
-        """Return how many times a worker was started again."""
-        return self._worker.restarts
 
     def submit(self, values: Mapping[str, Any], armature: Sequence[float]) -> None:
         """Ask for a design with ``armature`` on the parameters ``values`` (by ROS name)."""
@@ -244,10 +225,6 @@ class DesignWorker:
             return None
         self._busy = False
         return reply
-
-    def take_failure(self) -> Optional[str]:
-        """Return (once) what happened to the worker since the last call, or None."""
-        return self._worker.take_failure()
 
     def close(self) -> None:
         """End the process: a design still running is stopped, an idle worker ends itself."""

@@ -464,6 +464,46 @@ class SupervisedWorker:
         return True
 
 
+class WorkerOwner:
+    """
+    What a node's worker object (the goal check's, the design's) tells of its process.
+
+    A base for an object that runs its work on ``self._worker``, a :class:`SupervisedWorker`:
+    whether it is up, ready, why not, its pid and restarts, and its failures, said once.
+    """
+
+    _worker: SupervisedWorker
+
+    @property
+    def available(self) -> bool:
+        """Tell whether a worker process is up (False from its death until its restart)."""
+        return self._worker.available
+
+    @property
+    def ready(self) -> bool:
+        """Tell whether the worker is ready: it answers at once (no poll needed)."""
+        return self._worker.ready
+
+    @property
+    def unavailable_reason(self) -> str:
+        """Say why the worker is unavailable, and when it restarts ('' if available)."""
+        return self._worker.unavailable_reason
+
+    @property
+    def pid(self) -> Optional[int]:
+        """Return the worker process's id (None while the launcher starts it)."""
+        return self._worker.pid
+
+    @property
+    def restarts(self) -> int:
+        """Return how many times a worker was started again."""
+        return self._worker.restarts
+
+    def take_failure(self) -> Optional[str]:
+        """Return (once) what happened to the worker since the last call, or None."""
+        return self._worker.take_failure()
+
+
 def _serve_launcher() -> None:
     """
     Serve as the launcher process (:class:`Launcher`): start workers, hand their pipes over.
