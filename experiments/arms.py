@@ -12,7 +12,7 @@ import os
 from pathlib import Path
 from typing import Optional
 
-from quat_jt_runtime.joints import chain_joints, default_links
+from quat_jt_runtime.joints import chain_joints, default_links, fixed_end
 
 # name -> the URDF's path under example-robot-data's robots/ directory
 EXAMPLE_ROBOTS = {
@@ -85,9 +85,16 @@ def example_robot_urdf(name: str) -> Path:
 
 
 def arm_links(urdf_xml: str, base_link: Optional[str] = None,
-              tip_link: Optional[str] = None) -> tuple:
-    """Return ``(base_link, tip_link, joints)``, the links defaulting as ``default_links``."""
+              tip_link: Optional[str] = None, point: bool = False) -> tuple:
+    """
+    Return ``(base_link, tip_link, joints)``, the links defaulting as ``default_links``.
+
+    With ``point`` (a position task) the default tip goes on through the fixed links below it
+    (``fixed_end``), as ``design_gains`` takes it.
+    """
     if base_link is None or tip_link is None:
         base, tip = default_links(urdf_xml, base_link)
+        if point:
+            tip = fixed_end(urdf_xml, tip)
         base_link, tip_link = base_link or base, tip_link or tip
     return base_link, tip_link, chain_joints(urdf_xml, base_link, tip_link)

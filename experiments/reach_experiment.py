@@ -986,7 +986,8 @@ def arm_robot(name: str, urdf_path: str, base_link: Optional[str], tip_link: Opt
     sampled configurations (a rule for any arm, where a fixed bound in mixed units is not).
     """
     urdf = Path(urdf_path).read_text()
-    base, tip, joints = arms.arm_links(urdf, base_link, tip_link)
+    base, tip, joints = arms.arm_links(urdf, base_link, tip_link,
+                                       point=task is cl.Task.POSITION)
     model = RobotModel(urdf, base, tip, joints)
     rng = np.random.default_rng(0)
     lower, upper = sampling_box(model)

@@ -17,7 +17,8 @@ from quat_jt_controller.gain_design import (
     CRUISE_FRACTION, DEFAULT_FRICTION_EFFORT_SHARE, design, FRICTION_LEARNING)
 from quat_jt_controller.gain_output import ENGINES, sim_yaml, to_yaml
 from quat_jt_controller.model import ModelError, RobotModel
-from quat_jt_runtime.joints import chain_joints, check_state_rate, default_chain_end, joint_rows
+from quat_jt_runtime.joints import (chain_joints, check_state_rate, default_chain_end,
+                                    fixed_end, joint_rows)
 from quat_jt_runtime.joints import STATE_RATE_RANGE_HZ
 from quat_jt_runtime.payload import Payload
 
@@ -110,10 +111,15 @@ def _default_chain(parser: argparse.ArgumentParser, args: argparse.Namespace, ur
                 args.base_link = base
                 chosen.append(f"--base-link {base} (the URDF's root link)")
             if args.tip_link is None:
-                args.tip_link = tip
-                chosen.append(f'--tip-link {tip} (the end of its longest chain of revolute '
+                point = (fixed_end(urdf, tip) if cl.Task(args.task) is cl.Task.POSITION
+                         else tip)
+                args.tip_link = point
+                chosen.append(f'--tip-link {point} (the end of its longest chain of revolute '
                               'joints' + (f', the wrist above the hand at {hand}: its fingers '
-                                          'are not the arm' if hand else '') + ')')
+                                          'are not the arm' if hand else '')
+                              + (f', and the fixed links below {tip}: a position task '
+                                 'regulates a point, such as a fingertip or a foot'
+                                 if point != tip else '') + ')')
         if args.joints is None:
             args.joints = chain_joints(urdf, args.base_link, args.tip_link)
             chosen.append(f'--joints {" ".join(args.joints)} (the movable joints between them)'

@@ -204,6 +204,27 @@ def default_chain_end(urdf_xml: str,
     return base_link, tip_link, hand_link
 
 
+def fixed_end(urdf_xml: str, link: str) -> str:
+    """
+    Return the link at the end of the single chain of fixed joints below ``link``.
+
+    ``link`` itself where no fixed joint, or more than one joint of any type, leaves it. A
+    position task regulates a point; the child link of an arm's last joint often lies on that
+    joint's axis (a finger's last link, a leg's calf), where that joint cannot move it, while
+    the fingertip or foot fixed below it is the point meant.
+    """
+    below: dict[str, list[tuple[str, str]]] = {}
+    for _, kind, parent, child in _joint_rows(_parsed(urdf_xml)):
+        below.setdefault(parent, []).append((kind, child))
+    seen = {link}
+    while len(below.get(link, [])) == 1 and below[link][0][0] == 'fixed':
+        link = below[link][0][1]
+        if link in seen:  # a loop is no tree: stop where it closes
+            break
+        seen.add(link)
+    return link
+
+
 def _above_a_hand(root: ElementTree.Element, below: dict[str, list[tuple[bool, str]]],
                   base_link: str, tip_link: str, on_path: int) -> tuple[str, Optional[str]]:
     """

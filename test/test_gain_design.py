@@ -430,6 +430,31 @@ def test_a_urdf_without_links_given_gets_its_longest_chain_and_says_so(tmp_path,
                              'give --base-link link1'), lines
 
 
+def test_a_position_task_takes_the_point_fixed_below_the_last_link(tmp_path, capsys):
+    """A fingertip or a foot fixed below the last link: the point a position task means."""
+    tip = ('<link name="tip"/><joint name="tip_joint" type="fixed"><parent link="tool"/>'
+           '<child link="tip"/><origin xyz="0.1 0 0"/></joint>')
+    path = tmp_path / 'finger.urdf'
+    path.write_text(small_arm_urdf(('revolute',) * 3).replace('</robot>', tip + '</robot>'))
+    out = tmp_path / 'finger.yaml'
+    code, lines = run_main(['--urdf', str(path), '--task', 'position', '--out', str(out)],
+                           capsys)
+    assert code == 0, lines
+    assert ('--tip-link tip (the end of its longest chain of revolute joints, and the fixed '
+            'links below tool: a position task regulates a point, such as a fingertip or a '
+            'foot)') in lines[0], lines
+    assert params_of(out.read_text())['tip_link'] == 'tip'
+    code, lines = run_main(['--urdf', str(path), '--task', 'pose', '--out', str(out)], capsys)
+    assert '--tip-link tool (the end of its longest chain of revolute joints)' in lines[0]
+    # a fork below (two fixed links) leaves the tip where it was
+    fork = tip.replace('"tip"', '"tip2"').replace('tip_joint', 'tip2_joint')
+    path.write_text(small_arm_urdf(('revolute',) * 3).replace('</robot>', tip + fork
+                                                              + '</robot>'))
+    code, lines = run_main(['--urdf', str(path), '--task', 'position', '--out', str(out)],
+                           capsys)
+    assert '--tip-link tool (the end of its longest chain of revolute joints)' in lines[0]
+
+
 def test_a_urdf_without_effort_limits_or_ranges_is_refused_by_name(tmp_path, capsys):
     """Effort 0 (none given) and a revolute joint's unset range [0, 0], as URDFs come."""
     urdf = small_arm_urdf(('revolute',) * 4)
