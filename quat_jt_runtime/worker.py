@@ -370,10 +370,12 @@ class SupervisedWorker:
                 self._proc, self._writer = value, writer
             elif kind == 'not started':
                 if self._proc is None and not self._closed:
-                    died = self._on_exit(value)
+                    self._on_exit(value)
+                    died = True
             elif kind == 'exited':
                 if value is self._proc and not self._closed:
-                    died = self._on_exit()
+                    self._on_exit()
+                    died = True
             else:
                 self._deaths_in_a_row = 0  # the worker works
                 answers.append(value)
@@ -446,7 +448,7 @@ class SupervisedWorker:
             pass
         self._events.put(('exited', proc, None))
 
-    def _on_exit(self, not_started: str = '') -> bool:
+    def _on_exit(self, not_started: str = '') -> None:
         """Schedule the restart after the back-off, and say what happened."""
         if not_started:
             code = None
@@ -461,7 +463,6 @@ class SupervisedWorker:
                           else f'{self.label} exited'
                           + ('' if code is None else f' (exit code {code})'))
         self._failure = f'{self.last_exit}: {self._unavailable}; restarting it in {backoff_s:g} s'
-        return True
 
 
 class WorkerOwner:
