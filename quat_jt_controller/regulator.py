@@ -282,6 +282,7 @@ class Regulator:
         # take), and the damping torque they are computed from: for the learning, filled in place
         self._stuck = [0.0] * self.n
         self._unmet = [0.0] * self.n
+        self._sliding = [0.0] * self.n  # the friction a sliding joint meets (learn_friction)
         self._damping = [0.0] * self.n
         self._creep = [0.0] * self.n  # the creep speed per joint (rad/s), for the learning
         self._fade = [0.0] * self.n  # ... and the fade speed of the learned push (rad/s)
@@ -306,6 +307,7 @@ class Regulator:
         self._lead_in_shaping: Optional[sh.Shaping] = None  # ... and the shaping it last used
         self._fade_top = [sh.FADE_TOP_FRACTION * v for v in self._speed_cap]
         self._held = [0.0] * self.n  # how stuck each joint has stayed (learn_friction's h)
+        self._slid = [0.0] * self.n  # how much friction each has slid against (... its g)
         # the learning's acceleration estimate: qdot's low-pass (rad/s) and
         # (qdot - low-pass) / ACCELERATION_TIME_S (rad/s^2), advanced by the ticks given a step
         self._qdot_slow = [0.0] * self.n
@@ -413,6 +415,7 @@ class Regulator:
         self._learned_friction_nm = [min(a, a_max) for a, a_max in
                                      zip(self._learned_friction_nm, limits)]
         self._held = [h if a_max > 0.0 else 0.0 for h, a_max in zip(self._held, limits)]
+        self._slid = [g if a_max > 0.0 else 0.0 for g, a_max in zip(self._slid, limits)]
         self._accel_seeded = False  # the filter may have stood still while the learning was off
         self._armature.restart()  # ... and the estimate's filters with it
         self._keep_armature_estimate(shaping.armature_estimation_limit_kg_m2 or self._zero)
@@ -716,7 +719,8 @@ class Regulator:
                 fc = sh.friction_compensation(
                     tau_p, qdot, phi, shaping, self._learned_friction_nm if learning else None,
                     self._stuck, damping, self._unmet, creep, fade, inertial,
-                    shaping.learning_torque_band if q_star is not None else None)
+                    shaping.learning_torque_band if q_star is not None else None,
+                    self._sliding if learning else None)
                 for j in range(n):
                     tau[j] += fc[j]
         if guarded is not None:
@@ -736,7 +740,7 @@ class Regulator:
                               self.task)
         if shaping.learning_on and dt_s > 0.0:  # only from a finite tick: never poisoned
             sh.learn_friction(self._learned_friction_nm, self._stuck, phi, shaping, step,
-                              self._unmet, self._held)
+                              self._unmet, self._held, self._sliding, self._slid)
         saturated = cl.saturate(tau, self.effort_limits_nm)
         if estimating:
             self._estimate_armature(q, qdot, tau, g, dt_s, shaping, own)

@@ -87,6 +87,11 @@ HOLD_TIME_FRACTION = 0.2
 # between it and the creep speed the less the faster (so a steady creep below the creep speed
 # keeps learning; only a turning point's short stop is too brief to count)
 HELD_SPEED_SHARE = 0.75
+# The share of a sliding joint's push a friction takes, low-passed as how held a joint is,
+# from which the friction it meets counts for the learning, and from which it counts whole
+# (learn_friction): a swing's short phases, where the acceleration estimate lags, do not
+SLIDING_SHARE_FROM = 0.25
+SLIDING_SHARE_FULL = 0.5
 # The learning's estimate of a joint's acceleration: its velocity minus the velocity's
 # low-pass of this time constant, over it (s; Regulator.update)
 ACCELERATION_TIME_S = 0.02
@@ -387,7 +392,8 @@ def friction_compensation(tau_potential: Sequence[float], qdot: Sequence[float],
                           creep_rad_s: Optional[Sequence[float]] = None,
                           fade_rad_s: Optional[Sequence[float]] = None,
                           inertial_nm: Optional[Sequence[float]] = None,
-                          equilibrium_band_nm: Optional[Sequence[float]] = None) -> list[float]:
+                          equilibrium_band_nm: Optional[Sequence[float]] = None,
+                          sliding_out: Optional[list[float]] = None) -> list[float]:
     """
     tau_fc per joint: phi t_p [(f + r a) max(0, t_v t_p) + (f + a) (1 - |t_v|)], |.| <= f + a.
 
@@ -420,7 +426,12 @@ def friction_compensation(tau_potential: Sequence[float], qdot: Sequence[float],
     still counts, the less the nearer it is to it; with ``equilibrium_band_nm`` (the
     regulator passes :attr:`Shaping.learning_torque_band` once ``q*`` is known and the
     goal-configuration term pulls), times ``tanh(|tau_p| / b)`` (a joint at its own
-    equilibrium is not held away from it). Both are left alone when ``phi`` is 0.
+    equilibrium is not held away from it). ``sliding_out``, if given (with ``damping_nm``),
+    receives per joint the friction a joint sliding along its push, slower than its creep
+    speed, meets beyond the estimate: ``max(0, w |u| - f) max(0, t_v t_p) min(1, 4 slow)``
+    (N m; 0 at rest, against the push and from the creep speed on), with the same ``tanh``
+    factor; :func:`learn_friction` keeps ``a`` up to it. All are left alone when ``phi`` is
+    0.
     """
     out = [0.0] * len(qdot)
     if phi <= 0.0:
@@ -457,6 +468,8 @@ def friction_compensation(tau_potential: Sequence[float], qdot: Sequence[float],
             if slow < 0.0:
                 slow = 0.0
             w = 1.0
+            if sliding_out is not None:
+                sliding_out[j] = 0.0
             if damping_nm is not None:
                 signed = tau_potential[j] + out[j]
                 push = abs(signed)
@@ -468,10 +481,17 @@ def friction_compensation(tau_potential: Sequence[float], qdot: Sequence[float],
                     w = 1.0
                 if qdot[j] * signed < 0.0:  # moving against the push: it is not held
                     w *= slow
+                if sliding_out is not None:  # what a friction takes of a sliding joint's
+                    met = w * push - f  # push, up to 3/4 of its creep speed, less up to it
+                    if met > 0.0 and slow > 0.0:
+                        short = slow / (1.0 - HELD_SPEED_SHARE)
+                        sliding_out[j] = met * along * (short if short < 1.0 else 1.0)
+            equilibrium = (tanh(abs(tau_potential[j]) / band[j]) if band and band[j] > 0.0
+                           else 1.0)  # at its own equilibrium: not held away from it
             if stuck_out is not None:
-                stuck_out[j] = slow * abs(tp) * w
-                if band and band[j] > 0.0:  # at its own equilibrium: not held away from it
-                    stuck_out[j] *= tanh(abs(tau_potential[j]) / band[j])
+                stuck_out[j] = slow * abs(tp) * w * equilibrium
+            if sliding_out is not None and equilibrium < 1.0:
+                sliding_out[j] *= equilibrium
             if unmet_out is not None:
                 unmet_out[j] = w
     return out
@@ -541,7 +561,9 @@ def fade_tops(learned_nm: Sequence[float], seen_inertia: Sequence[float], tick_s
 def learn_friction(learned_nm: list[float], stuck: Sequence[float], phi: float,
                    shaping: Shaping, dt_s: float,
                    unmet: Optional[Sequence[float]] = None,
-                   held: Optional[list[float]] = None) -> None:
+                   held: Optional[list[float]] = None,
+                   sliding: Optional[Sequence[float]] = None,
+                   slid: Optional[list[float]] = None) -> None:
     """
     Advance ``a``, the learned part of the friction estimate, by one tick of ``dt_s``, in place.
 
@@ -556,6 +578,17 @@ def learn_friction(learned_nm: list[float], stuck: Sequence[float], phi: float,
     joint must stay held for a while (about ``0.7 c T``) before anything is learned, which the
     turning point of a swing does not, and learns less as it nears its creep speed.
     Without ``held``, ``s`` is ``stuck``.
+
+    ``sliding`` (N m per joint, :func:`friction_compensation`'s ``sliding_out``) is the
+    friction a joint sliding along its push meets beyond the estimate, ``m``; ``slid`` (per
+    joint, in place, with ``sliding``) is ``g``, the share ``w`` of a sliding joint's push a
+    friction takes (0 where ``m`` is 0), low-passed as ``h`` is. ``a`` is pulled up to
+    ``m_s = r_s(g) min(m, a_max)`` in ``c T`` (times ``phi``), and the leak where the damping
+    takes the push acts only on what ``a`` has above ``m_s``; ``r_s`` rises from 0 at ``g =
+    SLIDING_SHARE_FROM`` to 1 at ``SLIDING_SHARE_FULL``. So a joint that a friction slows,
+    sliding, learns it until it slides at its creep speed (``m`` is 0 from there on), where
+    before it kept a share of it that left it crawling; a swing's short phases, where the
+    acceleration estimate lags the joint and ``w`` is briefly wrong, do not count.
 
     So ``a`` grows only while a joint stays at rest or creeps, pushed and not moved by the push
     against its damping, outside the error band (``phi`` > 0): while the compensation does not
@@ -585,15 +618,29 @@ def learn_friction(learned_nm: list[float], stuck: Sequence[float], phi: float,
                 held[j] = h
                 if h < 0.75:  # not stuck for long enough: s = 0 below h = 1/2
                     s = s * (4.0 * h - 2.0) if h > 0.5 else 0.0
-            # leaks in T within the band, in HOLD_TIME_FRACTION T where the damping takes the push
-            leak = 1.0 - phi
+            m = 0.0  # the friction met, sliding, as far as it counts
+            if sliding is not None and slid is not None:
+                x = unmet[j] if unmet is not None and sliding[j] > 0.0 else 0.0
+                g = slid[j] + hold_rate * (x - slid[j])
+                slid[j] = g
+                if g > SLIDING_SHARE_FROM:
+                    m = sliding[j] if sliding[j] < a_max else a_max
+                    if g < SLIDING_SHARE_FULL:
+                        m *= (g - SLIDING_SHARE_FROM) / (SLIDING_SHARE_FULL - SLIDING_SHARE_FROM)
+            # leaks in T within the band, in HOLD_TIME_FRACTION T where the damping takes the
+            # push (there down to the friction met)
+            leak = (1.0 - phi) * a
             if unmet is not None:
                 taken = 1.0 - unmet[j]
-                leak += phi * taken * taken / HOLD_TIME_FRACTION
-            a += rate * (a_max * phi * s - leak * a)
+                leak += phi * taken * taken / HOLD_TIME_FRACTION * (a - m if a > m else 0.0)
+            a += rate * (a_max * phi * s - leak)
+            if m > a:  # up to the friction a sliding joint meets, in c T
+                a += hold_rate * phi * (m - a)
         else:
             if held is not None:
                 held[j] -= hold_rate * held[j]
+            if slid is not None:
+                slid[j] -= hold_rate * slid[j]
             a -= rate * a
         learned_nm[j] = a_max if a > a_max else (a if a > 0.0 else 0.0)
 

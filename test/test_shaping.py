@@ -209,13 +209,23 @@ def test_friction_learning_grows_only_while_stuck_off_the_goal_and_leaks_at_it()
     assert learned[0] == pytest.approx(0.5 * math.exp(-1.0), rel=2e-3)
 
 
-def _learning_tick(shaping, learned, held, tau_p, qdot, damping, phi=1.0):
-    """One tick of the learning as the regulator runs it, with the damping torque given."""
+def _learning_tick(shaping, learned, held, tau_p, qdot, damping, phi=1.0, inertial=None,
+                   slid=None):
+    """
+    One tick of the learning as the regulator runs it, with the damping torque given.
+
+    With ``slid`` (learn_friction's ``g`` per joint, kept by the caller as ``held``) the
+    friction a sliding joint meets counts too, as in the regulator; without it, the rule for
+    a held joint alone.
+    """
     n = len(qdot)
     stuck, unmet = [0.0] * n, [0.0] * n
+    sliding = None if slid is None else [0.0] * n
     sh.friction_compensation(tau_p, qdot, phi, shaping, learned, stuck, damping, unmet,
-                             equilibrium_band_nm=shaping.learning_torque_band)
-    sh.learn_friction(learned, stuck, phi, shaping, 1e-3, unmet, held)
+                             inertial_nm=inertial,
+                             equilibrium_band_nm=shaping.learning_torque_band,
+                             sliding_out=sliding)
+    sh.learn_friction(learned, stuck, phi, shaping, 1e-3, unmet, held, sliding, slid)
 
 
 def test_friction_learning_tells_a_stuck_joint_from_a_slow_approach_and_a_turning_point():
@@ -224,19 +234,22 @@ def test_friction_learning_tells_a_stuck_joint_from_a_slow_approach_and_a_turnin
 
     Joint 0 is at rest and pushed (no damping torque at rest): held. Joint 1 moves slowly the
     way it is pushed, its damping taking the whole push (an approach). Joint 2 swings: at rest
-    for 20 ms at each turning point, pushed back, then moving at speed.
+    for 20 ms at each turning point, pushed back, then moving at speed, what its damping does
+    not take of the push going into its acceleration (``M qddot``).
     """
     kv = 0.5
     shaping = sh.Shaping.create(3, friction_learning_limit=(0.5, 0.5, 0.5),
                                 friction_learning_time=1.0)
-    learned, held = [0.0] * 3, [0.0] * 3
+    learned, held, slid = [0.0] * 3, [0.0] * 3, [0.0] * 3
     for k in range(1000):
         swing = 0.0 if k % 200 < 20 else (0.4 if (k // 200) % 2 else -0.4)
         tau_p = [0.3, 0.3, 0.3 if (k // 200) % 2 else -0.3]
         qdot = [0.0, 0.3 / kv * 0.01, swing]
         damping = [-kv * v for v in qdot]
         tau_p[1] = kv * qdot[1]  # the push the damping balances: a slow, steady approach
-        _learning_tick(shaping, learned, held, tau_p, qdot, damping)
+        inertial = [0.0, 0.0, tau_p[2] + damping[2] if swing else 0.0]
+        _learning_tick(shaping, learned, held, tau_p, qdot, damping, inertial=inertial,
+                       slid=slid)
     assert learned[0] > 0.5 * 0.5 * (1.0 - 2.0 * sh.HOLD_TIME_FRACTION)  # stiction: learns
     assert learned[1] == 0.0 and learned[2] == 0.0
     # a held joint starts learning only after it has stayed held a while (no turning point)
@@ -324,7 +337,9 @@ def test_friction_learning_goes_on_in_a_steady_creep_below_the_creep_speed():
 
     It is held (the damping takes almost none of the push) and slower than its creep speed:
     the compensation is not yet enough, so ``a`` must grow until the joint reaches the creep
-    speed, not stall at a crawl. The same slide at the creep speed learns nothing.
+    speed, not stall at a crawl. The same slide at the creep speed learns nothing held. (The
+    rule for a held joint alone: at a speed fixed whatever the push, the friction met, which
+    a sliding joint also learns, would be all of the push, learned or not: no plant's.)
     """
     shaping = sh.Shaping.create(2, friction_learning_limit=(1.0, 1.0), friction_velocity=0.05)
     creep = sh.CREEP_SPEED_FACTOR * 0.05
@@ -347,31 +362,68 @@ def test_friction_learning_outgrows_its_leak_where_a_friction_takes_most_of_the_
     """
     shaping = sh.Shaping.create(1, friction_learning_limit=(1.0,), friction_velocity=0.05)
     creep = sh.CREEP_SPEED_FACTOR * 0.05
-    learned, held = [0.3], [1.0]
+    learned, held, slid = [0.3], [1.0], [0.0]
     qdot = [0.5 * creep]
     for _ in range(2000):
         push = 0.3 + learned[0]  # tau_p + the learned push along the motion
-        _learning_tick(shaping, learned, held, [0.3], qdot, [-0.2 * push])
+        _learning_tick(shaping, learned, held, [0.3], qdot, [-0.2 * push], slid=slid)
     assert learned[0] > 0.6
+
+
+def test_a_joint_sliding_against_a_friction_learns_it_up_to_its_creep_speed():
+    """
+    A joint a friction slows, moving the way it is pushed, learns what takes it to its creep speed.
+
+    Quasi-static slide of one joint (Romeo's left-arm joint of docs/reach.md, "A joint sliding
+    against a friction"): ``K_v qdot = tau_p + tau_fc - F``, the friction ``F`` near the
+    potential's push. Held at rest, the rule for a held joint lets it go and then keeps a
+    share of ``F`` where its growth, weak near the creep speed, meets the leak of the damping's
+    share: it slides at under 0.8 of its creep speed. What the friction takes of the push,
+    ``w |u|``, is ``F``, and with it counted ``a`` rises until the joint slides between 3/4 of
+    its creep speed and that speed, no faster (a light joint pushed on into the fade of the
+    learned push there swung each tick between the two speeds). Without the friction the
+    damping takes the whole push: nothing is learned.
+    """
+    v_eps = 0.02
+    shaping = sh.Shaping.create(2, friction_learning_limit=(0.1, 0.1), friction_velocity=v_eps)
+    kv, tau_p, friction = 0.032, 0.025, (0.0218, 0.0)
+    creep, fade = [0.44] * 2, [0.66] * 2  # the creep and fade speeds of a far q*
+
+    def slide(counted):  # 3 s of the slide; the friction met counted or not
+        learned, held, slid, qdot = [0.0, 0.0], [0.0, 0.0], [0.0, 0.0], [0.0, 0.0]
+        for _ in range(3000):
+            stuck, unmet, sliding = [0.0] * 2, [0.0] * 2, [0.0] * 2
+            fc = sh.friction_compensation([tau_p] * 2, qdot, 1.0, shaping, learned, stuck,
+                                          [-kv * v for v in qdot], unmet, creep, fade,
+                                          sliding_out=sliding if counted else None)
+            sh.learn_friction(learned, stuck, 1.0, shaping, 1e-3, unmet, held,
+                              sliding if counted else None, slid if counted else None)
+            qdot = [max(0.0, tau_p + c - f) / kv for c, f in zip(fc, friction)]
+        return learned, qdot
+    held_only, crawl = slide(False)
+    learned, qdot = slide(True)
+    assert crawl[0] < 0.8 * creep[0]
+    assert 0.85 * creep[0] < qdot[0] <= creep[0] and held_only[0] < learned[0] < friction[0]
+    assert learned[1] == 0.0 and qdot[1] == pytest.approx(tau_p / kv)
 
 
 def test_learned_friction_holds_against_a_friction_and_leaks_where_the_damping_takes_it():
     """Sliding with friction taking the push, ``a`` holds; moving freely it leaks fast."""
     shaping = sh.Shaping.create(1, friction_learning_limit=(1.0,), friction_velocity=0.05)
     kv, friction = 1.0, 0.895
-    learned, held = [0.8], [1.0]
+    learned, held, slid = [0.8], [1.0], [0.0]
     for _ in range(300):  # sliding at 5 mm/s: the friction takes nearly all of the push
         push = 0.1 + learned[0]
         qdot = (push - friction) / kv
-        _learning_tick(shaping, learned, held, [0.1], [qdot], [-kv * qdot])
+        _learning_tick(shaping, learned, held, [0.1], [qdot], [-kv * qdot], slid=slid)
     assert learned[0] > 0.7
     learned = [0.8]
     for _ in range(300):  # released: nothing holds it, the damping takes the push
         qdot = (0.1 + learned[0]) / kv
-        _learning_tick(shaping, learned, held, [0.1], [qdot], [-kv * qdot])
+        _learning_tick(shaping, learned, held, [0.1], [qdot], [-kv * qdot], slid=slid)
     assert learned[0] < 0.8 * math.exp(-0.3 / (sh.HOLD_TIME_FRACTION * 1.0)) * 1.5
     for _ in range(1000):  # near the goal (phi 0) it leaks with the learning time
-        _learning_tick(shaping, learned, held, [0.0], [0.0], [0.0], phi=0.0)
+        _learning_tick(shaping, learned, held, [0.0], [0.0], [0.0], phi=0.0, slid=slid)
     assert learned[0] < 0.1
 
 
@@ -534,7 +586,8 @@ def test_a_joint_creeping_below_the_creep_speed_with_a_friction_keeps_learning()
     Sliding slower than the creep speed with a friction taking the push, ``a`` keeps growing.
 
     The rule before stopped near ``v_eps``, which left joints creeping for seconds; a joint
-    given a faster creep speed (far from its goal configuration) learns up to that.
+    given a faster creep speed (far from its goal configuration) learns up to that. (The rule
+    for a held joint alone, at speeds fixed whatever the push, as in the test above.)
     """
     shaping = sh.Shaping.create(1, friction_learning_limit=(1.0,), friction_velocity=0.05)
     v_eps = shaping.friction_velocity_rad_s
