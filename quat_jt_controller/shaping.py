@@ -439,7 +439,8 @@ def friction_compensation(tau_potential: Sequence[float], qdot: Sequence[float],
     v_eps = shaping.friction_velocity_rad_s
     v_creep = CREEP_SPEED_FACTOR * v_eps
     v_fade = FADE_SPEED_FACTOR * v_eps
-    band = equilibrium_band_nm if stuck_out is not None and equilibrium_band_nm else ()
+    band = (equilibrium_band_nm if (stuck_out is not None or sliding_out is not None)
+            and equilibrium_band_nm else ())
     for j, (f, _, scale) in enumerate(shaping.friction_table):
         if scale <= 0.0:  # no estimate and nothing to learn
             continue
@@ -463,7 +464,7 @@ def friction_compensation(tau_potential: Sequence[float], qdot: Sequence[float],
             else:
                 size += learned_nm[j] * rest
         out[j] = phi * size * tp
-        if stuck_out is not None or unmet_out is not None:
+        if stuck_out is not None or unmet_out is not None or sliding_out is not None:
             slow = 1.0 - abs(v) / v_creep
             if slow < 0.0:
                 slow = 0.0

@@ -407,6 +407,25 @@ def test_a_joint_sliding_against_a_friction_learns_it_up_to_its_creep_speed():
     assert learned[1] == 0.0 and qdot[1] == pytest.approx(tau_p / kv)
 
 
+def test_the_friction_met_sliding_is_given_on_its_own_and_only_along_the_push():
+    """
+    ``sliding_out`` alone (no ``stuck_out`` or ``unmet_out``): ``w |u| - f`` along the push.
+
+    Joint 0 slides along its push at half its creep speed, its damping taking 0.1 of the 0.3
+    N m: the friction met is 0.2. Joint 1 is at rest, joint 2 moves against its push and
+    joint 3 above its creep speed: none. Every entry is written, whatever the list held.
+    """
+    v_eps = 0.05
+    shaping = sh.Shaping.create(4, friction_learning_limit=(1.0,) * 4, friction_velocity=v_eps)
+    creep = sh.CREEP_SPEED_FACTOR * v_eps
+    qdot = [0.5 * creep, 0.0, -0.5 * creep, 1.5 * creep]
+    sliding = [9.9] * 4
+    sh.friction_compensation([0.3] * 4, qdot, 1.0, shaping, [0.0] * 4,
+                             damping_nm=[-0.1] * 4, sliding_out=sliding)
+    along = math.tanh(0.5 * creep / v_eps) * math.tanh(0.3 / (0.001 * 1.0))
+    assert sliding[0] == pytest.approx(0.2 * along) and sliding[1:] == [0.0, 0.0, 0.0]
+
+
 def test_learned_friction_holds_against_a_friction_and_leaks_where_the_damping_takes_it():
     """Sliding with friction taking the push, ``a`` holds; moving freely it leaks fast."""
     shaping = sh.Shaping.create(1, friction_learning_limit=(1.0,), friction_velocity=0.05)
