@@ -24,7 +24,7 @@ import numpy as np
 from quat_jt_controller import quaternion as quat
 from quat_jt_controller.control_law import Task
 from quat_jt_controller.model import RobotModel, SINGULAR_SIGMA_MIN
-from quat_jt_controller.shaping import FULL_TURN_RAD
+from quat_jt_controller.shaping import BAND_DEPTH_TOLERANCE_RAD, FULL_TURN_RAD
 
 RESIDUAL_TOLERANCE = 1e-4  # IK residual (m and rad) below this: the goal is reached (A1)
 # q* is polished by Newton steps to this residual (m and rad), the model's precision, or refused:
@@ -79,8 +79,15 @@ def _limits(model: RobotModel) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
 
 def _in_band(q: np.ndarray, lower: np.ndarray, upper: np.ndarray, limited: np.ndarray,
              margin_rad: float) -> bool:
-    """Return whether a bounded joint of ``q`` lies within ``margin_rad`` of a limit."""
-    return bool(np.any(limited & ((q < lower + margin_rad) | (q > upper - margin_rad))))
+    """
+    Return whether a bounded joint of ``q`` lies within ``margin_rad`` of a limit.
+
+    A joint less than ``BAND_DEPTH_TOLERANCE_RAD`` deep counts as out of the band: that is
+    where :func:`posture` leaves a joint its cost pulls against the band's wall (the pull over
+    ``POSTURE_BAND_WEIGHT``, 1e-4 rad per rad of distance to the measured q).
+    """
+    inner = margin_rad - BAND_DEPTH_TOLERANCE_RAD
+    return bool(np.any(limited & ((q < lower + inner) | (q > upper - inner))))
 
 
 def solve_ik(model: RobotModel, q_start: Sequence[float], quat_desired: Sequence[float],

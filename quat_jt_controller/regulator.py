@@ -582,12 +582,18 @@ class Regulator:
         return ended
 
     def goal_in_band(self) -> tuple[int, ...]:
-        """Return the joints whose goal configuration q* lies in the joint-limit band."""
+        """
+        Return the joints whose goal configuration q* lies in the joint-limit band.
+
+        Deeper than ``BAND_DEPTH_TOLERANCE_RAD``, as the goal check counts it: a q* it slid
+        against a band's wall is out of it.
+        """
         band, q_star = self._law.band, self._target.q_star
         if band is None or q_star is None:
             return ()
+        tol = sh.BAND_DEPTH_TOLERANCE_RAD
         return tuple(j for j in band.joints
-                     if not band.lower_rad[j] <= q_star[j] <= band.upper_rad[j])
+                     if not band.lower_rad[j] - tol <= q_star[j] <= band.upper_rad[j] + tol)
 
     # -- the law ----------------------------------------------------------------------------
     def error(self, q: Sequence[float], goal: Optional[Goal] = None):

@@ -58,6 +58,10 @@ from quat_jt_runtime.param_table import check_all, names
 
 # A joint whose URDF range is at least this long turns freely: it gets no limit term.
 FULL_TURN_RAD = 2.0 * pi - 1e-6
+# A goal configuration less than this deep in a joint-limit band counts as out of it: the goal
+# check's posture cost holds a joint it pulls against a band's wall that little inside
+# (inverse_kinematics.posture)
+BAND_DEPTH_TOLERANCE_RAD = 1e-3
 # t_p = tanh(tau_p / (TORQUE_BAND_FRACTION f)): the breakaway reaches 76% of f when the
 # potential torque is 0.1% of f, and changes sign smoothly (C-infinity) through tau_p = 0.
 TORQUE_BAND_FRACTION = 0.001

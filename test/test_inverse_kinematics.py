@@ -151,6 +151,45 @@ def test_a_band_is_a_wall_for_the_posture_where_the_self_motion_leaves_it():
     assert np.linalg.norm(np.array(p) - np.array(p_d)) < 1e-6
 
 
+def test_a_posture_held_against_a_band_counts_as_out_of_it():
+    """
+    Baxter's right arm (7 joints): a posture held against a band is taken, not passed by.
+
+    The band's wall weight leaves a joint pulled against it a little inside (here about 1e-5
+    rad of its 0.133 rad band). Counted as in the band, that posture lost to a branch 5.8 rad
+    from the arm instead of 3.0 (the slow shoulder's travel nearly doubled). Up to
+    ``BAND_DEPTH_TOLERANCE_RAD`` deep it counts as out: q* is the nearer posture, at the wall.
+    """
+    import numpy as np
+    from quat_jt_controller import inverse_kinematics as gc
+    from quat_jt_controller.model import RobotModel
+    from quat_jt_runtime.joints import chain_joints
+    from robots import example_robot_data_urdf
+    urdf = example_robot_data_urdf('baxter_description/urdf/baxter.urdf').read_text()
+    model = RobotModel(urdf, 'base', 'right_wrist', chain_joints(urdf, 'base', 'right_wrist'))
+    margin = 0.133
+    q_start = np.array([0.364, -1.1147, -1.5346, 1.2606, -0.7161, -0.9223, 1.0257])
+    q_d, p_d = goal_at(model, [0.794, -1.7144, 0.6153, 0.7501, -0.356, 1.1133, 0.1547])
+    lower, upper = np.array(model.position_lower), np.array(model.position_upper)
+
+    def search():
+        return gc.goal_configuration(model, q_start, q_d, p_d, POSE, margin)
+    q_star = search()
+    gap = np.minimum(q_star - lower, upper - q_star)
+    assert gap.min() > margin - gc.BAND_DEPTH_TOLERANCE_RAD  # out of the bands, by the rule
+    assert gap.min() < margin + 1e-6  # against a band's wall: where the cost holds it
+    p, _ = model.forward_kinematics(q_star.tolist())
+    assert np.linalg.norm(np.array(p) - np.array(p_d)) < 1e-6
+    tolerance = gc.BAND_DEPTH_TOLERANCE_RAD
+    try:  # any depth counted as in the band: the search passes it by for a farther branch
+        gc.BAND_DEPTH_TOLERANCE_RAD = 0.0
+        strict = search()
+    finally:
+        gc.BAND_DEPTH_TOLERANCE_RAD = tolerance
+    assert np.minimum(strict - lower, upper - strict).min() >= margin
+    assert np.linalg.norm(q_star - q_start) < np.linalg.norm(strict - q_start) - 1.0
+
+
 def test_an_arm_without_self_motion_keeps_its_solution():
     """posture() changes nothing where J has as many rows as columns (the xArm6's pose)."""
     import numpy as np

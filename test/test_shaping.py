@@ -511,6 +511,13 @@ def test_the_band_ends_at_a_goal_configuration_inside_it():
     assert reg.potential_energy(beyond) > 0.0
     reg.set_goal_configuration(reg.goal, [0.3, 0.5, -0.2])  # outside the bands
     assert reg.goal_in_band() == ()
+    wall = model.position_upper[1] - 0.25  # the band's inner edge
+    for depth, joints in ((0.5 * sh.BAND_DEPTH_TOLERANCE_RAD, ()),
+                          (2.0 * sh.BAND_DEPTH_TOLERANCE_RAD, (1,))):  # as the goal check
+        q_wall = [0.3, wall + depth, -0.2]
+        reg.set_goal(reg.pose(q_wall))
+        assert reg.set_goal_configuration(reg.goal, q_wall)
+        assert reg.goal_in_band() == joints
 
 
 def test_goal_configuration_term_is_a_huber_spring_with_a_dead_zone():
