@@ -46,7 +46,8 @@ from quat_jt_controller.gain_analysis import (
     seen_inertia, settling_rate, sigma_min, time_to_goal_s, worst_rho)
 from quat_jt_controller.model import GRAVITY_RESERVE_SHARE, RobotModel
 from quat_jt_controller.shaping import (
-    DEFAULT_SPEED_CAP_RAD_S, FADE_DELAY_TICKS, FADE_FLOOR_FRACTION, FULL_TURN_RAD, Shaping)
+    DEFAULT_SPEED_CAP_RAD_S, FADE_DELAY_TICKS, FADE_FLOOR_FRACTION, FULL_TURN_RAD,
+    PLAUSIBLE_SPEED_RAD_S, Shaping)
 from quat_jt_runtime.joints import check_state_rate
 from quat_jt_runtime.param_table import row
 
@@ -110,9 +111,6 @@ SUGGESTED_ARMATURE = 0.1  # kg m^2, what a geared drive of a ~1 m arm reflects, 
 # The regulator may find at most the rotor inertia that the joint's effort limit accelerates
 # this fast (rad/s^2; m/s^2 on a slide), beyond the armature told (armature_estimate.py)
 ESTIMATED_ARMATURE_ACCELERATION_RAD_S2 = 10.0
-# A URDF velocity limit above this is taken for a placeholder (iCub's and Alex's 100 rad/s,
-# Solo's 1000, the hextilt arm's 10,000; the G1's 37 is real): a warning
-PLAUSIBLE_SPEED_RAD_S = 60.0
 SAMPLES = 24  # representative regular configurations for M(q), J(q)
 SURVEY = 400  # random configurations for the largest g(q) and lever ||J_p[:, j]||
 REGULAR_SIGMA_MIN = 0.1

@@ -24,7 +24,8 @@ import numpy as np
 from quat_jt_controller import quaternion as quat
 from quat_jt_controller.control_law import Task
 from quat_jt_controller.model import RobotModel, SINGULAR_SIGMA_MIN
-from quat_jt_controller.shaping import BAND_DEPTH_TOLERANCE_RAD, FULL_TURN_RAD
+from quat_jt_controller.shaping import (BAND_DEPTH_TOLERANCE_RAD, DEFAULT_SPEED_CAP_RAD_S,
+                                        FULL_TURN_RAD, PLAUSIBLE_SPEED_RAD_S)
 
 RESIDUAL_TOLERANCE = 1e-4  # IK residual (m and rad) below this: the goal is reached (A1)
 # q* is polished by Newton steps to this residual (m and rad), the model's precision, or refused:
@@ -75,6 +76,28 @@ def _limits(model: RobotModel) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     lower = np.array(model.position_lower, dtype=float)
     upper = np.array(model.position_upper, dtype=float)
     return lower, upper, np.isfinite(upper - lower) & (upper - lower < FULL_TURN_RAD)
+
+
+TRAVEL_SPEED_RATIO_MAX = 100.0  # travel_weights: at most this x the slowest joint's speed
+
+
+def travel_weights(model: RobotModel) -> np.ndarray:
+    """
+    Return each joint's weight in the distance q* is the nearest in: ``(v_min / v_j)^2``.
+
+    ``v_j`` is the joint's URDF velocity limit (``DEFAULT_SPEED_CAP_RAD_S`` where the URDF
+    gives none or a placeholder, above ``PLAUSIBLE_SPEED_RAD_S``), ``v_min`` the slowest
+    joint's: ``sqrt(sum_j w_j dq_j^2)`` is the travel's
+    time at the limits (its 2-norm over the joints, not the slowest joint's alone) in units of
+    the slowest joint's, so of two goal configurations the one the slow joints travel less to
+    is the nearer. Joints that share one limit keep the Euclidean distance. A joint more than
+    ``TRAVEL_SPEED_RATIO_MAX`` times faster than the slowest (a placeholder limit beside real
+    ones) counts as that much faster: the posture's Newton steps stay well conditioned.
+    """
+    v = np.array(model.velocity_limits, dtype=float)
+    v = np.where(np.isfinite(v) & (v > 0.0) & (v <= PLAUSIBLE_SPEED_RAD_S), v,
+                 DEFAULT_SPEED_CAP_RAD_S)
+    return np.maximum(float(v.min()) / v, 1.0 / TRAVEL_SPEED_RATIO_MAX) ** 2
 
 
 def _in_band(q: np.ndarray, lower: np.ndarray, upper: np.ndarray, limited: np.ndarray,
@@ -195,12 +218,13 @@ def posture(model: RobotModel, q: Sequence[float], quat_desired: Sequence[float]
     Among the configurations that reach the goal, the one reached from ``q`` by steps in the
     null space of J that minimise
 
-        c(q) = 1/2 ||q - q_measured||^2 + 1/2 weight ||q - q_preferred||^2
+        c(q) = 1/2 sum_j w_j ((q_j - q_measured,j)^2 + weight (q_j - q_preferred,j)^2)
                + 1/2 POSTURE_BAND_WEIGHT ||x(q)||^2
 
-    ``x`` the depth in the joint-limit bands of width ``margin_rad`` (section 2 of
-    docs/lyapunov.md): nearest the measured configuration, then the preferred posture, and out
-    of the bands where the self-motion allows. Each step is the Newton step of ``c`` within the
+    ``w`` the :func:`travel_weights`, ``x`` the depth in the joint-limit bands of width
+    ``margin_rad`` (section 2 of docs/lyapunov.md): nearest the measured configuration in the
+    time the joints take to travel there, then the preferred posture, and out of the bands
+    where the self-motion allows. Each step is the Newton step of ``c`` within the
     null space of J (a basis ``Z`` from the SVD of J: ``-Z (Z^T H Z)^-1 Z^T grad c``, ``H``
     the diagonal Hessian of ``c``), at most ``POSTURE_MAX_STEP_RAD`` long, taken back onto the
     goal by Newton steps, and halved until ``c`` decreases there (a backtracking line search:
@@ -211,6 +235,7 @@ def posture(model: RobotModel, q: Sequence[float], quat_desired: Sequence[float]
     q = np.array(q, dtype=float)
     q_now = np.asarray(q_measured, dtype=float)
     q_pref = np.asarray(q_preferred, dtype=float)
+    w = travel_weights(model)
     lower = np.array(model.position_lower, dtype=float)
     upper = np.array(model.position_upper, dtype=float)
     limited = _limits(model)[2]
@@ -221,7 +246,7 @@ def posture(model: RobotModel, q: Sequence[float], quat_desired: Sequence[float]
         return np.minimum(x - inner_lo, 0.0) + np.maximum(x - inner_hi, 0.0)
 
     def cost(x: np.ndarray) -> float:
-        return 0.5 * (float(np.sum((x - q_now) ** 2)) + weight * float(np.sum((x - q_pref) ** 2))
+        return 0.5 * (float(np.sum(w * ((x - q_now) ** 2 + weight * (x - q_pref) ** 2)))
                       + POSTURE_BAND_WEIGHT * float(np.sum(depth(x) ** 2)))
 
     _, J = _pose_residual(model, q, quat_desired, p_desired, task)
@@ -233,8 +258,8 @@ def posture(model: RobotModel, q: Sequence[float], quat_desired: Sequence[float]
         _, J = _pose_residual(model, q, quat_desired, p_desired, task)
         Z = np.linalg.svd(J)[2][rows:].T  # the self-motion's directions at q
         band = depth(q)
-        grad = (q - q_now) + weight * (q - q_pref) + POSTURE_BAND_WEIGHT * band
-        hessian = 1.0 + weight + POSTURE_BAND_WEIGHT * (band != 0.0)
+        grad = w * ((q - q_now) + weight * (q - q_pref)) + POSTURE_BAND_WEIGHT * band
+        hessian = w * (1.0 + weight) + POSTURE_BAND_WEIGHT * (band != 0.0)
         step = -Z @ np.linalg.solve(Z.T @ (hessian[:, None] * Z), Z.T @ grad)
         largest = float(np.max(np.abs(step)))
         if largest < POSTURE_STEP_RAD:
@@ -431,7 +456,8 @@ def search_goal_configuration(model: RobotModel, q_measured: Optional[Sequence[f
     the measured one, but ``margin_rad`` from their stops when a whole turn allows (the joint
     box is convex: the way there stays within the limits). Among them it prefers the regular
     ones (:func:`sigma_min` ``>= SINGULAR_SIGMA_MIN``), then those outside the joint-limit bands
-    (``margin_rad``), then the nearest to ``q_measured``. A goal reached only near a
+    (``margin_rad``), then the nearest to ``q_measured`` (in the :func:`travel_weights`'
+    distance: the time the joints take to travel there). A goal reached only near a
     singularity still gets the least singular q* found: A2 does not hold there, which the goal
     check reports, but the goal is reached. Deterministic.
 
@@ -451,6 +477,10 @@ def search_goal_configuration(model: RobotModel, q_measured: Optional[Sequence[f
     q_now = 0.5 * (lo + hi) if q_measured is None else np.asarray(q_measured, dtype=float)
     q_pref = np.asarray(model.middle_of_ranges() if q_preferred is None else q_preferred,
                         dtype=float)
+    weights = travel_weights(model)
+
+    def travel(q: np.ndarray) -> float:  # the distance from the arm, in the travel's time
+        return float(np.sqrt(np.sum(weights * (q - q_now) ** 2)))
     best_try: list = [np.asarray(q_now, dtype=float), np.inf]  # the smallest residual found
     tried: list = []  # the IK solutions taken further, one per branch
 
@@ -485,7 +515,7 @@ def search_goal_configuration(model: RobotModel, q_measured: Optional[Sequence[f
             return None
         sigma = sigma_min(model, q, task)
         in_band = _in_band(q, lower, upper, limited, margin_rad)
-        return (sigma < SINGULAR_SIGMA_MIN, in_band, float(np.linalg.norm(q - q_now))), q, sigma
+        return (sigma < SINGULAR_SIGMA_MIN, in_band, travel(q)), q, sigma
 
     count = 0
     if q_warm is not None:

@@ -277,7 +277,8 @@ SHAPING = (
          lambda context: [float(v) for v in context['preferred_configuration']],
          'A comfortable posture (rad), one per joint ({n}), within the limits: of the goal '
          "configurations along a redundant arm's self-motion, the goal check takes the one "
-         'nearest the measured joints, then nearest this posture with posture_weight, and out '
+         'nearest the measured joints (in the time they take to get there at their velocity '
+         'limits), then nearest this posture with posture_weight, and out '
          'of the joint-limit bands (docs/lyapunov.md, section 9). Default: the middle of the '
          'ranges. Next goal on. Live.', constraints='{n} finite values within the joint limits',
          default_text='the middle of the ranges', size='n', empty_ok=True,

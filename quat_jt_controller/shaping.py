@@ -113,6 +113,10 @@ STOP_CLEARANCE_SHARE = 0.25  # of the joint-limit margin: the room the stop guar
 LEARNING_ANGLE_RAD = 3e-3
 # The cubic damping turns linear above the URDF velocity limit, or above this without one.
 DEFAULT_SPEED_CAP_RAD_S = 2.0 * pi
+# A URDF velocity limit above this is taken for a placeholder (iCub's and Alex's 100 rad/s,
+# Solo's 1000, the hextilt arm's 10,000; the G1's 37 is real): design_gains warns of it, and
+# the goal check counts the joint's travel as for a joint without a limit
+PLAUSIBLE_SPEED_RAD_S = 60.0
 
 
 class ShapingError(QuatJtError):

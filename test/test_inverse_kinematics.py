@@ -56,13 +56,18 @@ def test_a_redundant_arm_gets_the_goal_configuration_nearest_along_its_self_moti
     The Panda reaches a pose along a 1-D self-motion: q* is slid along it towards q.
 
     It still reaches the goal exactly, it is nearer the measured q than the solution it was
-    slid from, and there the gradient of the posture cost has no part in the null space of J
-    (a minimum along the self-motion).
+    slid from (in the travel's time, the distance weighted by the joints' velocity limits),
+    and there the gradient of the posture cost has no part in the null space of J (a minimum
+    along the self-motion).
     """
     import numpy as np
     from quat_jt_controller.inverse_kinematics import goal_configuration, polish, posture, \
-        POLISHED_TOLERANCE, solve_ik
+        POLISHED_TOLERANCE, solve_ik, travel_weights
     model = panda_model()
+    w = travel_weights(model)
+
+    def travel(q):
+        return np.sqrt(np.sum(w * (q - q_now) ** 2))
     q_now = np.array([0.3, -0.5, 0.2, -2.0, 0.1, 1.8, 0.6])
     q_goal = [0.9, 0.1, -0.4, -1.6, 0.5, 1.5, 1.2]
     q_d, p_d = goal_at(model, q_goal)
@@ -74,17 +79,16 @@ def test_a_redundant_arm_gets_the_goal_configuration_nearest_along_its_self_moti
     _, e = quat.orientation_error(quat.from_rotation_matrix(R), q_d)
     assert np.linalg.norm(e) < POLISHED_TOLERANCE
     assert np.linalg.norm(np.subtract(p, p_d)) < POLISHED_TOLERANCE
-    assert np.linalg.norm(q_star - q_now) < np.linalg.norm(q_ik - q_now) - 0.1
+    assert travel(q_star) < travel(q_ik) - 0.1
     J = np.array(model.kinematics(q_star.tolist())[2])
     null = np.eye(7) - np.linalg.pinv(J) @ J
-    assert np.linalg.norm(null @ (q_star - q_now)) < 1e-4
+    assert np.linalg.norm(null @ (w * (q_star - q_now))) < 1e-4
     # the preferred posture pulls it along the self-motion, towards q_mid
     q_pref = posture(model, q_ik, q_d, p_d, POSE, q_now, q_mid, 1.0)
     assert np.linalg.norm(q_pref - q_mid) < np.linalg.norm(q_star - q_mid)
     # goal_configuration does the same from its own starts
     found = goal_configuration(model, q_now, q_d, p_d, POSE, 0.157)
-    assert found is not None and np.linalg.norm(found - q_now) <= np.linalg.norm(
-        q_ik - q_now)
+    assert found is not None and travel(found) <= travel(q_ik)
 
 
 def test_the_posture_search_settles_where_a_band_holds_it_back():
@@ -156,8 +160,8 @@ def test_a_posture_held_against_a_band_counts_as_out_of_it():
     Baxter's right arm (7 joints): a posture held against a band is taken, not passed by.
 
     The band's wall weight leaves a joint pulled against it a little inside (here about 1e-5
-    rad of its 0.133 rad band). Counted as in the band, that posture lost to a branch 5.8 rad
-    from the arm instead of 3.0 (the slow shoulder's travel nearly doubled). Up to
+    rad of its 0.133 rad band). Counted as in the band, that posture lost to a worse branch
+    (with the Euclidean distance, one 5.8 rad from the arm instead of 3.0). Up to
     ``BAND_DEPTH_TOLERANCE_RAD`` deep it counts as out: q* is the nearer posture, at the wall.
     """
     import numpy as np
@@ -186,8 +190,78 @@ def test_a_posture_held_against_a_band_counts_as_out_of_it():
         strict = search()
     finally:
         gc.BAND_DEPTH_TOLERANCE_RAD = tolerance
-    assert np.minimum(strict - lower, upper - strict).min() >= margin
-    assert np.linalg.norm(q_star - q_start) < np.linalg.norm(strict - q_start) - 1.0
+    w = gc.travel_weights(model)
+    travel = [np.sqrt(np.sum(w * (q - q_start) ** 2)) for q in (q_star, strict)]
+    deep = np.minimum(strict - lower, upper - strict).min() < margin - tolerance
+    assert deep or travel[1] > travel[0] + 1.0  # a branch deep in a band, or a farther one
+
+
+def test_the_goal_configuration_is_nearest_in_the_joints_travel_time():
+    """
+    Romeo's left arm (8 joints): its wrist roll turns at 1.1 rad/s, its elbow at 3.7.
+
+    Nearest in the Euclidean distance, q* took the wrist roll 2.5 rad (2.2 s at its limit);
+    nearest in the travel's time (each joint's travel over its velocity limit, travel_weights),
+    the elbow takes more of the way and the slowest joint's time halves.
+    """
+    import numpy as np
+    from quat_jt_controller import inverse_kinematics as gc
+    from quat_jt_controller.model import RobotModel
+    from quat_jt_runtime.joints import chain_joints
+    from robots import example_robot_data_urdf
+    urdf = example_robot_data_urdf('romeo_description/urdf/romeo_small.urdf').read_text()
+    model = RobotModel(urdf, 'base_link', 'l_wrist', chain_joints(urdf, 'base_link', 'l_wrist'))
+    velocity = np.array(model.velocity_limits)
+    q_start = np.array([0.4249, -0.0151, 0.3659, 1.5192, -0.6054, 0.0564, 0.1735, 0.2318])
+    q_d, p_d = goal_at(model, [-0.1212, 0.2076, 0.2908, -0.2248, -0.6037, -3.0278, -0.2395,
+                               0.1781])
+
+    def seconds(weights):
+        kept = gc.travel_weights
+        try:
+            if weights is not None:
+                gc.travel_weights = weights
+            q_star = gc.goal_configuration(model, q_start, q_d, p_d, POSE, 0.044,
+                                           q_preferred=model.middle_of_ranges(),
+                                           posture_weight=0.1)
+        finally:
+            gc.travel_weights = kept
+        p, _ = model.forward_kinematics(q_star.tolist())
+        assert np.linalg.norm(np.array(p) - np.array(p_d)) < 1e-6
+        return float(np.max(np.abs(q_star - q_start) / velocity))
+    weights = gc.travel_weights(model)
+    assert weights.max() == 1.0 and weights[5] == 1.0  # the wrist roll is the slowest joint
+    in_time, euclidean = seconds(None), seconds(lambda m: np.ones(m.n))
+    assert in_time < 0.7 * euclidean
+
+
+def test_the_travel_time_reads_placeholder_limits_as_none():
+    """
+    Alex's right arm: 100 rad/s on its shoulder and elbow (placeholders), 25 on its wrist.
+
+    A limit no drive has says nothing of the joint's speed: its travel counts as that of a
+    joint without a limit (2 pi rad/s), not as 100 rad/s, which would make the shoulder's
+    radians all but free.
+    """
+    import math
+
+    import numpy as np
+    from quat_jt_controller.inverse_kinematics import travel_weights
+    from quat_jt_controller.model import RobotModel
+    from quat_jt_controller.shaping import DEFAULT_SPEED_CAP_RAD_S, PLAUSIBLE_SPEED_RAD_S
+    from quat_jt_runtime.joints import chain_joints
+    from robots import example_robot_data_urdf
+    urdf = example_robot_data_urdf('alex_description/urdf/alex_sake_hands.urdf').read_text()
+    model = RobotModel(urdf, 'Torso', 'RightGripperYawLink',
+                       chain_joints(urdf, 'Torso', 'RightGripperYawLink'))
+    velocity = np.array(model.velocity_limits)
+    placeholder = velocity > PLAUSIBLE_SPEED_RAD_S
+    assert placeholder.any() and not placeholder.all()
+    weights = travel_weights(model)
+    slowest = min(DEFAULT_SPEED_CAP_RAD_S, velocity[~placeholder].min())
+    np.testing.assert_allclose(weights[placeholder], (slowest / DEFAULT_SPEED_CAP_RAD_S) ** 2)
+    np.testing.assert_allclose(weights[~placeholder], (slowest / velocity[~placeholder]) ** 2)
+    assert math.isclose(weights.max(), 1.0)
 
 
 def test_an_arm_without_self_motion_keeps_its_solution():
