@@ -87,12 +87,12 @@ def travel_weights(model: RobotModel) -> np.ndarray:
 
     ``v_j`` is the joint's URDF velocity limit (``DEFAULT_SPEED_CAP_RAD_S`` where the URDF
     gives none or a placeholder, above ``PLAUSIBLE_SPEED_RAD_S``), ``v_min`` the slowest
-    joint's: ``sqrt(sum_j w_j dq_j^2)`` is the travel's
-    time at the limits (its 2-norm over the joints, not the slowest joint's alone) in units of
-    the slowest joint's, so of two goal configurations the one the slow joints travel less to
-    is the nearer. Joints that share one limit keep the Euclidean distance. A joint more than
-    ``TRAVEL_SPEED_RATIO_MAX`` times faster than the slowest (a placeholder limit beside real
-    ones) counts as that much faster: the posture's Newton steps stay well conditioned.
+    joint's: ``sqrt(sum_j w_j dq_j^2)`` is the travel's time at the limits (its 2-norm over
+    the joints, not the slowest joint's alone) in units of the slowest joint's, so of two goal
+    configurations the one the slow joints travel less to is the nearer. Joints that share one
+    limit keep the Euclidean distance. A joint more than ``TRAVEL_SPEED_RATIO_MAX`` times
+    faster than the slowest counts as that much faster: the posture's Newton steps stay well
+    conditioned.
     """
     v = np.array(model.velocity_limits, dtype=float)
     v = np.where(np.isfinite(v) & (v > 0.0) & (v <= PLAUSIBLE_SPEED_RAD_S), v,
@@ -107,7 +107,7 @@ def _in_band(q: np.ndarray, lower: np.ndarray, upper: np.ndarray, limited: np.nd
 
     A joint less than ``BAND_DEPTH_TOLERANCE_RAD`` deep counts as out of the band: that is
     where :func:`posture` leaves a joint its cost pulls against the band's wall (the pull over
-    ``POSTURE_BAND_WEIGHT``, 1e-4 rad per rad of distance to the measured q).
+    ``POSTURE_BAND_WEIGHT``: at most 1e-4 rad per rad of distance to the measured q).
     """
     inner = margin_rad - BAND_DEPTH_TOLERANCE_RAD
     return bool(np.any(limited & ((q < lower + inner) | (q > upper - inner))))
