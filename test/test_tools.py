@@ -165,6 +165,17 @@ def test_release_check_keeps_a_released_learned_push_within_the_velocity_limits(
     assert len(worst) == 7 and max(float(v) for v in worst) < 1.0, stdout
 
 
+def test_ik_check_compares_the_search_with_more_starts():
+    """Each goal solved again with 48 starts: a column says how many of those q* are nearer."""
+    stdout = run_tool('experiments.ik_check', '--arms', 'ur3', '--cases', '4',
+                      '--compare-starts', '48')
+    header, rule, line = stdout.splitlines()[:3]
+    assert header.endswith('q* nearer with 48 starts / their median CPU time s |')
+    assert rule.count('|') == header.count('|') and line.startswith('| ur3 | pose | 6 | 4/4 ')
+    nearer, seconds = (cell.strip() for cell in line.split('|')[-2].split('/'))
+    assert 0 <= int(nearer) <= 4 and float(seconds) > 0.0
+
+
 def test_design_gains_entry_point_is_installed():
     """``ros2 run quat_jt_controller design_gains`` runs the console script of setup.py."""
     script = Path(sys.executable).parent / 'design_gains'  # pip puts it next to python
