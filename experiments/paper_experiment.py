@@ -22,7 +22,9 @@ By default the simulator paces itself in real time, as the wrist would run. With
 it publishes ``/clock`` and steps as soon as the command for its last state has arrived
 (``publish_clock``), and the controller runs on that clock (``use_sim_time``): the result no
 longer depends on how busy the machine is. Each run reports the simulator's timing health
-(ticks without a fresh command, command-watchdog trips).
+(ticks without a fresh command, command-watchdog trips), and the product config's run when its
+goal configuration q* came into force: the goal-check worker answers on wall time, so on a host
+too busy for it q* comes seconds of simulated time late even in lockstep.
 """
 import argparse
 import csv
@@ -72,6 +74,9 @@ class Run:
     sim_stats: dict  # the simulator's loop statistics (LoopStats.summary)
     recording_wall_s: float  # wall time to record duration_s of (simulated) time after the goal
     missing_states: int  # states of the recorded span that did not reach the recorder
+    # the first /diagnostics (1 a second, the controller's clock) after the goal that gave its
+    # goal configuration q*, relative to the goal (s); None: none did (or no such term)
+    q_star_seen_s: Optional[float] = None
 
 
 def _stamp_s(stamp) -> float:
@@ -165,12 +170,17 @@ def run_once(potential: str, duration_s: float, out_dir: Path, model: RobotModel
                                  history_qos(lockstep), raw=True)
     goal_pub = node.create_publisher(PoseStamped, f'/{CONTROLLER}/target_pose', 10)
     checks_ready = [False]  # the controller's goal-check worker has built its model
+    q_stars: list[tuple[float, str]] = []  # (stamp, q*) of the goal statuses that give one
 
     def on_diagnostics(msg: DiagnosticArray) -> None:
         for status in msg.status:
-            if status.name.endswith(f'{CONTROLLER}: goal') and any(
-                    kv.key == 'goal_check' and kv.value == 'available' for kv in status.values):
+            if not status.name.endswith(f'{CONTROLLER}: goal'):
+                continue
+            values = {kv.key: kv.value for kv in status.values}
+            if values.get('goal_check') == 'available':
                 checks_ready[0] = True
+            if values.get('goal_configuration_rad'):
+                q_stars.append((_stamp_s(msg.header.stamp), values['goal_configuration_rad']))
     node.create_subscription(DiagnosticArray, '/diagnostics', on_diagnostics, 10)
     goal = PoseStamped()
     goal.header.frame_id = 'base_link'
@@ -234,6 +244,7 @@ def run_once(potential: str, duration_s: float, out_dir: Path, model: RobotModel
         # t = 0 is the stamp of the last state before the goal was sent.
         t_goal_s = last_state_time_s()
         looked_at[0] = len(records['errors'])  # the held pose's errors, ~0, are not looked at
+        held_q_star = q_stars[-1][1] if q_stars else None  # the held pose's, if any
         goal_pub.publish(goal)
         spin_until(goal_taken, 10.0, 'waiting for the goal to be taken')
         progress(f'[{potential}] goal sent ({EQUATION[potential]}), recording {duration_s} s'
@@ -275,7 +286,9 @@ def run_once(potential: str, duration_s: float, out_dir: Path, model: RobotModel
     return Run(potential, t[keep], q[keep], qdot[keep], effort[keep], err[keep], cmd_t,
                np.array([list(c) for _, c in cmds]), work / f'{potential}.mcap', sim_stats,
                recording_wall_s,
-               int(round(duration_s / np.median(np.diff(t[keep])))) + 1 - int(keep.sum()))
+               int(round(duration_s / np.median(np.diff(t[keep])))) + 1 - int(keep.sum()),
+               next((stamp - t_goal_s for stamp, q_star in q_stars
+                     if stamp >= t_goal_s and q_star != held_q_star), None))
 
 
 def summarize(run: Run, limits) -> dict:
@@ -443,6 +456,14 @@ def main(argv: Optional[list] = None) -> int:
                  'fell behind; rerun with --max-rtf)' if args.lockstep else
                  f'; {r.missing_states} ticks missing (late ticks the real-time loop skipped, '
                  'or states this process missed)'))
+    for r in runs:  # the goal-check worker answers on wall time, the loop in lockstep does not
+        if r.potential == EXTENDED:
+            print(f'{r.potential}: the goal configuration q* '
+                  + (f'in force by t = {r.q_star_seen_s:.2f} s (the first diagnostics of the '
+                     'controller, once a second, that give it)'
+                     if r.q_star_seen_s is not None else
+                     f'not in force by {args.duration:g} s (the goal-check worker answered '
+                     'late, or found none)'))
     print(f'\nFigure {args.out / "fig2_error_norm.png"}, CSV {args.out / "paper_experiment.csv"}, '
           f'MCAP {", ".join(str(r.mcap_path) for r in runs)}')
     if not args.no_animation:  # after the runs, from the recorded joint states

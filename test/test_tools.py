@@ -57,7 +57,12 @@ def test_paper_experiment_reproduces_the_qualitative_result(tmp_path, mode):
     assert 0.1 < final['quadratic'] < 0.4, final
     assert final['tanh'] < 0.02, final
     # The product config (designed gains, extensions) reaches the goal too.
-    assert final['tanh_extended'] < 0.005, final
+    # ... once its goal-check worker has given q* (a wall-time worker: on a host too busy for
+    # it, the line says so).
+    q_star = [line for line in stdout.splitlines()
+              if line.startswith('tanh_extended: the goal configuration q*')]
+    assert len(q_star) == 1, stdout[-2000:]
+    assert final['tanh_extended'] < 0.005, (final, q_star[0])
     assert (tmp_path / 'fig2_error_norm.png').stat().st_size > 10_000
     assert '| quadratic (Eq. 37) |' in stdout and '| tanh (Eq. 38) |' in stdout
     assert stdout.count('Animation ') == 3 and 'rendered in' in stdout  # two + the extended
