@@ -227,6 +227,13 @@ def test_an_arm_from_its_urdf_runs_the_same_serial_or_parallel(tmp_path, name):
         assert np.isfinite(a.q_final).all() and a.speed_ratio >= 0.0
     row = rx.table_row(robot, cond, runs[0])
     assert row.startswith(f'| small | {cond.describe()} | ') and '/2 |' in row
+    # the goal check's starts, and the report's count of the searches that went past the least
+    assert all(rx.MAX_STARTS <= o.ik_starts <= 48 for o in runs[0])
+    longer = [dataclasses.replace(o, ik_starts=48) for o in runs[0]]
+    assert ("the goal check's search for q* took more than 12 IK starts (no regular q* out of "
+            'the bands in 12) in 2 cases, 48 at most') in rx.report(robot, 'tanh', longer, 1.0)
+    least = [dataclasses.replace(o, ik_starts=rx.MAX_STARTS) for o in runs[0]]
+    assert 'IK starts' not in rx.report(robot, 'tanh', least, 1.0)
 
 
 @pytest.mark.unit
