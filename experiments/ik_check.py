@@ -32,9 +32,9 @@ from experiments import arms
 import numpy as np
 from quat_jt_controller import quaternion as quat
 from quat_jt_controller.control_law import Task
-from quat_jt_controller.inverse_kinematics import goal_configuration, sampling_box, sigma_min
+from quat_jt_controller.inverse_kinematics import (goal_configuration, sampling_box, sigma_min,
+                                                   travel_speeds)
 from quat_jt_controller.model import RobotModel, SINGULAR_SIGMA_MIN
-from quat_jt_controller.shaping import DEFAULT_SPEED_CAP_RAD_S, PLAUSIBLE_SPEED_RAD_S
 
 DEFAULT_ARMS = ('ur3', 'ur5', 'ur10', 'panda', 'so100:gripper', 'z1', 'xarm7', 'talos_left_arm',
                 'wrist')
@@ -59,13 +59,10 @@ def travel_s(model: RobotModel, q_from: np.ndarray, q_to: np.ndarray) -> float:
     """
     Return the slowest joint's time from ``q_from`` to ``q_to`` at the velocity limits (s).
 
-    A joint without a limit, or with a placeholder above ``PLAUSIBLE_SPEED_RAD_S``, turns at
-    ``DEFAULT_SPEED_CAP_RAD_S``.
+    At the goal check's travel speeds (``inverse_kinematics.travel_speeds``: a joint without a
+    limit, or with a placeholder, at 2 pi rad/s).
     """
-    v = np.array(model.velocity_limits, dtype=float)
-    v = np.where(np.isfinite(v) & (v > 0.0) & (v <= PLAUSIBLE_SPEED_RAD_S), v,
-                 DEFAULT_SPEED_CAP_RAD_S)
-    return float(np.max(np.abs(np.asarray(q_to) - np.asarray(q_from)) / v))
+    return float(np.max(np.abs(np.asarray(q_to) - np.asarray(q_from)) / travel_speeds(model)))
 
 
 def check_arm(model: RobotModel, task: Task, cases: int, seed: int, margin_rad: float,

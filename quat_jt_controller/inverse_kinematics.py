@@ -94,10 +94,21 @@ def travel_weights(model: RobotModel) -> np.ndarray:
     faster than the slowest counts as that much faster: the posture's Newton steps stay well
     conditioned.
     """
-    v = np.array(model.velocity_limits, dtype=float)
-    v = np.where(np.isfinite(v) & (v > 0.0) & (v <= PLAUSIBLE_SPEED_RAD_S), v,
-                 DEFAULT_SPEED_CAP_RAD_S)
+    v = travel_speeds(model)
     return np.maximum(float(v.min()) / v, 1.0 / TRAVEL_SPEED_RATIO_MAX) ** 2
+
+
+def travel_speeds(model: RobotModel) -> np.ndarray:
+    """
+    Return the speed each joint travels at in the travel's time (rad/s, :func:`travel_weights`).
+
+    Its URDF velocity limit; ``DEFAULT_SPEED_CAP_RAD_S`` where the URDF gives none or a
+    placeholder (above ``PLAUSIBLE_SPEED_RAD_S``): a limit no drive has says nothing of the
+    joint's speed.
+    """
+    v = np.array(model.velocity_limits, dtype=float)
+    return np.where(np.isfinite(v) & (v > 0.0) & (v <= PLAUSIBLE_SPEED_RAD_S), v,
+                    DEFAULT_SPEED_CAP_RAD_S)
 
 
 def _in_band(q: np.ndarray, lower: np.ndarray, upper: np.ndarray, limited: np.ndarray,
