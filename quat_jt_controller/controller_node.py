@@ -29,7 +29,7 @@ from quat_jt_runtime.params import declare_realtime, history_qos
 from quat_jt_runtime.payload import Payload
 from quat_jt_runtime.prewarm_timer import describe_prewarm, prewarm_off_reason, PrewarmTimer
 from quat_jt_runtime.resources import bundled_urdf_hint
-from quat_jt_runtime.worker import Launcher
+from quat_jt_runtime.worker import Launcher, WORKER_NICE
 from rclpy.clock import Clock, ClockType
 from rclpy.node import Node
 from rclpy.parameter import Parameter
@@ -80,8 +80,9 @@ class QuatJtController(Node):
         reg.set_payload(self.payload.current)
         self._change_log = parameters.change_log(self, reg)
         # the workers' launcher: a process started now, before the loop, that starts each
-        # worker (again, after a death) so that the node never starts one while it runs
-        self._launcher = Launcher()
+        # worker (again, after a death) so that the node never starts one while it runs;
+        # niced, but not on simulated time, where the loop steps on without them
+        self._launcher = Launcher(0 if self._use_sim_time else WORKER_NICE)
         self._goal_checker = GoalCheckWorker(ModelSpec(
             cfg.urdf_xml, cfg.base_link, cfg.tip_link, cfg.joints, cfg.task),
             launcher=self._launcher)

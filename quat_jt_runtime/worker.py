@@ -22,15 +22,21 @@ from typing import Any, Callable, IO, Iterable, Optional, Sequence
 
 from quat_jt_runtime.realtime import start_at_normal_scheduling
 
-WORKER_NICE = 10  # advice only: leave the CPU to the 1 kHz nodes
+# advice only: leave the CPU to the 1 kHz nodes. On simulated time a node's launcher is told 0
+# (controller_node): there the loop keeps no deadlines, and a niced worker on a busy host would
+# answer seconds of simulated time late, as the loop steps on without it.
+WORKER_NICE = 10
 # a worker (or the launcher) not gone this long after its input closes is killed
 WORKER_CLOSE_WAIT_S = 2.0
 RESTART_BACKOFF_S = (1.0, 2.0, 4.0, 8.0, 16.0, 30.0)  # after the 1st, 2nd, ... death in a row
 
 
-def start_worker(module: str) -> subprocess.Popen:
+def start_worker(module: str, nice: int = WORKER_NICE) -> subprocess.Popen:
     """
     Start ``python -m module`` with text pipes on its stdin and stdout (stderr the node's).
+
+    ``nice`` more than this process's niceness, set as soon as it runs (advice: an error to
+    set it is ignored).
 
     SIGINT is blocked from its first instruction (a blocked mask survives exec) until it
     ignores it (:func:`quiet_worker`), and it runs out of the terminal's process group: Ctrl-C
@@ -38,7 +44,14 @@ def start_worker(module: str) -> subprocess.Popen:
     restored. Started from a real-time thread (a restart, from the tick's executor), it still
     begins with normal scheduling: it must never compete with the loop.
     """
-    return _start(['-m', module], subprocess.PIPE, subprocess.PIPE)
+    proc = _start(['-m', module], subprocess.PIPE, subprocess.PIPE)
+    if nice > 0:
+        try:
+            os.setpriority(os.PRIO_PROCESS, proc.pid,
+                           os.getpriority(os.PRIO_PROCESS, 0) + nice)
+        except OSError:  # gone already, or not permitted: it runs as it is
+            pass
+    return proc
 
 
 def _start(args: list, stdin: Any, stdout: Any) -> subprocess.Popen:
@@ -52,13 +65,9 @@ def _start(args: list, stdin: Any, stdout: Any) -> subprocess.Popen:
 
 
 def quiet_worker() -> None:
-    """In a worker :func:`start_worker` started: ignore SIGINT, unblock it, lower priority."""
+    """In a worker :func:`start_worker` started (and niced): ignore SIGINT, unblock it."""
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the node stops it (closes its stdin)
     signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})  # blocked since its start
-    try:
-        os.nice(WORKER_NICE)
-    except OSError:
-        pass
 
 
 def answer(message: Any) -> bool:
@@ -186,10 +195,13 @@ class Launcher:
     returns; the launcher's reader thread, a thread of the node started with the launcher,
     calls ``on_started`` with the :class:`LaunchedProcess` (or None and the reason), and
     reports each exit to it. Call :meth:`close` at the end (after the workers' input is
-    closed).
+    closed). Each worker runs ``worker_nice`` more niced than the launcher (0: as niced).
     """
 
-    def __init__(self) -> None:
+    def __init__(self, worker_nice: int = WORKER_NICE) -> None:
+        if not 0 <= worker_nice <= 19:
+            raise ValueError(f'worker_nice must be 0 to 19, got {worker_nice}')
+        self._worker_nice = worker_nice
         ours, theirs = socket.socketpair(socket.AF_UNIX, socket.SOCK_SEQPACKET)
         try:
             self._proc = _start(['-m', 'quat_jt_runtime.worker'], stdin=theirs.fileno(),
@@ -232,7 +244,8 @@ class Launcher:
             self._next_id += 1
             key = self._next_id
             self._waiting[key] = on_started
-        if self._gone or not self.send({'start': module, 'id': key}):
+        if self._gone or not self.send({'start': module, 'id': key,
+                                        'nice': self._worker_nice}):
             with self._lock:  # unless the reader, ending, has told it already
                 told = self._waiting.pop(key, None) is None
             if not told:
@@ -510,11 +523,11 @@ def _serve_launcher() -> None:
     Serve as the launcher process (:class:`Launcher`): start workers, hand their pipes over.
 
     Its input is a socket to the node (one JSON message a request): ``{'start': module,
-    'id': k}`` is answered ``{'id': k, 'pid': pid}`` with the worker's input and output pipes
-    attached (or ``{'id': k, 'error': text}``), and ``{'exited': pid, 'code': code}`` when that
-    worker ends; ``{'kill': pid}`` kills it. It runs with normal scheduling, not niced (its
-    workers nice themselves); it ends when the node closes the socket, and its workers when
-    the node closes their input.
+    'id': k, 'nice': n}`` is answered ``{'id': k, 'pid': pid}`` with the worker's input and
+    output pipes attached (or ``{'id': k, 'error': text}``), and ``{'exited': pid, 'code':
+    code}`` when that worker ends; ``{'kill': pid}`` kills it. It runs with normal scheduling,
+    not niced (each worker ``n`` more, :func:`start_worker`); it ends when the node closes the
+    socket, and its workers when the node closes their input.
     """
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # the node ends it (closes the socket)
     signal.pthread_sigmask(signal.SIG_UNBLOCK, {signal.SIGINT})
@@ -542,7 +555,8 @@ def _serve_launcher() -> None:
         request = json.loads(data)
         if 'start' in request:
             try:
-                proc = start_worker(str(request['start']))
+                proc = start_worker(str(request['start']),
+                                    int(request.get('nice', WORKER_NICE)))
             except OSError as exc:
                 send({'id': request['id'], 'error': f'{type(exc).__name__}: {exc}'})
                 continue

@@ -7,6 +7,7 @@ joint states and goals on the node's topics and listens to its commands, poses, 
 /diagnostics. The multi-process behaviour over DDS is in test_controller_node.py.
 """
 import math
+import os
 from pathlib import Path
 import sys
 import time
@@ -26,6 +27,7 @@ from quat_jt_controller.model import ModelError
 from quat_jt_controller.parameter_table import GAINS, SHAPING
 from quat_jt_controller.shaping import Shaping, ShapingError
 from quat_jt_runtime.param_table import names
+from quat_jt_runtime.worker import WORKER_NICE
 from rcl_interfaces.msg import Log, ParameterType
 import rclpy
 from rclpy.executors import SingleThreadedExecutor
@@ -431,6 +433,12 @@ def test_no_joint_states_after_start_is_a_warning_naming_the_topic(context, sim_
         waited_s = float(line.split(' s after start')[0].rsplit(' ', 1)[1])
         assert waited_s >= NO_STATE_WARN_NS * 1e-9, line  # due 1.8 s after start, not before
         assert node.controller.goal is None  # nothing held, nothing commanded
+        # its goal-check worker niced, but not on simulated time (no deadlines to keep)
+        while node.controller.checker.pid is None:
+            assert time.monotonic() < deadline + 20.0, 'no goal-check worker'
+            executor.spin_once(timeout_sec=0.05)
+        assert (os.getpriority(os.PRIO_PROCESS, node.controller.checker.pid)
+                - os.getpriority(os.PRIO_PROCESS, 0)) == (0 if sim_time else WORKER_NICE)
     finally:
         executor.remove_node(listener)
         executor.remove_node(node)

@@ -197,6 +197,28 @@ def test_a_launcher_starts_workers_hands_their_pipes_over_and_reports_their_exit
         launcher.close()
 
 
+@pytest.mark.parametrize('nice', [0, 7])
+def test_a_launcher_starts_its_workers_niced_as_told(nice):
+    """Each worker runs ``worker_nice`` more niced than the node (0 on simulated time)."""
+    import os
+    import queue
+    from quat_jt_runtime.worker import Launcher
+    started: queue.SimpleQueue = queue.SimpleQueue()
+    launcher = Launcher(nice)
+    try:
+        launcher.start('quat_jt_controller.redesign', lambda *got: started.put(got))
+        worker, error = started.get(timeout=30.0)
+        assert error == ''
+        assert (os.getpriority(os.PRIO_PROCESS, worker.pid)
+                == min(19, os.getpriority(os.PRIO_PROCESS, 0) + nice))
+        worker.stdin.close()
+        assert worker.wait(timeout=30.0) == 0
+    finally:
+        launcher.close()
+    with pytest.raises(ValueError, match='worker_nice must be 0 to 19, got 20'):
+        Launcher(20)
+
+
 def test_goal_check_worker_checks_the_newest_goal_of_a_flood():
     model = wrist_model()
     worker = GoalCheckWorker(ModelSpec(default_urdf_xml(), 'base_link', 'tool0',
