@@ -107,7 +107,8 @@ FLIP_FLOOR = 1e-3  # of the effort limit: smaller torques have no sign (numerica
 FINAL_WINDOW_S = 0.1
 # The goal-check worker's answer arrives this long after the goal: its search of MAX_STARTS
 # IK starts takes 10 to 100 ms on the campaign's arms on this host, up to 4 times that where it
-# goes on to 48 (no regular q* out of the bands in MAX_STARTS; the report counts those cases)
+# goes on to 48 (no regular q* out of the bands in MAX_STARTS; the report counts those cases).
+# With --q-star-by-starts, this long per MAX_STARTS starts the search took (run_case).
 Q_STAR_AFTER_S = 0.1
 # A design again (redesign.py) is in force this long after it is due: the node's worker
 # designs (Pinocchio imported as it starts); about the median answer on the campaign's arms
@@ -249,6 +250,7 @@ class Outcome:
     warm_touched: bool = False  # a stop touched in the warm-up (run_case's warm_up_s)
     warm_speed_ratio: float = 0.0  # ... and its max |qdot_j| / velocity limit_j
     ik_starts: int = 0  # the IK starts the goal check's search for the case's q* took
+    q_star_after_s: float = math.nan  # ... and when q* was given, after the goal (s)
 
 
 class Redesigns:
@@ -361,7 +363,8 @@ def run_case(robot: Robot, model: RobotModel, gains: cl.Gains, shaping: sh.Shapi
              dt_s: float = 1e-3, encoder_bits: int = 0, encoder_told: bool = True,
              sim_payload_kg: float = 0.0, identify_at_s: float = 0.0,
              design_values: Optional[dict] = None, warm_up_s: float = 0.0,
-             q_warm_goal: Optional[np.ndarray] = None) -> Outcome:
+             q_warm_goal: Optional[np.ndarray] = None,
+             q_star_by_starts: bool = False) -> Outcome:
     """
     Run one case on the simulator core (``engine``); classify it.
 
@@ -378,6 +381,9 @@ def run_case(robot: Robot, model: RobotModel, gains: cl.Gains, shaping: sh.Shapi
     (:class:`Redesigns`). With ``warm_up_s`` > 0 the arm works before the case: from ``q0``
     towards ``q_warm_goal``'s pose for that long, then the case's goal from where it is (the
     case's start, in the outcome), its estimates, learned friction and gains kept.
+    ``q*`` is given ``q_star_after_s`` after each goal; with ``q_star_by_starts``, that long
+    per ``MAX_STARTS`` IK starts its search took (at least that long), as a worker's search
+    of more starts answers later.
     """
     from wrist_sim.simulator import RobotSimulator
 
@@ -385,15 +391,19 @@ def run_case(robot: Robot, model: RobotModel, gains: cl.Gains, shaping: sh.Shapi
         p, R = model.forward_kinematics(q_goal.tolist())
         return quat.from_rotation_matrix(R), p
 
-    def configuration(q_from: np.ndarray, goal: tuple) -> tuple[Optional[np.ndarray], int]:
-        """Return q* (None without the term) and the IK starts its search took."""
+    def configuration(q_from: np.ndarray, goal: tuple
+                      ) -> tuple[Optional[np.ndarray], int, float]:
+        """Return q* (None without the term), the IK starts its search took, when given."""
         if not shaping.configuration_on:
-            return None, 0
+            return None, 0, q_star_after_s
         search = search_goal_configuration(
             model, q_from, goal[0], goal[1], robot.task, shaping.joint_limit_margin_rad,
             q_preferred=shaping.preferred_configuration_rad or None,
             posture_weight=shaping.posture_weight)
-        return search.q_star, search.starts
+        after = q_star_after_s
+        if q_star_by_starts and search.starts > MAX_STARTS:
+            after *= search.starts / MAX_STARTS
+        return search.q_star, search.starts, after
     q_d, p_d = target(qg)
     first_goal = target(q_warm_goal) if warm_up_s > 0.0 else (q_d, p_d)
     loop = ClosedLoop(model, gains, robot.task, *first_goal, shaping=shaping)
@@ -418,17 +428,18 @@ def run_case(robot: Robot, model: RobotModel, gains: cl.Gains, shaping: sh.Shapi
             lambda t, q: redesigns.step(start_s + t, q))
     try:
         if warm_up_s > 0.0:  # the arm at work before the case: to the warm-up goal
-            warm = run_sampled(loop, plant, warm_up_s, delay_ticks,
-                               configuration(q0, first_goal)[0], q_star_after_s, from_s(0.0))
+            warm_q_star, _, warm_after = configuration(q0, first_goal)
+            warm = run_sampled(loop, plant, warm_up_s, delay_ticks, warm_q_star, warm_after,
+                               from_s(0.0))
             q0 = sim.q_rad.copy()  # the case starts where the warm-up left the arm
             goal = Goal(tuple(q_d), tuple(p_d))
             loop.goal = goal
             for regulator in (loop.regulator, loop.clamped):
                 regulator.set_goal(goal)
-        q_star, ik_starts = configuration(q0, (q_d, p_d))
+        q_star, ik_starts, after_s = configuration(q0, (q_d, p_d))
         total_s = robot.duration_s + robot.hold_s
         if identify_at_s > 0.0:
-            first = run_sampled(loop, plant, identify_at_s, delay_ticks, q_star, q_star_after_s,
+            first = run_sampled(loop, plant, identify_at_s, delay_ticks, q_star, after_s,
                                 from_s(warm_up_s))
             payload, _ = identify_payload(loop.clamped, sim.q_rad.tolist(),
                                           sim.qdot_rad_s.tolist(), first.tau_nm[-1].tolist())
@@ -438,7 +449,7 @@ def run_case(robot: Robot, model: RobotModel, gains: cl.Gains, shaping: sh.Shapi
             held = _joined(first, run_sampled(loop, plant, total_s - identify_at_s, delay_ticks,
                                               q_star, 0.0, from_s(warm_up_s + identify_at_s)))
         else:
-            held = run_sampled(loop, plant, total_s, delay_ticks, q_star, q_star_after_s,
+            held = run_sampled(loop, plant, total_s, delay_ticks, q_star, after_s,
                                from_s(warm_up_s))
     finally:
         sim.close()
@@ -474,7 +485,7 @@ def run_case(robot: Robot, model: RobotModel, gains: cl.Gains, shaping: sh.Shapi
                       armature_estimate=loop.clamped.armature_estimate,
                       redesigns=() if redesigns is None else tuple(redesigns.applied),
                       warm_touched=warmed[0], warm_speed_ratio=warmed[1],
-                      ik_starts=ik_starts)
+                      ik_starts=ik_starts, q_star_after_s=after_s)
     if not reached:
         outcome.cause = classify(model, loop, shaping, q_star, run)
     if outcome.flips_per_s > LIMIT_CYCLE_FLIPS_PER_S:
@@ -601,12 +612,17 @@ def report(robot: Robot, potential: str, outcomes: list, elapsed_s: float,
                      f'({SPEED_MARGIN:g} x the limits) in {ceiling}, at its cruise '
                      f'({cruise_fraction:g} x the limits) in {cruise}')
     starts = np.array([o.ik_starts for o in outcomes])
-    if starts.max() > MAX_STARTS:  # q* comes at q_star_after_s whatever the search took
+    if starts.max() > MAX_STARTS:  # when q* came, for the searches of more starts
+        given = np.array([o.q_star_after_s for o in outcomes])
+        longer = starts > MAX_STARTS
         lines.append(f"  the goal check's search for q* took more than {MAX_STARTS} IK starts "
                      f'(no regular q* out of the bands in {MAX_STARTS}) in '
-                     f'{int(np.count_nonzero(starts > MAX_STARTS))} cases, {int(starts.max())} '
-                     f'at most: q* is given {Q_STAR_AFTER_S:g} s after the goal in every case, '
-                     'where a worker answers such a search later')
+                     f'{int(np.count_nonzero(longer))} cases, {int(starts.max())} at most: '
+                     + (f'q* is given {Q_STAR_AFTER_S:g} s after the goal in every case, where '
+                        'a worker answers such a search later'
+                        if np.nanmax(given[longer]) <= Q_STAR_AFTER_S else
+                        f'q* is given {Q_STAR_AFTER_S:g} s after the goal per {MAX_STARTS} '
+                        f'starts there (--q-star-by-starts), {np.nanmax(given):.2f} s at most'))
     if robot.hold_s > 0.0 and ok:  # after settling: the cases reached
         drift = np.array([o.final_speed_rad_s for o in outcomes if o.reached])
         away = np.array([o.from_q_star_rad for o in outcomes if o.reached])
@@ -744,6 +760,7 @@ class CaseJob:
     design_values: Optional[dict] = None  # the parameters a design again reads (run_case)
     warm_up_s: float = 0.0  # > 0: the arm works this long first, towards q_warm_goal's pose
     q_warm_goal: Optional[np.ndarray] = None
+    q_star_by_starts: bool = False  # q* given later for a longer search (run_case)
 
 
 @functools.lru_cache(maxsize=8)
@@ -768,7 +785,8 @@ def run_job(job: CaseJob) -> Outcome:
                     dt_s=job.dt_s, encoder_bits=job.encoder_bits,
                     encoder_told=job.encoder_told, sim_payload_kg=job.sim_payload_kg,
                     identify_at_s=job.identify_at_s, design_values=job.design_values,
-                    warm_up_s=job.warm_up_s, q_warm_goal=job.q_warm_goal)
+                    warm_up_s=job.warm_up_s, q_warm_goal=job.q_warm_goal,
+                    q_star_by_starts=job.q_star_by_starts)
 
 
 def run_jobs(jobs: list, label: str, progress=print, workers: Optional[int] = None,
@@ -1112,7 +1130,7 @@ def run_arm(robot: Robot, cond: Condition, potential: str, count: int, seed: int
             approach_time_s: Optional[float] = None,
             cruise_fraction: Optional[float] = None, design_delays: tuple = (1,),
             armature_estimation: bool = True, redesign: bool = True,
-            warm_up_s: float = 0.0) -> list:
+            warm_up_s: float = 0.0, q_star_by_starts: bool = False) -> list:
     """
     Run ``count`` cases of an arm from its URDF in condition ``cond``; their outcomes.
 
@@ -1124,7 +1142,8 @@ def run_arm(robot: Robot, cond: Condition, potential: str, count: int, seed: int
     ``armature_estimation`` False turns the design's rotor inertia estimate off (an ablation),
     ``redesign`` False its design again for the rotor inertia found (``gain_redesign``).
     With ``warm_up_s`` > 0 each case starts after that long towards the previous case's goal
-    (the last case's for the first; ``run_case``).
+    (the last case's for the first; ``run_case``), and with ``q_star_by_starts`` each case's
+    ``q*`` comes later in proportion to its search's IK starts past ``MAX_STARTS``.
     ``friction_effort_share``, ``approach_time_s``, ``cruise_fraction`` and ``design_delays``
     (its ``--delays``) are design_gains' options (:func:`arm_design`).
     """
@@ -1156,7 +1175,7 @@ def run_arm(robot: Robot, cond: Condition, potential: str, count: int, seed: int
     jobs = [CaseJob(robot, spec, gains, shaping, sim_params, i, q0, qg, cond.delay_ticks, engine,
                     (cond.plant_armature,) * n, cond.no_velocities, 1.0 / rate_hz,
                     cond.encoder_bits, cond.encoder_told, plant_payload_kg, cond.identify_at_s,
-                    values, warm_up_s, pairs[i - 1][1])
+                    values, warm_up_s, pairs[i - 1][1], q_star_by_starts)
             for i, (q0, qg) in enumerate(pairs)]
     return run_jobs(jobs, f'{robot.name} {cond.name}', progress, workers, ray_address)
 
@@ -1269,6 +1288,10 @@ def main(argv: Optional[list] = None) -> int:
     arm.add_argument('--no-redesign', action='store_true',
                      help="turn the design's design again for the rotor inertia found off "
                      '(gain_redesign false), to see what it does')
+    arm.add_argument('--q-star-by-starts', action='store_true',
+                     help=f'give each case its q* {Q_STAR_AFTER_S:g} s after the goal per '
+                     f'{MAX_STARTS} IK starts its search took, as a worker answers a longer '
+                     f'search later (default: {Q_STAR_AFTER_S:g} s in every case)')
     arm.add_argument('--design-delays', type=int, nargs='+', default=[1],
                      help="design_gains' --delays: the ticks of delay the design checks its "
                      'sampled loop with, and one more (default: 1; --delay is the '
@@ -1373,7 +1396,8 @@ def main_arm(parser: argparse.ArgumentParser, args, overrides: dict) -> int:
                                    cruise_fraction=args.cruise_fraction,
                                    design_delays=tuple(args.design_delays),
                                    armature_estimation=not args.no_armature_estimation,
-                                   redesign=not args.no_redesign, warm_up_s=args.warm_up)
+                                   redesign=not args.no_redesign, warm_up_s=args.warm_up,
+                                   q_star_by_starts=args.q_star_by_starts)
             except (cl.GainsError, sh.ShapingError) as exc:
                 parser.error(f'--param: {exc}')
             shown = (dataclasses.replace(robot, duration_s=robot.duration_s + cond.identify_at_s)
@@ -1385,6 +1409,8 @@ def main_arm(parser: argparse.ArgumentParser, args, overrides: dict) -> int:
                                  if args.no_armature_estimation else [])
                               + (['no design again'] if args.no_redesign else [])
                               + ([f'after a warm-up of {args.warm_up:g} s'] if args.warm_up
+                                 else [])
+                              + (['q* later for a longer search'] if args.q_star_by_starts
                                  else [])
                               + [f'{k} {v}' for k, v in overrides.items()])
             text.append(report(shown, label, outcomes, time.monotonic() - t0,

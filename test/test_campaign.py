@@ -234,6 +234,19 @@ def test_an_arm_from_its_urdf_runs_the_same_serial_or_parallel(tmp_path, name):
             'the bands in 12) in 2 cases, 48 at most') in rx.report(robot, 'tanh', longer, 1.0)
     least = [dataclasses.replace(o, ik_starts=rx.MAX_STARTS) for o in runs[0]]
     assert 'IK starts' not in rx.report(robot, 'tanh', least, 1.0)
+    # q* given 0.1 s in every case, or (--q-star-by-starts) 0.1 s per 12 starts its search took
+    assert all(o.q_star_after_s == rx.Q_STAR_AFTER_S for o in runs[0])
+    by_starts = rx.run_arm(robot, cond, 'tanh', 2, seed=1, progress=None, workers=1,
+                           q_star_by_starts=True)
+    for a, b in zip(runs[0], by_starts, strict=True):
+        assert b.ik_starts == a.ik_starts
+        assert b.q_star_after_s == pytest.approx(
+            rx.Q_STAR_AFTER_S * max(1.0, b.ik_starts / rx.MAX_STARTS))
+        if b.ik_starts == rx.MAX_STARTS:  # the same q* at the same time: the same run
+            np.testing.assert_array_equal(a.q_final, b.q_final)
+    later = [dataclasses.replace(o, ik_starts=48, q_star_after_s=0.4) for o in runs[0]]
+    assert ('in 2 cases, 48 at most: q* is given 0.1 s after the goal per 12 starts there '
+            '(--q-star-by-starts), 0.40 s at most') in rx.report(robot, 'tanh', later, 1.0)
 
 
 @pytest.mark.unit
