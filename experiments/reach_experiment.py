@@ -105,6 +105,7 @@ TOUCH_RAD = 1e-3  # closer than this to a URDF limit: the stop was touched
 LIMIT_CYCLE_FLIPS_PER_S = 1.0  # more sign changes of tau - g(q) in the last second: a cycle
 FLIP_FLOOR = 1e-3  # of the effort limit: smaller torques have no sign (numerical dither)
 FINAL_WINDOW_S = 0.1
+GRAVITY_CHECK_EVERY = 10  # a failed case's g(q) is checked against the effort limits this often
 # The goal-check worker's answer arrives this long after the goal: its search of MAX_STARTS
 # IK starts takes 10 to 100 ms on the campaign's arms on this host, up to 4 times that where it
 # goes on to 48 (no regular q* out of the bands in MAX_STARTS; the report counts those cases).
@@ -565,6 +566,18 @@ def classify(model: RobotModel, loop: ClosedLoop, shaping: sh.Shaping, q_star,
         out = reg.update(run.q_rad[-1].tolist(), qdot)
         found = StallDetector(reg).diagnose(run.q_rad[-1].tolist(), out, qdot)
         causes += ['stalled: ' + c for c in found]
+    if loop.clamped.gains.gravity_compensation:  # where gravity alone asked more than a limit
+        effort = np.array(model.effort_limits)
+        ratio = np.array([np.abs(model.gravity(q.tolist())) / effort
+                          for q in run.q_rad[::GRAVITY_CHECK_EVERY]])
+        j = int(np.argmax(ratio.max(axis=0)))
+        if ratio[:, j].max() > 1.0:
+            over_s = (np.count_nonzero(ratio[:, j] > 1.0) * GRAVITY_CHECK_EVERY
+                      * (run.t_s[1] - run.t_s[0]))
+            causes.append(f'on its way the arm passed where it cannot hold itself: '
+                          f'{model.joint_names[j]} needed up to {ratio[:, j].max():.3g} x its '
+                          'effort limit against gravity (its command clamped there, it sagged) '
+                          f'for {over_s:.2f} s')
     return '; '.join(causes)
 
 

@@ -628,7 +628,8 @@ class Controller:
         return [
             ('control loop', *diagnostics.loop_status(
                 figures, not self.last_state_ns, self.stopped, self.counters, graph_warnings,
-                self.command_refusal)),
+                self.command_refusal, () if self.last_q is None else
+                diagnostics.gravity_beyond_effort(regulator, self.last_q))),
             ('goal', *diagnostics.goal_status(
                 self.goal_source, regulator.goal, self.goal_warning, self.last, self.last_qdot,
                 self.has_position, self.counters, unavailable, ready,

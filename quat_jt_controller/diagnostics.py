@@ -61,6 +61,22 @@ def start_warnings(regulator: Regulator) -> list[str]:
             'in the URDF']
 
 
+def gravity_beyond_effort(regulator: Regulator, q: Sequence[float]) -> list[str]:
+    """
+    Name the joints whose effort limit is below what gravity alone asks of them at ``q``.
+
+    There the arm cannot hold itself (the model's links and payload): the tick's command is
+    clamped at the limit (``control_law.saturate``) and the joint sags, whatever the
+    potential. Empty with ``gravity_compensation`` off (the drives then hold the weight).
+    """
+    if not regulator.gains.gravity_compensation:
+        return []
+    model = regulator.model
+    joints = zip(model.joint_names, model.gravity(q), model.effort_limits)
+    return [f'{name} needs {abs(g):.3g} N m against gravity here, above its effort limit '
+            f'{limit:g} N m' for name, g, limit in joints if abs(g) > limit]
+
+
 def command_order_problem(joints: Sequence[str], receiver: str,
                           theirs: Sequence[str]) -> str:
     """
@@ -113,11 +129,14 @@ def no_state_warning(state_topic: str, waited_s: float, publishers: int, rejecte
 
 
 def loop_status(figures: dict, waiting: bool, stopped: bool, counters: Counters,
-                graph_warnings: Sequence[str] = (), refusal: str = '') -> Status:
+                graph_warnings: Sequence[str] = (), refusal: str = '',
+                unheld: Sequence[str] = ()) -> Status:
     """
     Report the control loop: rate, timing, saturation, timeouts (TickStats.window figures).
 
-    ``refusal``: why commands are stopped ('' when they are not): an ERROR.
+    ``refusal``: why commands are stopped ('' when they are not): an ERROR. ``unheld``: the
+    joints gravity asks more of than their effort limits where the arm is
+    (:func:`gravity_beyond_effort`): a WARN.
     """
     messages = []
     level = OK
@@ -134,6 +153,11 @@ def loop_status(figures: dict, waiting: bool, stopped: bool, counters: Counters,
     if n and saturated > SATURATION_WARN_FRACTION * n:
         level = max(level, WARN)
         messages.append(f'torque saturated in {saturated}/{n} ticks')
+    if unheld:
+        level = max(level, WARN)
+        messages.append(f'the arm cannot hold itself here: {"; ".join(unheld)} (its command is '
+                        'clamped and it sags: check the payload and the effort limits, or '
+                        'give a goal the arm can hold on the way)')
     if counters.stale_states:
         level = max(level, WARN)
         messages.append(f'{counters.stale_states} joint states rejected for their stamps '

@@ -556,3 +556,31 @@ def test_nodes_that_do_not_stop_are_all_killed_before_any_is_waited_for():
             if proc.poll() is None:
                 proc.kill()
             proc.stdout.close()
+
+
+@pytest.mark.unit
+def test_a_failed_case_names_where_gravity_asked_more_than_an_effort_limit():
+    """The classification says when the arm passed where it could not hold itself."""
+    from quat_jt_controller import paper
+    from quat_jt_controller.reference_sim import ClosedLoop, SampledRun
+    from quat_jt_controller.shaping import Shaping
+    from quat_jt_runtime.payload import Payload
+    from robots import wrist_model
+    model = wrist_model()
+    gains = cl.Gains.create('tanh', paper.KP, paper.KV, paper.LAMBDA, cl.Task.ORIENTATION, 3)
+    loop = ClosedLoop(model, gains, cl.Task.ORIENTATION, paper.Q_DESIRED)
+    t = np.arange(200) * 1e-3
+    q = np.outer(0.1 * t, np.ones(3)) + np.array([0.0, 0.5, 0.0])  # still moving, 0.1 rad/s
+    zeros = np.zeros_like(t)
+    run = SampledRun(t, zeros, zeros + 0.5, zeros, 0, True, q, np.zeros_like(q))
+    assert 'cannot hold itself' not in rx.classify(model, loop, Shaping(), None, run)
+    loop.clamped.set_payload(Payload(200.0, (0.3, 0.0, 0.0)))  # far more than it carries
+    cause = rx.classify(model, loop, Shaping(), None, run)
+    assert cause.startswith('still moving at the end (up to 0.100 rad/s): too slow; '), cause
+    ratio = np.array([np.abs(model.gravity(x.tolist())) / np.array(model.effort_limits)
+                      for x in q[::rx.GRAVITY_CHECK_EVERY]]).max(axis=0)
+    j = int(np.argmax(ratio))
+    assert ratio[j] > 1.0
+    assert (f'on its way the arm passed where it cannot hold itself: joint{j + 1} needed up to '
+            f'{ratio[j]:.3g} x its effort limit against gravity (its command clamped there, it '
+            'sagged) for 0.20 s') in cause, cause

@@ -481,3 +481,30 @@ def test_the_payload_held_at_rest_is_identified_on_an_arm_that_shows_it():
     tick(wrist, (0.1, 0.2, 0.3), MS)
     payload, why = wrist.identify_payload()
     assert payload is None and 'an arm of 3 joints shows too little' in why
+
+
+def test_a_pose_gravity_asks_more_than_the_effort_limits_of_is_a_warning_naming_the_joints():
+    """Where the arm cannot hold itself, the control loop's status says which joint, and why."""
+    from quat_jt_runtime.payload import Payload
+    ctl = controller()
+    figures = {'control_rate_hz': 1000.0, 'ticks_in_window': 1000, 'saturated_ticks': 0}
+    tick(ctl, (0.0, 0.5, 0.0), MS)
+    level, message, _ = ctl.statuses(figures)[0][1:]
+    assert 'cannot hold itself' not in message and level == diagnostics.OK
+    ctl.regulator.set_payload(Payload(200.0, (0.3, 0.0, 0.0)))  # far more than it carries
+    tick(ctl, (0.0, 0.5, 0.0), 2 * MS)
+    level, message, _ = ctl.statuses(figures)[0][1:]
+    g = ctl.regulator.model.gravity([0.0, 0.5, 0.0])
+    over = [j for j, (t, e) in enumerate(zip(g, ctl.regulator.model.effort_limits))
+            if abs(t) > e]
+    assert over and level == diagnostics.WARN, (g, message)
+    assert message.startswith('the arm cannot hold itself here: joint'), message
+    for j in over:
+        assert (f'joint{j + 1} needs {abs(g[j]):.3g} N m against gravity here, above its '
+                f'effort limit {ctl.regulator.model.effort_limits[j]:g} N m') in message
+    assert 'its command is clamped and it sags' in message
+    gains = ctl.regulator.gains  # the drives hold the weight themselves: none of ours
+    ctl.regulator.set_gains(cl.Gains.create('tanh', paper.KP, paper.KV, paper.LAMBDA,
+                                            cl.Task.ORIENTATION, 3, gravity_compensation=False))
+    assert 'cannot hold itself' not in ctl.statuses(figures)[0][2]
+    ctl.regulator.set_gains(gains)
