@@ -156,8 +156,8 @@ def loop_status(figures: dict, waiting: bool, stopped: bool, counters: Counters,
     if unheld:
         level = max(level, WARN)
         messages.append(f'the arm cannot hold itself here: {"; ".join(unheld)} (its command is '
-                        'clamped and it sags: check the payload and the effort limits, or '
-                        'give a goal the arm can hold on the way)')
+                        'clamped and it sags: check the payload and the effort limits, or give '
+                        'an intermediate goal the arm can hold)')
     if counters.stale_states:
         level = max(level, WARN)
         messages.append(f'{counters.stale_states} joint states rejected for their stamps '

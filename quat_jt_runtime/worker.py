@@ -35,8 +35,8 @@ def start_worker(module: str, nice: int = WORKER_NICE) -> subprocess.Popen:
     """
     Start ``python -m module`` with text pipes on its stdin and stdout (stderr the node's).
 
-    ``nice`` more than this process's niceness, set as soon as it runs (advice: an error to
-    set it is ignored).
+    The worker runs ``nice`` more niced than this process, set as soon as it runs (advice:
+    where it cannot be set, it runs as it is).
 
     SIGINT is blocked from its first instruction (a blocked mask survives exec) until it
     ignores it (:func:`quiet_worker`), and it runs out of the terminal's process group: Ctrl-C
