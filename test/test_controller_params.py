@@ -467,7 +467,9 @@ def test_shuffled_and_extra_names_give_the_same_command(make_probe):
 
 
 def test_states_without_velocities_get_them_estimated_and_say_so_once(make_probe):
-    probe = make_probe({'state_rate': 500.0})
+    # the stamps are the test's, 2 ms apart however slow the host: a round trip that stalls
+    # on a busy host neither ages them past max_state_age nor trips the state timeout
+    probe = make_probe({'state_rate': 500.0, 'max_state_age': 60.0, 'state_timeout': 10.0})
     probe.send_goal(goal(GOAL_XYZW))
     t0 = time.time_ns() - 10_000_000
     commands = []
