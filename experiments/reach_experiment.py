@@ -567,7 +567,7 @@ def classify(model: RobotModel, loop: ClosedLoop, shaping: sh.Shaping, q_star,
         found = StallDetector(reg).diagnose(run.q_rad[-1].tolist(), out, qdot)
         causes += ['stalled: ' + c for c in found]
     if loop.clamped.gains.gravity_compensation:  # where gravity alone asked more than a limit
-        effort = np.array(model.effort_limits)
+        effort = np.array(loop.clamped.effort_limits_nm)  # the clamp (inf: none)
         ratio = np.array([np.abs(model.gravity(q.tolist())) / effort
                           for q in run.q_rad[::GRAVITY_CHECK_EVERY]])
         j = int(np.argmax(ratio.max(axis=0)))

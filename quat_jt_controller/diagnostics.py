@@ -66,13 +66,14 @@ def gravity_beyond_effort(regulator: Regulator, q: Sequence[float]) -> list[str]
     Name the joints whose effort limit is below what gravity alone asks of them at ``q``.
 
     There the arm cannot hold itself (the model's links and payload): the tick's command is
-    clamped at the limit (``control_law.saturate``) and the joint sags, whatever the
-    potential. Empty with ``gravity_compensation`` off (the drives then hold the weight).
+    clamped at the limit (``control_law.saturate``, the regulator's clamp: a joint without a
+    usable limit has none) and the joint sags, whatever the potential. Empty with
+    ``gravity_compensation`` off (the drives then hold the weight).
     """
     if not regulator.gains.gravity_compensation:
         return []
     model = regulator.model
-    joints = zip(model.joint_names, model.gravity(q), model.effort_limits)
+    joints = zip(model.joint_names, model.gravity(q), regulator.effort_limits_nm)
     return [f'{name} needs {abs(g):.3g} N m against gravity here, above its effort limit '
             f'{limit:g} N m' for name, g, limit in joints if abs(g) > limit]
 

@@ -503,6 +503,8 @@ def test_a_pose_gravity_asks_more_than_the_effort_limits_of_is_a_warning_naming_
         assert (f'joint{j + 1} needs {abs(g[j]):.3g} N m against gravity here, above its '
                 f'effort limit {ctl.regulator.model.effort_limits[j]:g} N m') in message
     assert 'its command is clamped and it sags' in message
+    unclamped = Regulator(ctl.regulator.model, cl.Task.ORIENTATION, GAINS, [math.inf] * 3)
+    assert diagnostics.gravity_beyond_effort(unclamped, [0.0, 0.5, 0.0]) == []  # no limit
     gains = ctl.regulator.gains  # the drives hold the weight themselves: none of ours
     ctl.regulator.set_gains(cl.Gains.create('tanh', paper.KP, paper.KV, paper.LAMBDA,
                                             cl.Task.ORIENTATION, 3, gravity_compensation=False))
