@@ -23,8 +23,9 @@ it publishes ``/clock`` and steps as soon as the command for its last state has 
 (``publish_clock``), and the controller runs on that clock (``use_sim_time``): the result no
 longer depends on how busy the machine is. Each run reports the simulator's timing health
 (ticks without a fresh command, command-watchdog trips), and the product config's run when its
-goal configuration q* came into force: the goal-check worker answers on wall time, so on a host
-too busy for it q* comes seconds of simulated time late even in lockstep.
+goal configuration q* came into force: the goal-check worker answers on wall time (not niced
+on simulated time, but sharing the host), so on a host too busy for it q* may come late in
+simulated time even in lockstep.
 """
 import argparse
 import csv

@@ -505,8 +505,7 @@ def test_a_pose_gravity_asks_more_than_the_effort_limits_of_is_a_warning_naming_
     assert 'its command is clamped and it sags' in message
     unclamped = Regulator(ctl.regulator.model, cl.Task.ORIENTATION, GAINS, [math.inf] * 3)
     assert diagnostics.gravity_beyond_effort(unclamped, [0.0, 0.5, 0.0]) == []  # no limit
-    gains = ctl.regulator.gains  # the drives hold the weight themselves: none of ours
+    # the drives hold the weight themselves: none of ours
     ctl.regulator.set_gains(cl.Gains.create('tanh', paper.KP, paper.KV, paper.LAMBDA,
                                             cl.Task.ORIENTATION, 3, gravity_compensation=False))
     assert 'cannot hold itself' not in ctl.statuses(figures)[0][2]
-    ctl.regulator.set_gains(gains)
